@@ -1,0 +1,162 @@
+"""Scenario: the frozen, validated description of one enclosing experiment.
+
+Positions are in the local ENU plane (x east, y north) in metres.  Follower and
+target numbers in TOML files are 1-based, as in the paper; everything in code
+is 0-based.  Validation happens once, in `agents.scenario_file`, and every
+error names the offending field.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+PROFILE_KINDS = ("paper_v1", "paper_v2", "constant", "circle", "random_walk")
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Estimator and controller gains (paper Table II)."""
+
+    k_e: float = 6.0
+    alpha1: float = 7.0 / 3.0
+    k_z: float = 2.0
+    alpha2: float = 3.0
+    k_d: float = 2.0
+    alpha3: float = 3.0
+
+
+@dataclass(frozen=True)
+class Pattern:
+    """Spacing pattern P = {w_d, rho_d, a}; `angles_rad[i]` is follower i's gap to its successor."""
+
+    rho_d_m: float
+    w_d_rad_s: float
+    angles_rad: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class TargetSpec:
+    """One target: start, motion profile and the followers that observe it (0-based)."""
+
+    initial_pos_m: tuple[float, float]
+    profile: str
+    observed_by: tuple[int, ...]
+    vel_m_s: tuple[float, float] = (0.0, 0.0)
+    center_m: tuple[float, float] = (0.0, 0.0)
+    omega_rad_s: float = 0.0
+    speed_max_m_s: float = 0.0
+    knot_interval_s: float = 2.0
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Timing of a run and the accuracy bounds its metrics are judged by."""
+
+    duration_s: float = 200.0
+    dt_s: float = 0.001
+    rate_hz: float = 50.0
+    steady_from_s: float | None = None
+    eps_rho_m: float = 0.0999
+    eps_delta: float = 0.0199
+    target_start_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """Kinematic multirotor limits used by the simulator (and expected of a real vehicle)."""
+
+    altitude_m: float = 10.0
+    tau_s: float = 0.05
+    max_speed_xy_m_s: float = 12.0
+    max_speed_z_m_s: float = 3.0
+    max_accel_m_s2: float = 20.0
+    flavour: str = "px4"
+
+
+@dataclass(frozen=True)
+class HomeConfig:
+    """Geodetic origin of the local frame (PX4 SITL's default home)."""
+
+    lat_deg: float = 47.397742
+    lon_deg: float = 8.545594
+    alt_m: float = 488.0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything one run needs; built only by `agents.scenario_file`."""
+
+    name: str
+    beta_m_s: float
+    follower_pos_m: tuple[tuple[float, float], ...]
+    targets: tuple[TargetSpec, ...]
+    edges: tuple[tuple[int, int], ...]
+    successor: tuple[int, ...]
+    pattern: Pattern
+    gains: Gains = field(default_factory=Gains)
+    run: RunConfig = field(default_factory=RunConfig)
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    home: HomeConfig = field(default_factory=HomeConfig)
+
+    @property
+    def n(self) -> int:
+        return len(self.follower_pos_m)
+
+    @property
+    def m(self) -> int:
+        return len(self.targets)
+
+    def adjacency(self) -> FloatArray:
+        """Symmetric 0/1 follower adjacency matrix a_ij."""
+        adj = np.zeros((self.n, self.n))
+        for i, j in self.edges:
+            adj[i, j] = adj[j, i] = 1.0
+        return adj
+
+    def observation(self) -> FloatArray:
+        """(n, m) 0/1 matrix: follower i observes target j."""
+        obs = np.zeros((self.n, self.m))
+        for j, target in enumerate(self.targets):
+            obs[list(target.observed_by), j] = 1.0
+        return obs
+
+    def neighbours(self, i: int) -> tuple[int, ...]:
+        return tuple(sorted({b for a, b in self.edges if a == i} | {a for a, b in self.edges if b == i}))
+
+    def steady_from_s(self) -> float:
+        start = self.run.steady_from_s
+        return self.run.duration_s / 2.0 if start is None else start
+
+    @property
+    def a_min_rad(self) -> float:
+        return min(self.pattern.angles_rad)
+
+
+def ccw_order(points_m: FloatArray, center_m: FloatArray) -> tuple[int, ...]:
+    """Successor map i -> i+ of points sorted counter-clockwise around `center_m`."""
+    d = np.asarray(points_m) - np.asarray(center_m)
+    order = [int(k) for k in np.argsort(np.arctan2(d[:, 1], d[:, 0]), kind="stable")]
+    succ = [0] * len(order)
+    for k, i in enumerate(order):
+        succ[i] = order[(k + 1) % len(order)]
+    return tuple(succ)
+
+
+def successor_is_cycle(successor: tuple[int, ...]) -> bool:
+    """True when following successors from 0 visits every follower once."""
+    seen, i = set(), 0
+    for _ in successor:
+        seen.add(i)
+        i = successor[i]
+    return i == 0 and len(seen) == len(successor)
+
+
+def full_turn_ok(angles_rad: tuple[float, ...]) -> bool:
+    return abs(sum(angles_rad) - 2.0 * math.pi) <= 1e-6
