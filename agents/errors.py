@@ -32,7 +32,14 @@ class InadmissibleError(ConfigError):
 
 
 class CodecError(EncloseError):
-    """A bus payload could not be decoded (bad msgpack, version, schema or non-finite number)."""
+    """A bus payload could not be decoded (bad msgpack, version, schema or non-finite number).
+
+    `reason` is a short tag (msgpack, version, schema, type, non_finite, ...) used to count drops.
+    """
+
+    def __init__(self, message: str, reason: str = "invalid") -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 class TransportError(EncloseError):

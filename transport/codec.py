@@ -1,0 +1,195 @@
+"""msgpack codec with a version field and an explicit schema per message type.
+
+Wire format: one msgpack array
+    [version, type_tag, sender_id, seq, stamp_s, field_1, field_2, ...]
+with the fields of the message type in schema order.  A field has a kind
+(checked on encode *and* decode: type, length, finiteness) and the codec
+version that introduced it; a version bump may only append fields that have
+defaults, so a newer decoder still reads older payloads.
+
+`encode` / `decode` raise `CodecError` (with a `reason`).  Processes use a
+`Decoder`, which never raises: it drops bad payloads and counts them per reason,
+and counts per-sender sequence gaps and stale (duplicate/reordered) messages.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+
+from agents.errors import CodecError
+from transport.messages import (
+    PROCESS_STATES,
+    FollowerState,
+    Header,
+    Message,
+    ProcessStatus,
+    TargetObservation,
+    TruthSnapshot,
+)
+
+CODEC_VERSION = 1
+MIN_VERSION = 1
+MAX_PAYLOAD_BYTES = 1 << 16
+_MAX_ITEMS = 256  # longest list/map accepted (vehicles in a snapshot, counters)
+_HEADER_LEN = 5
+
+
+@dataclass(frozen=True)
+class Field:
+    name: str
+    kind: str  # int | float | opt_float | str | state | vec2 | vec2s | vec3s | counters
+    since: int = 1
+
+
+SCHEMAS: dict[type, tuple[int, tuple[Field, ...]]] = {
+    FollowerState: (1, (
+        Field("index", "int"), Field("r_m", "vec2"), Field("dr_m_s", "vec2"),
+        Field("phi_m", "vec2"), Field("pos_m", "vec2"), Field("vel_m_s", "vec2"),
+        Field("u_m_s", "vec2"), Field("vehicle_stamp_s", "float"),
+    )),
+    TargetObservation: (2, (
+        Field("observer_index", "int"), Field("target_index", "int"), Field("pos_m", "vec2"),
+        Field("observed_stamp_s", "float"), Field("noise_std_m", "opt_float"),
+    )),
+    TruthSnapshot: (3, (
+        Field("sim_time_s", "float"), Field("follower_pos_m", "vec3s"),
+        Field("follower_vel_m_s", "vec3s"), Field("target_pos_m", "vec2s"),
+        Field("target_vel_m_s", "vec2s"),
+    )),
+    ProcessStatus: (4, (
+        Field("role", "str"), Field("index", "int"), Field("state", "state"),
+        Field("counters", "counters"), Field("detail", "str"),
+    )),
+}
+_BY_TAG = {tag: (cls, fields) for cls, (tag, fields) in SCHEMAS.items()}
+
+
+def _fail(reason: str, detail: str) -> CodecError:
+    return CodecError(f"{reason}: {detail}", reason=reason)
+
+
+def _float(v: Any, name: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise _fail("type", f"{name} must be a number, got {type(v).__name__}")
+    f = float(v)
+    if not math.isfinite(f):
+        raise _fail("non_finite", f"{name} = {v}")
+    return f
+
+
+def _int(v: Any, name: str) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise _fail("type", f"{name} must be a non-negative int, got {v!r}")
+    return v
+
+
+def _str(v: Any, name: str) -> str:
+    if not isinstance(v, str) or len(v) > 256:
+        raise _fail("type", f"{name} must be a string of <= 256 characters")
+    return v
+
+
+def _seq(v: Any, name: str, length: int | None = None) -> list[Any] | tuple[Any, ...]:
+    if not isinstance(v, list | tuple) or len(v) > _MAX_ITEMS:
+        raise _fail("type", f"{name} must be a list")
+    if length is not None and len(v) != length:
+        raise _fail("schema", f"{name} must have {length} items, got {len(v)}")
+    return v
+
+
+def _vec(v: Any, name: str, dim: int) -> tuple[float, ...]:
+    return tuple(_float(x, name) for x in _seq(v, name, dim))
+
+
+def _counters(v: Any, name: str) -> dict[str, int]:
+    if not isinstance(v, dict) or len(v) > _MAX_ITEMS:
+        raise _fail("type", f"{name} must be a map")
+    out: dict[str, int] = {}
+    for k, n in v.items():
+        if isinstance(n, bool) or not isinstance(n, int):
+            raise _fail("type", f"{name}[{k!r}] must be an int")
+        out[_str(k, name)] = n
+    return out
+
+
+def _check(kind: str, v: Any, name: str) -> Any:
+    """The validated, normalised value of one field (same rules both ways)."""
+    if kind == "float":
+        return _float(v, name)
+    if kind == "opt_float":
+        return None if v is None else _float(v, name)
+    if kind == "int":
+        return _int(v, name)
+    if kind == "str":
+        return _str(v, name)
+    if kind == "state":
+        if v not in PROCESS_STATES:
+            raise _fail("schema", f"{name} = {v!r} not in {PROCESS_STATES}")
+        return v
+    if kind == "vec2":
+        return _vec(v, name, 2)
+    if kind in ("vec2s", "vec3s"):
+        dim = 2 if kind == "vec2s" else 3
+        return tuple(_vec(x, name, dim) for x in _seq(v, name))
+    if kind == "counters":
+        return _counters(v, name)
+    raise AssertionError(f"unknown field kind {kind}")
+
+
+def _wire(kind: str, v: Any) -> Any:
+    if kind in ("vec2", "vec2s", "vec3s"):
+        return [list(x) for x in v] if kind != "vec2" else list(v)
+    return v
+
+
+def encode(msg: Message) -> bytes:
+    """msgpack bytes of `msg`; CodecError if a field is invalid (e.g. NaN)."""
+    try:
+        tag, fields = SCHEMAS[type(msg)]
+    except KeyError:
+        raise _fail("type", f"{type(msg).__name__} is not a message type") from None
+    h = msg.header
+    head = [CODEC_VERSION, tag, _str(h.sender_id, "sender_id"), _int(h.seq, "seq"),
+            _float(h.stamp_s, "stamp_s")]
+    body = [_wire(f.kind, _check(f.kind, getattr(msg, f.name), f.name)) for f in fields]
+    return bytes(msgpack.packb(head + body, use_bin_type=True))
+
+
+def _unpack(payload: bytes) -> list[Any]:
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise _fail("too_large", f"{len(payload)} bytes")
+    try:
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=True, use_list=True)
+    except Exception as exc:  # hostile input: msgpack raises many unrelated types
+        raise _fail("msgpack", f"{type(exc).__name__}: {exc}") from None
+    if not isinstance(obj, list) or len(obj) < _HEADER_LEN:
+        raise _fail("schema", "payload is not a message array")
+    return obj
+
+
+def decode(payload: bytes) -> Message:
+    """The message in `payload`; CodecError (with `.reason`) if anything is wrong."""
+    obj = _unpack(payload)
+    version, tag = obj[0], obj[1]
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise _fail("version", f"version {version!r} is not an int")
+    if not MIN_VERSION <= version <= CODEC_VERSION:
+        raise _fail("version", f"version {version} not in [{MIN_VERSION}, {CODEC_VERSION}]")
+    if isinstance(tag, bool) or tag not in _BY_TAG:
+        raise _fail("unknown_type", f"type tag {tag!r}")
+    cls, fields = _BY_TAG[tag]
+    present = [f for f in fields if f.since <= version]
+    if len(obj) != _HEADER_LEN + len(present):
+        raise _fail("schema", f"{cls.__name__} v{version} needs {len(present)} fields")
+    header = Header(_str(obj[2], "sender_id"), _int(obj[3], "seq"), _float(obj[4], "stamp_s"))
+    body = zip(present, obj[_HEADER_LEN:], strict=True)
+    values = {f.name: _check(f.kind, v, f.name) for f, v in body}
+    try:
+        msg: Message = cls(header=header, **values)
+    except TypeError as exc:  # a field added later lacks a default: a schema bug, not input
+        raise _fail("schema", str(exc)) from None
+    return msg

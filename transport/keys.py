@@ -1,0 +1,135 @@
+"""Every Zenoh key expression of the swarm, built in this one module.
+
+All keys live under `enclose/<swarm>/`, so several swarms can share a router or
+a machine without hearing each other.  Followers, sensors and status keys carry
+a 0-based index.  `key_matches` implements the Zenoh wildcard rules the
+in-memory bus needs (`*` is exactly one non-empty chunk, `**` any number of
+chunks, including none).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from agents.errors import ConfigError
+
+ROOT = "enclose"
+# Zenoh reserves `*`, `$`, `#`, `?` and `/` separates chunks; a strict whitelist is simpler.
+_NAME_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+_WILDCARDS = ("*", "$", "#", "?")
+
+
+def validate_name(name: str, field: str = "swarm") -> str:
+    """Return `name` if it is a valid single key chunk, else raise ConfigError."""
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise ConfigError(field, f"{name!r} must be 1-64 characters of [A-Za-z0-9_.-]")
+    return name
+
+
+def _index(i: int, field: str) -> int:
+    if isinstance(i, bool) or not isinstance(i, int) or i < 0:
+        raise ConfigError(field, f"{i!r} must be a non-negative int")
+    return i
+
+
+def validate_concrete(key: str) -> str:
+    """A key one can publish on: non-empty chunks, no wildcard or reserved character."""
+    chunks = key.split("/")
+    if not key or any(not c for c in chunks) or any(w in key for w in _WILDCARDS):
+        raise ConfigError("key", f"{key!r} is not a concrete key expression")
+    return key
+
+
+@dataclass(frozen=True)
+class SwarmKeys:
+    """Key builder for one swarm; every key of the system comes from here."""
+
+    swarm: str
+
+    def __post_init__(self) -> None:
+        validate_name(self.swarm, "swarm")
+
+    @property
+    def prefix(self) -> str:
+        return f"{ROOT}/{self.swarm}"
+
+    def follower_state(self, i: int) -> str:
+        return f"{self.prefix}/follower/{_index(i, 'follower')}/state"
+
+    def sensor_targets(self, i: int) -> str:
+        """Where the simulator publishes the targets follower `i` observes."""
+        return f"{self.prefix}/sensor/{_index(i, 'follower')}/targets"
+
+    def truth(self) -> str:
+        return f"{self.prefix}/truth"
+
+    def status(self, role: str, i: int) -> str:
+        return f"{self.prefix}/status/{validate_name(role, 'role')}/{_index(i, 'index')}"
+
+    def alive(self, role: str, i: int) -> str:
+        """Liveliness token key of process (`role`, `i`)."""
+        return f"{self.prefix}/alive/{validate_name(role, 'role')}/{_index(i, 'index')}"
+
+    # Wildcards, for recorders, launchers and tests.
+    def all_follower_states(self) -> str:
+        return f"{self.prefix}/follower/*/state"
+
+    def all_sensor_targets(self) -> str:
+        return f"{self.prefix}/sensor/*/targets"
+
+    def all_status(self) -> str:
+        return f"{self.prefix}/status/**"
+
+    def all_alive(self) -> str:
+        return f"{self.prefix}/alive/**"
+
+    def everything(self) -> str:
+        return f"{self.prefix}/**"
+
+
+@dataclass(frozen=True)
+class KeyInfo:
+    """What a concrete key names: `kind` is follower|sensor|truth|status|alive."""
+
+    swarm: str
+    kind: str
+    role: str | None = None
+    index: int | None = None
+
+
+def parse_key(key: str) -> KeyInfo | None:
+    """Decompose a concrete swarm key (e.g. to find the sender of a link); None if foreign."""
+    parts = key.split("/")
+    if len(parts) < 3 or parts[0] != ROOT:
+        return None
+    swarm, kind, rest = parts[1], parts[2], parts[3:]
+    if kind == "truth" and not rest:
+        return KeyInfo(swarm, kind)
+    if kind in ("follower", "sensor") and len(rest) == 2 and rest[0].isdigit():
+        return KeyInfo(swarm, kind, "follower", int(rest[0]))
+    if kind in ("status", "alive") and len(rest) == 2 and rest[1].isdigit():
+        return KeyInfo(swarm, kind, rest[0], int(rest[1]))
+    return None
+
+
+def key_matches(key_expr: str, key: str) -> bool:
+    """True if the concrete `key` is matched by `key_expr` (Zenoh `*` / `**` semantics)."""
+    return _match(key_expr.split("/"), key.split("/"))
+
+
+def _match(pattern: list[str], chunks: list[str]) -> bool:
+    if not pattern:
+        return not chunks
+    head, tail = pattern[0], pattern[1:]
+    if head == "**":
+        return any(_match(tail, chunks[k:]) for k in range(len(chunks) + 1))
+    if not chunks:
+        return False
+    if head == "*" or head == chunks[0]:
+        return _match(tail, chunks[1:])
+    if "*" in head:
+        # A chunk such as `st*` : `*` matches any run of characters within the chunk.
+        regex = "^" + ".*".join(re.escape(p) for p in head.split("*")) + "$"
+        return re.match(regex, chunks[0]) is not None and _match(tail, chunks[1:])
+    return False

@@ -1,0 +1,183 @@
+"""The Zenoh implementation of the bus.
+
+Every subscription uses a Zenoh RingChannel drained with `try_recv()` from the
+process's loop: no Python callback ever runs on a Zenoh thread (they would
+touch agent state, and they keep a process from exiting).  `close()` undeclares
+everything and closes the session; use the bus as a context manager.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import TypeVar, Union
+
+import zenoh
+
+from agents.errors import TransportError
+from transport.bus import DEFAULT_CAPACITY, AliveEvent, BusBase, Clock, Congestion, Received
+from transport.keys import validate_concrete
+from transport.zenoh_config import ZenohConfig, build_zenoh_config
+
+log = logging.getLogger(__name__)
+
+_Owned = Union["ZenohSubscription", "ZenohPublisher", "ZenohToken", "ZenohAliveWatch"]
+_T = TypeVar("_T", bound=_Owned)
+
+_CONGESTION = {
+    Congestion.BLOCK: zenoh.CongestionControl.BLOCK,
+    Congestion.DROP: zenoh.CongestionControl.DROP,
+}
+
+
+def _hlc(sample: zenoh.Sample) -> tuple[float | None, str | None]:
+    stamp = sample.timestamp
+    if stamp is None:
+        return None, None
+    return stamp.get_time_as_ntp64().as_secs_f64(), str(stamp.get_id())
+
+
+class ZenohSubscription:
+    def __init__(self, bus: ZenohBus, key_expr: str, capacity: int) -> None:
+        self.key_expr = key_expr
+        self._bus = bus
+        self._sub = bus.session.declare_subscriber(key_expr, zenoh.handlers.RingChannel(capacity))
+
+    def drain(self, max_items: int | None = None) -> list[Received]:
+        out: list[Received] = []
+        now = self._bus.now_s()
+        while max_items is None or len(out) < max_items:
+            sample = self._sub.try_recv()
+            if sample is None:
+                break
+            if sample.kind != zenoh.SampleKind.PUT:
+                continue
+            hlc_s, source = _hlc(sample)
+            payload = sample.payload.to_bytes()
+            out.append(Received(str(sample.key_expr), payload, now, hlc_s, source))
+        return out
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+class ZenohPublisher:
+    def __init__(self, bus: ZenohBus, key: str, congestion: Congestion) -> None:
+        self.key = validate_concrete(key)
+        self.congestion = congestion
+        self._pub = bus.session.declare_publisher(
+            key, congestion_control=_CONGESTION[congestion]
+        )
+
+    def put(self, payload: bytes) -> None:
+        try:
+            self._pub.put(payload)
+        except zenoh.ZError as exc:
+            raise TransportError(f"put on {self.key}: {exc}") from exc
+
+    def matched(self) -> bool:
+        # The stub says bool; at runtime (1.10) it is a MatchingStatus with `.matching`.
+        status: object = self._pub.matching_status
+        return bool(getattr(status, "matching", status))
+
+    def close(self) -> None:
+        self._pub.undeclare()
+
+
+class ZenohToken:
+    def __init__(self, bus: ZenohBus, key: str) -> None:
+        self.key = validate_concrete(key)
+        self._token = bus.session.liveliness().declare_token(key)
+
+    def close(self) -> None:
+        self._token.undeclare()
+
+
+class ZenohAliveWatch:
+    def __init__(self, bus: ZenohBus, key_expr: str) -> None:
+        self.key_expr = key_expr
+        self._alive: set[str] = set()
+        self._sub = bus.session.liveliness().declare_subscriber(
+            key_expr, zenoh.handlers.FifoChannel(1024), history=True
+        )
+
+    def drain_events(self) -> list[AliveEvent]:
+        events: list[AliveEvent] = []
+        while (sample := self._sub.try_recv()) is not None:
+            ev = AliveEvent(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+            (self._alive.add if ev.alive else self._alive.discard)(ev.key)
+            events.append(ev)
+        return events
+
+    def poll(self) -> frozenset[str]:
+        self.drain_events()
+        return frozenset(self._alive)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+class ZenohBus(BusBase):
+    """A Zenoh session configured by `ZenohConfig`."""
+
+    def __init__(self, cfg: ZenohConfig, clock: Clock = time.time) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self._clock = clock
+        self._owned: list[_Owned] = []
+        try:
+            self.session = zenoh.open(build_zenoh_config(cfg))
+        except zenoh.ZError as exc:
+            raise TransportError(f"cannot open Zenoh session: {exc}") from exc
+        self.closed = False
+        log.debug("zenoh session %s listen=%s connect=%s", self.zid, cfg.listen, cfg.connect)
+
+    @property
+    def zid(self) -> str:
+        return str(self.session.zid())
+
+    def now_s(self) -> float:
+        return self._clock()
+
+    def _own(self, obj: _T) -> _T:
+        self._owned.append(obj)
+        return obj
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise TransportError("Zenoh bus is closed")
+
+    def declare_publisher(
+        self, key: str, congestion: Congestion = Congestion.BLOCK
+    ) -> ZenohPublisher:
+        self._check_open()
+        return self._own(ZenohPublisher(self, key, congestion))
+
+    def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY) -> ZenohSubscription:
+        self._check_open()
+        return self._own(ZenohSubscription(self, key_expr, capacity))
+
+    def declare_token(self, key: str) -> ZenohToken:
+        self._check_open()
+        return self._own(ZenohToken(self, key))
+
+    def watch_alive(self, key_expr: str) -> ZenohAliveWatch:
+        self._check_open()
+        return self._own(ZenohAliveWatch(self, key_expr))
+
+    def peers(self) -> list[str]:
+        """Zenoh ids of the peers this session is linked to right now."""
+        return [str(z) for z in self.session.info.peers_zid()]
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        for obj in reversed(self._owned):
+            try:
+                obj.close()
+            except zenoh.ZError as exc:  # already undeclared: nothing left to release
+                log.debug("undeclare %s: %s", obj, exc)
+        self._owned.clear()
+        self._publishers.clear()
+        self.session.close()

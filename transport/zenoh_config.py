@@ -1,0 +1,90 @@
+"""Zenoh session configuration, built in one function from a frozen dataclass.
+
+Safe by construction: peer mode, explicit endpoints, multicast scouting off,
+listening on 127.0.0.1 only, HLC timestamping on.  A user's own Zenoh config
+file (JSON5) may be given; it is loaded untouched as the base, and any key it
+sets wins over our safe value -- except `timestamping/enabled`, which the
+message stamps need, and non-empty `listen`/`connect` lists given here, which
+are explicit choices of the caller.  Keys the file leaves unset get the safe
+values, so a file that only tunes, say, buffers never opens multicast scouting
+or a listener on every interface.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+from agents.errors import ConfigError
+
+LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
+_MODES = ("peer", "client", "router")
+
+
+@dataclass(frozen=True)
+class ZenohConfig:
+    """What a process needs to open its Zenoh session."""
+
+    mode: str = "peer"
+    listen: tuple[str, ...] = ()  # empty: an OS-chosen port on 127.0.0.1
+    connect: tuple[str, ...] = ()
+    user_config_path: str | None = None
+    lowlatency: bool = False  # `transport/unicast/lowlatency`; also turns QoS off
+
+    def __post_init__(self) -> None:
+        if self.mode not in _MODES:
+            raise ConfigError("zenoh.mode", f"{self.mode!r} not in {_MODES}")
+        for field, endpoints in (("zenoh.listen", self.listen), ("zenoh.connect", self.connect)):
+            if isinstance(endpoints, str) or not all(isinstance(e, str) for e in endpoints):
+                raise ConfigError(field, "must be a tuple of endpoint strings")
+            for e in endpoints:
+                if "/" not in e:
+                    raise ConfigError(field, f"{e!r} is not a locator like tcp/127.0.0.1:7447")
+        if self.user_config_path is not None and not Path(self.user_config_path).is_file():
+            raise ConfigError("zenoh.user_config_path", f"{self.user_config_path} is not a file")
+
+
+def _is_set(config: zenoh.Config, default: zenoh.Config, key: str) -> bool:
+    """True if the user's file gave `key` a value other than Zenoh's built-in one."""
+    return bool(config.get_json(key) != default.get_json(key))
+
+
+def _put(config: zenoh.Config, key: str, value: object) -> None:
+    # insert_json5 takes a JSON5 *string*, not a Python value.
+    config.insert_json5(key, json.dumps(value))
+
+
+def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
+    """The zenoh.Config for `cfg` (see the module docstring for precedence)."""
+    default = zenoh.Config()
+    if cfg.user_config_path is None:
+        config = zenoh.Config()
+    else:
+        try:
+            config = zenoh.Config.from_file(cfg.user_config_path)
+        except zenoh.ZError as exc:
+            raise ConfigError("zenoh.user_config_path", str(exc)) from exc
+    user = cfg.user_config_path is not None
+    if not (user and _is_set(config, default, "mode")):
+        _put(config, "mode", cfg.mode)
+    if cfg.listen or not (user and _is_set(config, default, "listen/endpoints")):
+        _put(config, "listen/endpoints", list(cfg.listen or LOOPBACK_LISTEN))
+    if cfg.connect:
+        _put(config, "connect/endpoints", list(cfg.connect))
+    if not (user and _is_set(config, default, "scouting/multicast/enabled")):
+        _put(config, "scouting/multicast/enabled", False)
+    _put(config, "timestamping/enabled", True)
+    if cfg.lowlatency:
+        _put(config, "transport/unicast/lowlatency", True)
+        _put(config, "transport/unicast/qos/enabled", False)
+    return config
+
+
+def loopback_endpoint(port: int, proto: str = "tcp") -> str:
+    """`tcp/127.0.0.1:<port>`: the only kind of endpoint the project uses by default."""
+    if not 0 <= port <= 65535:
+        raise ConfigError("zenoh.port", f"{port} out of range")
+    return f"{proto}/127.0.0.1:{port}"
