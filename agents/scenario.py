@@ -29,6 +29,7 @@ class Gains:
     alpha2: float = 3.0
     k_d: float = 2.0
     alpha3: float = 3.0
+    step_fraction: float = 0.5  # share of an error one sampled step may remove; 0 = plain Euler
 
 
 @dataclass(frozen=True)

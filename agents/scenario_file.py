@@ -222,7 +222,11 @@ def _successor(t: Table, f_pos: np.ndarray, center: np.ndarray, n: int) -> tuple
 
 def _gains(t: Table) -> Gains:
     d = Gains()
-    g = Gains(**{k: positive(t, k, "gains", getattr(d, k)) for k in d.__dataclass_fields__})
+    names = [k for k in d.__dataclass_fields__ if k != "step_fraction"]
+    fraction = number(t, "step_fraction", "gains", d.step_fraction)
+    if not 0.0 <= fraction <= 1.0:
+        raise ScenarioError("gains.step_fraction", f"must be within [0, 1], got {fraction}")
+    g = Gains(step_fraction=fraction, **{k: positive(t, k, "gains", getattr(d, k)) for k in names})
     for key in ("alpha1", "alpha2", "alpha3"):
         if getattr(g, key) < 1.0:
             raise InadmissibleError(f"gains.{key}", "must be >= 1 (the paper's p > q)")

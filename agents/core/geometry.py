@@ -1,0 +1,63 @@
+"""Small geometric primitives shared by the estimator, the controller and the metrics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+TWO_PI = 2.0 * math.pi
+
+
+def sig(x: FloatArray, exponent: float) -> FloatArray:
+    """sig(x)^a = sign(x) * |x|^a, elementwise (the paper's odd-ratio power)."""
+    if exponent == 1.0 / 3.0:
+        return np.cbrt(x)  # exact and one call: the paper's alpha = 3
+    return np.copysign(np.abs(x) ** exponent, x)
+
+
+def wrap_2pi(angle_rad: FloatArray) -> FloatArray:
+    """Wrap angles into [0, 2 pi)."""
+    return np.mod(angle_rad, TWO_PI)
+
+
+def bearing(vec: FloatArray) -> FloatArray:
+    """Angle of (..., 2) vectors from the x (east) axis, counter-clockwise."""
+    return np.arctan2(vec[..., 1], vec[..., 0])
+
+
+def included_angles(pos_m: FloatArray, succ_pos_m: FloatArray, center_m: FloatArray) -> FloatArray:
+    """Angle from each follower to its successor seen from `center_m`, in [0, 2 pi).
+
+    `center_m` is (..., 2) and broadcast against the positions: the true LAP for the
+    real errors, each follower's own estimate r_i for the controller.
+    """
+    return wrap_2pi(bearing(succ_pos_m - center_m) - bearing(pos_m - center_m))
+
+
+def rotate_ccw(vec: FloatArray) -> FloatArray:
+    """(..., 2) vectors rotated by +90 degrees."""
+    out = np.empty_like(vec)
+    out[..., 0] = -vec[..., 1]
+    out[..., 1] = vec[..., 0]
+    return out
+
+
+def limited_sig(x: FloatArray, exponent: float, gain: float, rate_cap_per_s: FloatArray | float) -> FloatArray:
+    """gain * sig(x)^a, its magnitude capped at rate_cap_per_s * |x|.
+
+    A law with a < 1 has unbounded gain near zero, so an explicit step of dt
+    overshoots zero and settles into a 2-cycle (the numerical dithering the paper
+    claims to avoid).  Capping the rate at fraction/dt * |x| lets one step remove
+    at most that fraction of the error; as dt -> 0 the cap vanishes and the law
+    is the paper's.  An infinite cap gives the plain law.
+    """
+    mag = np.abs(x)
+    return np.copysign(np.minimum(gain * mag**exponent, rate_cap_per_s * mag), x)
+
+
+def rate_cap(step_fraction: float, dt_s: float) -> float:
+    """The cap of `limited_sig` for a step of dt: infinite (no cap) when the fraction is <= 0."""
+    return step_fraction / dt_s if step_fraction > 0.0 else float("inf")

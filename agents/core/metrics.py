@@ -1,0 +1,91 @@
+"""Accuracy metrics of a run, computed the same way for lock-step and networked runs."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.core.geometry import included_angles
+from agents.core.timeseries import RunSeries
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class ErrorSeries:
+    """Per-sample errors, (k, n) each: estimated (z, delta) and real (e_rho, e_delta)."""
+
+    z_m: FloatArray
+    delta: FloatArray
+    estimator_error_m: FloatArray
+    e_rho_m: FloatArray
+    e_delta: FloatArray
+
+
+@dataclass(frozen=True)
+class Metrics:
+    steady_from_s: float
+    estimator_error_m: float
+    radius_error_m: float
+    angle_error: float
+    settle_time_s: float | None
+    command_jump_m_s: float
+    duration_s: float
+    samples: int
+
+    def as_dict(self) -> dict[str, float | int | None]:
+        return asdict(self)
+
+
+def error_series(
+    series: RunSeries, successor: tuple[int, ...], angles_rad: FloatArray, rho_d_m: float
+) -> ErrorSeries:
+    succ = np.asarray(successor)
+    pos, est = series.follower_pos_m, series.estimate_m
+    lap = series.lap_m[:, None, :]
+    succ_pos = pos[:, succ, :]
+    rho_est = np.linalg.norm(pos - est, axis=2)
+    rho_true = np.linalg.norm(pos - lap, axis=2)
+    return ErrorSeries(
+        z_m=rho_est - rho_d_m,
+        delta=included_angles(pos, succ_pos, est) / angles_rad - 1.0,
+        estimator_error_m=np.linalg.norm(est - lap, axis=2),
+        e_rho_m=rho_true - rho_d_m,
+        e_delta=included_angles(pos, succ_pos, lap) / angles_rad - 1.0,
+    )
+
+
+def settle_time(t_s: FloatArray, inside: BoolArray) -> float | None:
+    """First time after which `inside` (k,) holds to the end; None if it fails at the end."""
+    if len(inside) == 0 or not inside[-1]:
+        return None
+    outside = np.nonzero(~inside)[0]
+    return float(t_s[0]) if len(outside) == 0 else float(t_s[outside[-1] + 1])
+
+
+def compute_metrics(
+    series: RunSeries,
+    errors: ErrorSeries,
+    steady_from_s: float,
+    eps_rho_m: float,
+    eps_delta: float,
+) -> Metrics:
+    steady = series.t_s >= steady_from_s
+    if not np.any(steady):
+        steady = np.ones_like(series.t_s, dtype=bool)
+    inside = np.all((np.abs(errors.e_rho_m) < eps_rho_m) & (np.abs(errors.e_delta) < eps_delta), axis=1)
+    jumps = np.linalg.norm(np.diff(series.command_m_s, axis=0), axis=2)
+    steady_jumps = jumps[steady[1:] & steady[:-1]]
+    return Metrics(
+        steady_from_s=float(steady_from_s),
+        estimator_error_m=float(errors.estimator_error_m[steady].max()),
+        radius_error_m=float(np.abs(errors.e_rho_m[steady]).max()),
+        angle_error=float(np.abs(errors.e_delta[steady]).max()),
+        settle_time_s=settle_time(series.t_s, inside),
+        command_jump_m_s=float(steady_jumps.max()) if steady_jumps.size else 0.0,
+        duration_s=float(series.t_s[-1] - series.t_s[0]),
+        samples=len(series.t_s),
+    )

@@ -1,0 +1,80 @@
+"""The paper's six performance panels and the trajectory plot, as PNG files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only: runs on headless machines and in CI
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+
+from agents.core.metrics import ErrorSeries  # noqa: E402
+from agents.core.timeseries import RunSeries  # noqa: E402
+
+PANELS = (
+    ("z_m", "z_i = rho'_i - rho_d [m]", "estimated radius error"),
+    ("delta", "delta_i", "estimated included-angle error"),
+    ("estimator_error_m", "|r_i - LAP| [m]", "estimator error"),
+    ("e_rho_m", "e_rho,i [m]", "real radius error"),
+    ("e_delta", "e_delta,i", "real included-angle error"),
+)
+
+
+def _plot_followers(ax: Axes, t: np.ndarray, values: np.ndarray, label: str) -> None:
+    for i in range(values.shape[1]):
+        ax.plot(t, values[:, i], lw=1.0, label=f"{label}{i + 1}")
+
+
+def performance_figure(series: RunSeries, errors: ErrorSeries, eps: tuple[float, float], path: Path) -> None:
+    fig, axes = plt.subplots(3, 2, figsize=(12, 10), sharex=True)
+    t = series.t_s
+    for ax, (field, ylabel, title) in zip(axes.flat, PANELS, strict=False):
+        _plot_followers(ax, t, getattr(errors, field), "F")
+        ax.set_title(title)
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+    for ax, bound in ((axes.flat[2], eps[0]), (axes.flat[3], eps[0]), (axes.flat[4], eps[1])):
+        ax.axhline(bound, color="k", ls="--", lw=0.8)
+        if ax is not axes.flat[2]:
+            ax.axhline(-bound, color="k", ls="--", lw=0.8)
+    axes.flat[2].set_yscale("log")
+    cmd = axes.flat[5]
+    speed = np.linalg.norm(series.command_m_s, axis=2)
+    _plot_followers(cmd, t, speed, "|u|")
+    cmd.set_title("control commands")
+    cmd.set_ylabel("|u_i| [m/s]")
+    cmd.grid(alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]")
+    axes.flat[0].legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def trajectory_figure(series: RunSeries, rho_d_m: float, path: Path) -> None:
+    fig, ax = plt.subplots(figsize=(10, 7))
+    for i in range(series.follower_pos_m.shape[1]):
+        xy = series.follower_pos_m[:, i]
+        ax.plot(xy[:, 0], xy[:, 1], lw=0.9, label=f"follower {i + 1}")
+        ax.plot(*xy[0], "o", ms=4, color=ax.lines[-1].get_color())
+    for j in range(series.target_pos_m.shape[1]):
+        xy = series.target_pos_m[:, j]
+        ax.plot(xy[:, 0], xy[:, 1], "--", lw=0.8, color="0.4")
+    lap = series.lap_m
+    ax.plot(lap[:, 0], lap[:, 1], "k-", lw=1.5, label="LAP (true)")
+    circle = plt.Circle(tuple(lap[-1]), rho_d_m, fill=False, ls=":", color="k")
+    ax.add_patch(circle)
+    ax.plot(series.follower_pos_m[-1, :, 0], series.follower_pos_m[-1, :, 1], "k^", ms=7)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x east [m]")
+    ax.set_ylabel("y north [m]")
+    ax.set_title(f"trajectories over {series.t_s[-1] - series.t_s[0]:.0f} s (dashed: targets)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,73 @@
+"""Turn a recorded run into metrics.json, series.csv and figures: one code path for every run kind."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.core.metrics import Metrics, compute_metrics, error_series
+from agents.core.timeseries import RunSeries
+from agents.errors import EncloseError
+from deploy.figures import performance_figure, trajectory_figure
+from deploy.rundir import SERIES_FILE, RunInfo, read_info, read_series, write_metrics, write_series
+
+log = logging.getLogger(__name__)
+MAX_CSV_RATE_HZ = 100.0
+PERFORMANCE_PNG = "performance.png"
+TRAJECTORY_PNG = "trajectory.png"
+
+
+def write_run_outputs(
+    run_dir: Path, series: RunSeries, info: RunInfo, extra: dict[str, Any] | None = None
+) -> Metrics:
+    """Metrics from the full-rate series; CSV and figures from at most 100 Hz of it."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    angles = np.asarray(info.angles_rad)
+    errors = error_series(series, info.successor, angles, info.rho_d_m)
+    metrics = compute_metrics(series, errors, info.steady_from_s, info.eps_rho_m, info.eps_delta)
+    write_metrics(run_dir, metrics, info, extra or {})
+    thin = series.decimate(_decimation(series.t_s))
+    thin_errors = error_series(thin, info.successor, angles, info.rho_d_m)
+    write_series(run_dir / SERIES_FILE, thin, thin_errors)
+    _figures(run_dir, thin, info)
+    return metrics
+
+
+def _decimation(t_s: np.ndarray) -> int:
+    if len(t_s) < 2:
+        return 1
+    dt = float(np.median(np.diff(t_s)))
+    return max(1, int(round(1.0 / (MAX_CSV_RATE_HZ * dt)))) if dt > 0 else 1
+
+
+def _figures(run_dir: Path, series: RunSeries, info: RunInfo) -> None:
+    angles = np.asarray(info.angles_rad)
+    errors = error_series(series, info.successor, angles, info.rho_d_m)
+    performance_figure(series, errors, (info.eps_rho_m, info.eps_delta), run_dir / PERFORMANCE_PNG)
+    trajectory_figure(series, info.rho_d_m, run_dir / TRAJECTORY_PNG)
+
+
+def regenerate_figures(run_dir: Path) -> list[Path]:
+    """Figures again from a run directory's series.csv and run.json."""
+    if not run_dir.is_dir():
+        raise EncloseError(f"{run_dir} is not a run directory")
+    info = read_info(run_dir)
+    series = read_series(run_dir / SERIES_FILE, info.n, info.m)
+    _figures(run_dir, series, info)
+    return [run_dir / PERFORMANCE_PNG, run_dir / TRAJECTORY_PNG]
+
+
+def register(sub: Any) -> None:
+    parser = sub.add_parser("report", help="regenerate the figures of a run directory")
+    parser.add_argument("run_dir", type=Path, help="directory written by simulate or run")
+    parser.set_defaults(func=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    for path in regenerate_figures(args.run_dir):
+        log.info("wrote %s", path)
+    return 0
