@@ -3,7 +3,8 @@
 A `Decoder` belongs to one process loop.  Every payload that fails to decode
 is dropped and counted under its `CodecError.reason`; a message whose type is
 not expected on that subscription, or whose index disagrees with its key, is
-dropped too.  Per sender it counts sequence gaps (messages never seen) and
+dropped too.  Per stream -- (sender id, key), since a sender numbers each
+key it publishes on separately -- it counts sequence gaps (messages never seen) and
 stale messages (sequence number not above the last one: duplicated or
 reordered) -- stale messages are still delivered, flagged, since only the
 consumer knows whether "latest by seq" matters.
@@ -54,9 +55,9 @@ class Decoder:
         self.expect = expect
         self.dropped: Counter[str] = Counter()
         self.accepted = 0
-        self.gaps: Counter[str] = Counter()
+        self.gaps: Counter[str] = Counter()  # per sender id, over its streams
         self.stale: Counter[str] = Counter()
-        self._last_seq: dict[str, int] = {}
+        self._last_seq: dict[tuple[str, str], int] = {}
 
     def decode(self, rec: Received) -> Inbound | None:
         try:
@@ -71,16 +72,16 @@ class Decoder:
             self.dropped["key_mismatch"] += 1
             return None
         self.accepted += 1
-        return Inbound(msg, rec, self._track(msg.header.sender_id, msg.header.seq))
+        return Inbound(msg, rec, self._track(msg.header.sender_id, rec.key, msg.header.seq))
 
-    def _track(self, sender: str, seq: int) -> bool:
-        last = self._last_seq.get(sender)
+    def _track(self, sender: str, key: str, seq: int) -> bool:
+        last = self._last_seq.get((sender, key))
         if last is not None and seq <= last:
             self.stale[sender] += 1
             return True
         if last is not None and seq > last + 1:
             self.gaps[sender] += seq - last - 1
-        self._last_seq[sender] = seq
+        self._last_seq[(sender, key)] = seq
         return False
 
     def decode_all(self, received: Iterable[Received]) -> list[Inbound]:

@@ -42,12 +42,16 @@ def vec3(values: Iterable[float]) -> Vec3:
 @dataclass(frozen=True)
 class Header:
     sender_id: str  # e.g. "follower-2", "sim-0"
-    seq: int  # per sender, +1 per message sent, from 0
+    seq: int  # per (sender, key) stream, +1 per message sent, from 0
     stamp_s: float  # sender's clock when the message was built
 
 
 class Stamper:
-    """Makes the headers of one sender: same id, increasing seq, its clock."""
+    """Makes the headers of one stream: same sender id, seq +1 per message, its clock.
+
+    Use one Stamper per key a process publishes on, so that a receiver of that key
+    sees consecutive numbers and can count gaps (see `transport.decoder`).
+    """
 
     def __init__(self, sender_id: str, clock: Clock = time.time) -> None:
         self.sender_id = sender_id

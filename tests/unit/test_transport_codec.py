@@ -200,3 +200,14 @@ def test_newer_field_defaults_when_decoding_older_version(monkeypatch: pytest.Mo
     out = decode(v1)
     assert isinstance(out, TargetObservation) and out.noise_std_m is None
     assert decode(encode(ALL_MESSAGES[1])) == ALL_MESSAGES[1]
+
+
+def test_decoder_tracks_streams_per_key() -> None:
+    """One sender numbering two keys separately is not a gap."""
+    decoder = Decoder()
+    for key_index in (1, 2):
+        stamper = Stamper("sim-0", clock=lambda: 0.0)
+        for _ in range(3):
+            obs = TargetObservation(stamper.header(), key_index, 0, (1.0, 1.0), 0.0)
+            assert decoder.decode(rec(encode(obs), key=f"enclose/t/sensor/{key_index}/targets"))
+    assert decoder.gaps["sim-0"] == 0 and decoder.stale["sim-0"] == 0
