@@ -23,3 +23,19 @@ def ned_to_enu(vec_ned: FloatArray) -> FloatArray:
     """Convert (..., 3) NED vectors to ENU."""
     vec = np.asarray(vec_ned, dtype=np.float64)
     return np.stack([vec[..., 1], vec[..., 0], -vec[..., 2]], axis=-1)
+
+
+def yaw_enu_to_ned(yaw_enu_rad: float) -> float:
+    """ENU yaw (counter-clockwise from east) to NED yaw (clockwise from north), in (-pi, pi]."""
+    return wrap_pi(0.5 * np.pi - yaw_enu_rad)
+
+
+def yaw_ned_to_enu(yaw_ned_rad: float) -> float:
+    """NED yaw to ENU yaw; the map is its own inverse."""
+    return wrap_pi(0.5 * np.pi - yaw_ned_rad)
+
+
+def wrap_pi(angle_rad: float) -> float:
+    """Wrap an angle to (-pi, pi]."""
+    wrapped = float(np.arctan2(np.sin(angle_rad), np.cos(angle_rad)))
+    return np.pi if wrapped == -np.pi else wrapped

@@ -1,0 +1,108 @@
+"""`enclose sim [SCENARIO | --vehicles N]`: the vehicle simulator alone, for any MAVLink GCS/SDK.
+
+Also runnable as `python -m deploy.cmd_sim ...` (same options) without the other subcommands.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import time
+from collections.abc import Sequence
+from types import FrameType
+from typing import Any
+
+from agents.errors import EncloseError
+from agents.mavlink.modes import FLAVOURS
+from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario_file import load_scenario
+from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned, spawn_points_ned
+
+log = logging.getLogger("enclose.sim")
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser("sim", help="run the MAVLink vehicle simulator alone",
+                                   description=__doc__)
+    add_arguments(parser)
+    parser.set_defaults(func=run)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("scenario", nargs="?", default=None,
+                       help="shipped scenario name or TOML path (default: the paper's case)")
+    which.add_argument("--vehicles", type=int, default=None, metavar="N",
+                       help="N vehicles on a 5 m grid instead of a scenario")
+    parser.add_argument("--flavour", choices=FLAVOURS, default=None,
+                        help="autopilot flavour (default: the scenario's, else px4)")
+    parser.add_argument("--rate-hz", type=float, default=100.0, help="simulation tick rate")
+    parser.add_argument("--telemetry-hz", type=float, default=50.0,
+                        help="default rate of LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE")
+    parser.add_argument("--host", default="127.0.0.1", help="loopback address to use")
+    parser.add_argument("--base-port", type=int, default=14580,
+                        help="vehicle i listens on BASE+i (PX4 SITL: 14580)")
+    parser.add_argument("--send-base-port", type=int, default=14540,
+                        help="vehicle i sends telemetry to SEND_BASE+i (PX4 SITL: 14540)")
+    parser.add_argument("--duration-s", type=float, default=None,
+                        help="stop after this much simulated time (default: until Ctrl-C)")
+
+
+def build_simulator(args: argparse.Namespace) -> Simulator:
+    if args.vehicles is not None:
+        if args.vehicles < 1:
+            raise EncloseError("--vehicles must be >= 1")
+        spawn, vehicle, home = grid_spawn_ned(args.vehicles), VehicleConfig(), HomeConfig()
+    else:
+        scenario = load_scenario(args.scenario)
+        spawn, vehicle, home = spawn_points_ned(scenario), scenario.vehicle, scenario.home
+    cfg = SimConfig(rate_hz=args.rate_hz, telemetry_hz=args.telemetry_hz,
+                    flavour=args.flavour or vehicle.flavour, host=args.host,
+                    listen_base_port=args.base_port, send_base_port=args.send_base_port)
+    return Simulator(spawn, vehicle, home, cfg)
+
+
+def run(args: argparse.Namespace) -> int:
+    sim = build_simulator(args)
+    stop = {"flag": False}
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop["flag"] = True
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    ports = sim.listen_ports()
+    log.info("%d %s vehicles, sysid 1..%d, listening on %s:%d..%d, sending to %s:%d..%d",
+             sim.n, sim.cfg.flavour, sim.n, sim.cfg.host, ports[0], ports[-1], sim.cfg.host,
+             sim.cfg.send_base_port, sim.cfg.send_base_port + sim.n - 1)
+    max_ticks = None if args.duration_s is None else round(args.duration_s * sim.cfg.rate_hz)
+    started = time.monotonic()
+    try:
+        stats = sim.run(lambda: stop["flag"], max_ticks)
+    finally:
+        sim.close()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    wall_s = time.monotonic() - started
+    counters = " ".join(f"{k}={v}" for k, v in sorted(sim.counters.items()))
+    print(f"sim stopped: ticks={stats.ticks} sim_time_s={sim.sim_time_s:.2f} wall_s={wall_s:.2f} "
+          f"overruns={stats.overruns} resyncs={stats.resyncs} {counters}", flush=True)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="enclose sim", description=__doc__)
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:
+        return run(args)
+    except EncloseError as exc:
+        log.error("%s: %s", type(exc).__name__, exc)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,113 @@
+"""Telemetry messages of one simulated vehicle, built from one row of the fleet state."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+from agents.mavlink.modes import (
+    MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+    MAV_MODE_FLAG_SAFETY_ARMED,
+    PX4,
+    autopilot_of_flavour,
+    encode_custom_mode,
+)
+from agents.scenario import HomeConfig
+
+MSG_HEARTBEAT = 0
+MSG_SYS_STATUS = 1
+MSG_ATTITUDE = 30
+MSG_LOCAL_POSITION_NED = 32
+MSG_GLOBAL_POSITION_INT = 33
+MSG_AUTOPILOT_VERSION = 148
+MSG_HOME_POSITION = 242
+MSG_EXTENDED_SYS_STATE = 245
+
+EARTH_RADIUS_M = 6_378_137.0
+MAV_TYPE_QUADROTOR = 2
+MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 3, 4
+LANDED_ON_GROUND, LANDED_IN_AIR, LANDED_TAKEOFF, LANDED_LANDING = 1, 2, 3, 4
+# gyro, accel, mag, baro, GPS and the pre-arm check bit: present, enabled and healthy.
+SENSORS_OK = 1 | 2 | 4 | 8 | 32 | 0x10000000
+# PARAM_FLOAT, COMMAND_INT, SET_POSITION_TARGET_LOCAL_NED, MAVLINK2
+CAPABILITIES = 2 | 8 | 128 | 8192
+SW_VERSION = {PX4: (1 << 24) | (14 << 16) | 255, "ardupilot": (4 << 24) | (5 << 16) | 255}
+
+
+@dataclass(frozen=True)
+class Row:
+    """One vehicle at one tick (NED, SI units)."""
+
+    time_boot_ms: int
+    pos: tuple[float, float, float]
+    vel: tuple[float, float, float]
+    roll: float
+    pitch: float
+    yaw: float
+    yaw_rate: float
+    landed: bool
+
+
+def geodetic(home: HomeConfig, north_m: float, east_m: float) -> tuple[int, int]:
+    """lat, lon in degE7 of a local offset (flat earth: fine over a few km)."""
+    lat = home.lat_deg + math.degrees(north_m / EARTH_RADIUS_M)
+    east_radius_m = EARTH_RADIUS_M * math.cos(math.radians(home.lat_deg))
+    lon = home.lon_deg + math.degrees(east_m / east_radius_m)
+    return round(lat * 1e7), round(lon * 1e7)
+
+
+def heartbeat(mav: mavlink2.MAVLink, flavour: str, mode: str,
+              armed: bool) -> mavlink2.MAVLink_message:
+    base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+    return mav.heartbeat_encode(MAV_TYPE_QUADROTOR, autopilot_of_flavour(flavour), base,
+                                encode_custom_mode(flavour, mode),
+                                MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY)
+
+
+def landed_state(row: Row, mode: str, armed: bool) -> int:
+    if row.landed:
+        return LANDED_ON_GROUND
+    if mode == "LAND" and armed:
+        return LANDED_LANDING
+    return LANDED_TAKEOFF if mode == "TAKEOFF" else LANDED_IN_AIR
+
+
+def stream_message(mav: mavlink2.MAVLink, msg_id: int, row: Row,
+                   home: HomeConfig) -> mavlink2.MAVLink_message | None:
+    """A position-type message for `row`, or None for an id this module does not stream."""
+    if msg_id == MSG_LOCAL_POSITION_NED:
+        return mav.local_position_ned_encode(row.time_boot_ms, *row.pos, *row.vel)
+    if msg_id == MSG_ATTITUDE:
+        return mav.attitude_encode(row.time_boot_ms, row.roll, row.pitch, row.yaw, 0.0, 0.0,
+                                   row.yaw_rate)
+    if msg_id == MSG_GLOBAL_POSITION_INT:
+        lat, lon = geodetic(home, row.pos[0], row.pos[1])
+        hdg = round(math.degrees(row.yaw) * 100.0) % 36000
+        vel_cm = [max(-32768, min(32767, round(v * 100.0))) for v in row.vel]
+        return mav.global_position_int_encode(row.time_boot_ms, lat, lon,
+                                              round((home.alt_m - row.pos[2]) * 1000.0),
+                                              round(-row.pos[2] * 1000.0), *vel_cm, hdg)
+    if msg_id == MSG_HOME_POSITION:
+        lat, lon = geodetic(home, 0.0, 0.0)
+        return mav.home_position_encode(lat, lon, round(home.alt_m * 1000.0), 0.0, 0.0, 0.0,
+                                        [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+                                        row.time_boot_ms * 1000)
+    return None
+
+
+def status_message(mav: mavlink2.MAVLink, msg_id: int, row: Row, flavour: str, mode: str,
+                   armed: bool, sysid: int) -> mavlink2.MAVLink_message | None:
+    """A status-type message, or None for an id this module does not produce."""
+    if msg_id == MSG_HEARTBEAT:
+        return heartbeat(mav, flavour, mode, armed)
+    if msg_id == MSG_SYS_STATUS:
+        return mav.sys_status_encode(SENSORS_OK, SENSORS_OK, SENSORS_OK, 200, 16200, -1, 100,
+                                     0, 0, 0, 0, 0, 0)
+    if msg_id == MSG_EXTENDED_SYS_STATE:
+        return mav.extended_sys_state_encode(0, landed_state(row, mode, armed))
+    if msg_id == MSG_AUTOPILOT_VERSION:
+        return mav.autopilot_version_encode(CAPABILITIES, SW_VERSION[flavour], 0, 0, 0,
+                                            [0] * 8, [0] * 8, [0] * 8, 0x26AC, 0x0011, sysid)
+    return None
