@@ -22,6 +22,7 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 
 from transport.bus import Congestion
 from transport.codec import encode
@@ -59,6 +60,8 @@ def echo(port: int, swarm: str, lowlatency: bool) -> int:
                 time.sleep(IDLE_S)
             for inbound in pings:
                 msg = inbound.message
+                if not isinstance(msg, FollowerState):
+                    continue
                 pong.put(encode(dataclasses.replace(msg, header=pong_stamper.header(), index=1)))
             for name, sub in zip(("block", "drop"), floods, strict=True):
                 counts[name] += len(sub.drain())
@@ -69,9 +72,9 @@ def echo(port: int, swarm: str, lowlatency: bool) -> int:
     return 0
 
 
-def wait_for(cond: object, timeout_s: float) -> None:
+def wait_for(cond: Callable[[], bool], timeout_s: float) -> None:
     deadline = time.monotonic() + timeout_s
-    while not cond():  # type: ignore[operator]
+    while not cond():
         if time.monotonic() > deadline:
             raise SystemExit("bench: peer did not come up")
         time.sleep(0.001)
