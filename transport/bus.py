@@ -21,10 +21,13 @@ processes on one host, and Zenoh HLC stamps, are comparable).
 from __future__ import annotations
 
 import enum
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Protocol, Self
+
+from agents.errors import TransportError
 
 Clock = Callable[[], float]
 
@@ -130,6 +133,27 @@ class Bus(Protocol):
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None: ...
+
+
+def wait_until_alive(
+    watch: AliveWatch,
+    expected: set[str] | frozenset[str],
+    timeout_s: float,
+    poll_s: float = 0.002,
+) -> frozenset[str]:
+    """Poll `watch` until every key of `expected` is alive; TransportError names the missing.
+
+    For launchers and tests: the wait ends as soon as the last token shows up.
+    """
+    deadline = time.monotonic() + timeout_s
+    while True:
+        alive = watch.poll()
+        missing = set(expected) - alive
+        if not missing:
+            return alive
+        if time.monotonic() > deadline:
+            raise TransportError(f"not alive after {timeout_s} s: {sorted(missing)}")
+        time.sleep(poll_s)
 
 
 def drain_all(subscriptions: list[Subscription]) -> list[Received]:

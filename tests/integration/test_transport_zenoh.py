@@ -16,6 +16,7 @@ from pathlib import Path
 import msgpack
 import pytest
 
+from transport.bus import Bus, wait_until_alive
 from transport.codec import encode
 from transport.decoder import Decoder
 from transport.keys import SwarmKeys
@@ -65,8 +66,9 @@ def test_two_processes_exchange_stamped_states_and_survive_garbage() -> None:
     keys = SwarmKeys(swarm)
     with echo_peer(swarm, loopback_endpoint(port)) as proc, \
             ZenohBus(ZenohConfig(connect=(loopback_endpoint(port),))) as bus:
-        alive = bus.watch_alive(keys.all_alive())
-        wait_for(lambda: keys.alive("echo", 0) in alive.poll(), 20, "echo liveliness token")
+        typed: Bus = bus  # ZenohBus implements the Bus protocol (checked by mypy)
+        alive = typed.watch_alive(keys.all_alive())
+        wait_until_alive(alive, {keys.alive("echo", 0)}, timeout_s=20)
         echoes, statuses = bus.subscribe(keys.follower_state(1)), bus.subscribe(keys.all_status())
         pub = bus.declare_publisher(keys.follower_state(0))
         wait_for(pub.matched, 10, "echo subscriber to match")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from agents.errors import TransportError
-from transport.bus import AliveEvent, Bus, drain_all
+from transport.bus import AliveEvent, Bus, drain_all, wait_until_alive
 from transport.codec import encode
 from transport.decoder import Decoder
 from transport.keys import SwarmKeys
@@ -124,3 +124,15 @@ def test_decoder_drains_subscription_and_drops_garbage() -> None:
         assert [i.message for i in out] == [msg]
         assert decoder.counters() == {"accepted": 1, "seq_gap": 0, "seq_stale": 0,
                                       "drop_msgpack": 1}
+
+
+def test_wait_until_alive_returns_or_names_the_missing() -> None:
+    hub = MemoryHub()
+    with MemoryBus(hub) as launcher, MemoryBus(hub) as f0:
+        watch = launcher.watch_alive(K.all_alive())
+        f0.declare_token(K.alive("follower", 0))
+        expected = {K.alive("follower", 0), K.alive("follower", 1)}
+        with pytest.raises(TransportError, match="follower/1"):
+            wait_until_alive(watch, expected, timeout_s=0.01)
+        f0.declare_token(K.alive("follower", 1))
+        assert wait_until_alive(watch, expected, timeout_s=1.0) == expected
