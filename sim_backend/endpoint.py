@@ -52,6 +52,7 @@ class VehicleEndpoint:
         }
         self.intervals = dict(self.default_intervals)
         self.next_due: dict[int, float] = dict.fromkeys(self.intervals, 0.0)
+        self._announced: tuple[str, bool] = ("", False)
 
     # ---- receive ------------------------------------------------------------------------
     def on_datagram(self, data: bytes, addr: Addr, now_s: float, row: tm.Row) -> None:
@@ -192,6 +193,11 @@ class VehicleEndpoint:
     def telemetry(self, now_s: float, row: tm.Row) -> None:
         """Send every stream that is due at sim time `now_s`, as one datagram per destination."""
         out = b""
+        ap = self.autopilot
+        if (ap.mode, ap.armed) != self._announced:
+            # Announce mode and arming changes at once so clients need not wait up to 1 s.
+            self._announced = (ap.mode, ap.armed)
+            self.next_due[tm.MSG_HEARTBEAT] = now_s
         for msg_id, interval in self.intervals.items():
             if interval <= 0.0 or now_s < self.next_due[msg_id]:
                 continue

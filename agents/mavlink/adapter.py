@@ -1,0 +1,270 @@
+"""The agents' MAVLink adapter: one vehicle, one UDP socket we own, non-blocking.
+
+Designed for a single-threaded follower loop: `poll()` drains the socket and
+returns the latest `VehicleState`; `send_velocity_enu()` streams a setpoint.
+Conversion between the agent's ENU and the vehicle's NED happens only through
+`agents.frames`.  The same code flies PX4 (offboard) and ArduPilot (guided);
+the flavour is read from the vehicle's HEARTBEAT.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import selectors
+import socket
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from agents.errors import LinkLostError, MavlinkError
+from agents.frames import enu_to_ned, ned_to_enu, yaw_enu_to_ned
+from agents.mavlink.modes import (
+    MAV_MODE_FLAG_SAFETY_ARMED,
+    decode_custom_mode,
+    flavour_of_autopilot,
+)
+from agents.mavlink.timemap import BootClockMap
+from agents.mavlink.wire import MAVLinkMessage, decode_datagram, new_codec
+
+log = logging.getLogger(__name__)
+Addr = tuple[str, int]
+MAV_FRAME_LOCAL_NED = 1
+MASK_VELOCITY = 3527
+MASK_VELOCITY_YAW = 2503
+MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID = 18, 8
+HEARTBEAT_PERIOD_S = 1.0
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """Latest known state; position/velocity in ENU, stamp on the agent's clock."""
+
+    pos_enu_m: tuple[float, float, float]
+    vel_enu_m_s: tuple[float, float, float]
+    stamp_s: float
+    armed: bool
+    mode: str
+    link_ok: bool
+
+
+NO_STATE = VehicleState((math.nan,) * 3, (math.nan,) * 3, -math.inf, False, "UNKNOWN", False)
+
+
+@dataclass(frozen=True)
+class AdapterConfig:
+    """Where to listen and whom to talk to; remote is learned from HEARTBEATs when None."""
+
+    local_port: int
+    remote_port: int | None = None
+    local_host: str = "127.0.0.1"
+    remote_host: str = "127.0.0.1"
+    target_sysid: int | None = None
+    own_sysid: int = 245
+    own_compid: int = 191
+    link_timeout_s: float = 0.5
+
+    @classmethod
+    def px4_sitl(cls, index: int, local_base: int = 14540, vehicle_base: int = 14580,
+                 host: str = "127.0.0.1") -> AdapterConfig:
+        """Vehicle `index` on PX4 SITL's port convention (sysid index+1)."""
+        return cls(local_port=local_base + index, remote_port=vehicle_base + index,
+                   local_host=host, remote_host=host, target_sysid=index + 1)
+
+
+class MavlinkAdapter:
+    """Talks to one autopilot; never blocks except in `wait_readable`."""
+
+    def __init__(self, cfg: AdapterConfig, clock: Callable[[], float] = time.monotonic) -> None:
+        self.cfg = cfg
+        self.clock = clock
+        self.counters: Counter[str] = Counter()
+        self.mav = new_codec(cfg.own_sysid, cfg.own_compid)
+        self.sysid = cfg.target_sysid
+        self.flavour: str | None = None
+        self.remote: Addr | None = None if cfg.remote_port is None else (cfg.remote_host,
+                                                                         cfg.remote_port)
+        self.home_amsl_m: float | None = None
+        self.acks: dict[int, int] = {}
+        self._state = NO_STATE
+        self._armed, self._mode = False, "UNKNOWN"
+        self._last_rx_s = -math.inf
+        self._last_hb_tx_s = -math.inf
+        self._link_reported_ok = False
+        self._timemap = BootClockMap()
+        self._t0 = clock()
+        self.sock: socket.socket | None = None
+        self._selector: selectors.BaseSelector | None = None
+
+    # ---- lifecycle ----------------------------------------------------------------------
+    def open(self) -> MavlinkAdapter:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.bind((self.cfg.local_host, self.cfg.local_port))
+        except OSError as exc:
+            sock.close()
+            raise MavlinkError(f"cannot bind {self.cfg.local_host}:{self.cfg.local_port}: "
+                               f"{exc.strerror}") from exc
+        sock.setblocking(False)
+        self.sock = sock
+        self._selector = selectors.DefaultSelector()
+        self._selector.register(sock, selectors.EVENT_READ)
+        return self
+
+    def close(self) -> None:
+        if self._selector is not None:
+            self._selector.close()
+            self._selector = None
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+
+    def __enter__(self) -> MavlinkAdapter:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---- receive ------------------------------------------------------------------------
+    @property
+    def state(self) -> VehicleState:
+        return self._state
+
+    def poll(self) -> VehicleState:
+        """Drain the socket, keep our heartbeat going, update the link flag; never blocks."""
+        now = self.clock()
+        while self.sock is not None:
+            try:
+                data, addr = self.sock.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                self.counters["rx_errors"] += 1
+                break
+            decoded = decode_datagram(self.mav, data)
+            self.counters["bad_packets"] += decoded.bad
+            for msg in decoded.messages:
+                self.handle(msg, addr, now)
+        if now - self._last_hb_tx_s >= HEARTBEAT_PERIOD_S and self.remote is not None:
+            self._last_hb_tx_s = now
+            self._send(self.mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER,
+                                                 MAV_AUTOPILOT_INVALID, 0, 0, 4))
+        return self._update_link(now)
+
+    def wait_readable(self, timeout_s: float) -> None:
+        """Block until a datagram is queued or timeout_s passes (start-up helpers only)."""
+        if self._selector is not None:
+            self._selector.select(max(0.0, timeout_s))
+
+    def check_link(self) -> None:
+        """Raise LinkLostError when no telemetry arrived within the link timeout."""
+        if not self._state.link_ok:
+            raise LinkLostError(f"no telemetry from vehicle {self.sysid} for "
+                                f">= {self.cfg.link_timeout_s} s")
+
+    def _update_link(self, now: float) -> VehicleState:
+        ok = now - self._last_rx_s < self.cfg.link_timeout_s
+        if ok != self._link_reported_ok:
+            self._link_reported_ok = ok
+            if ok:
+                log.info("link to vehicle %s up (%s)", self.sysid, self.flavour)
+            else:
+                self.counters["link_losses"] += 1
+                log.warning("link to vehicle %s lost: no telemetry for %.2f s", self.sysid,
+                            self.cfg.link_timeout_s)
+        if ok != self._state.link_ok:
+            self._state = replace(self._state, link_ok=ok)
+        return self._state
+
+    def handle(self, msg: MAVLinkMessage, addr: Addr, now: float) -> None:
+        """Apply one received message (public so unit tests can feed messages directly)."""
+        src = msg.get_srcSystem()
+        kind = msg.get_type()
+        if kind == "HEARTBEAT":
+            self._heartbeat(msg, addr)
+            return
+        if self.sysid is None or src != self.sysid or msg.get_srcComponent() != 1:
+            self.counters["ignored_other_system"] += 1
+            return
+        if kind == "LOCAL_POSITION_NED":
+            self._local_position(msg, now)
+        elif kind == "COMMAND_ACK":
+            self.acks[msg.command] = msg.result
+        elif kind == "GLOBAL_POSITION_INT":
+            self.home_amsl_m = (msg.alt - msg.relative_alt) * 1e-3
+        elif kind == "HOME_POSITION":
+            self.home_amsl_m = msg.altitude * 1e-3
+
+    def _heartbeat(self, msg: MAVLinkMessage, addr: Addr) -> None:
+        flavour = flavour_of_autopilot(msg.autopilot)
+        src = msg.get_srcSystem()
+        if flavour is None or msg.get_srcComponent() != 1:
+            return  # ground stations, companions, gimbals: not our vehicle
+        if self.sysid is None:
+            self.sysid = src
+        if src != self.sysid:
+            self.counters["ignored_other_system"] += 1
+            return
+        if self.flavour is None:
+            log.info("vehicle %d is %s at %s:%d", src, flavour, *addr)
+        self.flavour = flavour
+        self.remote = addr
+        self._armed = bool(msg.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
+        self._mode = decode_custom_mode(flavour, msg.custom_mode)
+        self._state = replace(self._state, armed=self._armed, mode=self._mode)
+
+    def _local_position(self, msg: MAVLinkMessage, now: float) -> None:
+        ned = np.array([[msg.x, msg.y, msg.z], [msg.vx, msg.vy, msg.vz]])
+        if not np.all(np.isfinite(ned)):
+            self.counters["ignored_nonfinite"] += 1
+            return
+        enu = ned_to_enu(ned).tolist()
+        self._last_rx_s = now
+        stamp = self._timemap.stamp(msg.time_boot_ms * 1e-3, now)
+        self._state = VehicleState(tuple(enu[0]), tuple(enu[1]), stamp,
+                                   self._armed, self._mode, True)
+
+    # ---- send ---------------------------------------------------------------------------
+    def send_velocity_enu(self, vel_m_s: tuple[float, float, float] | np.ndarray,
+                          yaw_enu_rad: float | None = None) -> bool:
+        """Stream one velocity setpoint; False (and counted) when refused."""
+        vel = np.asarray(vel_m_s, dtype=np.float64)
+        if vel.shape != (3,) or not np.all(np.isfinite(vel)) or \
+                (yaw_enu_rad is not None and not math.isfinite(yaw_enu_rad)):
+            self.counters["refused_nonfinite"] += 1
+            return False
+        if self.sysid is None or self.remote is None:
+            self.counters["refused_not_connected"] += 1
+            return False
+        vn, ve, vd = enu_to_ned(vel).tolist()
+        mask = MASK_VELOCITY if yaw_enu_rad is None else MASK_VELOCITY_YAW
+        yaw = 0.0 if yaw_enu_rad is None else yaw_enu_to_ned(yaw_enu_rad)
+        msg = self.mav.set_position_target_local_ned_encode(
+            self._boot_ms(), self.sysid, 1, MAV_FRAME_LOCAL_NED, mask, 0.0, 0.0, 0.0,
+            vn, ve, vd, 0.0, 0.0, 0.0, yaw, 0.0)
+        self._send(msg)
+        self.counters["setpoints_sent"] += 1
+        return True
+
+    def send_command(self, command: int, params: tuple[float, ...], confirmation: int = 0) -> None:
+        """COMMAND_LONG with up to 7 params; clears any earlier ACK of the same command."""
+        if self.sysid is None:
+            raise MavlinkError("no vehicle heartbeat yet")
+        p = list(params) + [0.0] * (7 - len(params))
+        self.acks.pop(command, None)
+        self._send(self.mav.command_long_encode(self.sysid, 1, command, confirmation, *p))
+
+    def _boot_ms(self) -> int:
+        return int((self.clock() - self._t0) * 1000.0) & 0xFFFFFFFF
+
+    def _send(self, msg: MAVLinkMessage) -> None:
+        if self.sock is None or self.remote is None:
+            self.counters["tx_dropped"] += 1
+            return
+        try:
+            self.sock.sendto(msg.pack(self.mav), self.remote)
+        except OSError:
+            self.counters["tx_errors"] += 1

@@ -1,0 +1,150 @@
+"""Blocking start-up helpers with explicit timeouts: heartbeat -> arm -> take-off -> offboard.
+
+PX4:       arm, NAV_TAKEOFF (param7 = AMSL altitude), stream setpoints, DO_SET_MODE OFFBOARD.
+ArduPilot: DO_SET_MODE GUIDED, arm, NAV_TAKEOFF (param7 = relative altitude), stream setpoints.
+Commands are re-sent when no COMMAND_ACK arrives within `retry_s`, as SDKs do.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from agents.errors import CommandRejectedError, MavlinkError
+from agents.mavlink.adapter import MavlinkAdapter, VehicleState
+from agents.mavlink.modes import ARDUPILOT, OFFBOARD_MODE, do_set_mode_params
+
+log = logging.getLogger(__name__)
+
+MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_REQUEST_MESSAGE = 512
+MSG_LOCAL_POSITION_NED = 32
+MSG_HOME_POSITION = 242
+ACCEPTED, TEMPORARILY_REJECTED, IN_PROGRESS = 0, 1, 5
+ZERO = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class StartupTimeouts:
+    heartbeat_s: float = 10.0
+    position_s: float = 5.0
+    command_s: float = 3.0
+    takeoff_s: float = 60.0
+    offboard_s: float = 5.0
+    retry_s: float = 0.5
+    stream_s: float = 0.5
+    setpoint_hz: float = 20.0
+    altitude_tolerance_m: float = 0.3
+    telemetry_hz: float = 50.0
+
+
+def wait_until(ad: MavlinkAdapter, ok: Callable[[VehicleState], bool], timeout_s: float,
+               what: str, keepalive_hz: float = 0.0) -> VehicleState:
+    """Poll until ok(state); streams zero-velocity setpoints at keepalive_hz meanwhile."""
+    deadline = ad.clock() + timeout_s
+    next_keepalive = ad.clock()
+    while True:
+        state = ad.poll()
+        if ok(state):
+            return state
+        now = ad.clock()
+        if now >= deadline:
+            raise MavlinkError(f"timed out after {timeout_s:.1f} s waiting for {what}")
+        if keepalive_hz > 0.0 and now >= next_keepalive:
+            ad.send_velocity_enu(ZERO)
+            next_keepalive = now + 1.0 / keepalive_hz
+        wake = min(deadline, next_keepalive) if keepalive_hz > 0.0 else deadline
+        ad.wait_readable(min(wake - now, 0.05))
+
+
+def command(ad: MavlinkAdapter, cmd: int, params: tuple[float, ...], t: StartupTimeouts,
+            keepalive_hz: float = 0.0) -> None:
+    """Send a command until ACCEPTED; raises CommandRejectedError or MavlinkError on timeout.
+
+    No ACK, or TEMPORARILY_REJECTED: re-send every retry_s.  IN_PROGRESS: keep waiting.
+    """
+    deadline = ad.clock() + t.command_s
+    attempt = 0
+    while True:
+        ad.send_command(cmd, params, confirmation=min(attempt, 255))
+        attempt += 1
+        retry_at = min(deadline, ad.clock() + t.retry_s)
+
+        def settled(_s: VehicleState, retry_at: float = retry_at) -> bool:
+            result = ad.acks.get(cmd)
+            if result in (ACCEPTED,) or result not in (None, TEMPORARILY_REJECTED, IN_PROGRESS):
+                return True
+            return ad.clock() >= (deadline if result == IN_PROGRESS else retry_at)
+
+        wait_until(ad, settled, t.command_s + 1.0, f"ACK of command {cmd}", keepalive_hz)
+        result = ad.acks.get(cmd)
+        if result == ACCEPTED:
+            return
+        if result not in (None, TEMPORARILY_REJECTED, IN_PROGRESS):
+            raise CommandRejectedError(cmd, int(result))
+        if ad.clock() >= deadline:
+            if result is None:
+                raise MavlinkError(f"no COMMAND_ACK for command {cmd} within {t.command_s:.1f} s")
+            raise CommandRejectedError(cmd, result, "(still rejected at timeout)")
+
+
+def set_mode(ad: MavlinkAdapter, name: str, t: StartupTimeouts, keepalive_hz: float = 0.0) -> None:
+    if ad.flavour is None:
+        raise MavlinkError("flavour unknown: no heartbeat yet")
+    command(ad, MAV_CMD_DO_SET_MODE, do_set_mode_params(ad.flavour, name), t, keepalive_hz)
+    wait_until(ad, lambda s: s.mode == name, t.command_s, f"mode {name} in HEARTBEAT",
+               keepalive_hz)
+
+
+def connect(ad: MavlinkAdapter, t: StartupTimeouts) -> VehicleState:
+    """Wait for the vehicle's heartbeat and its first position; ask for fast position telemetry."""
+    wait_until(ad, lambda _s: ad.flavour is not None, t.heartbeat_s, "vehicle HEARTBEAT")
+    try:
+        command(ad, MAV_CMD_SET_MESSAGE_INTERVAL, (MSG_LOCAL_POSITION_NED, 1e6 / t.telemetry_hz),
+                t)
+    except MavlinkError as exc:  # the default rate still works, just coarser
+        log.warning("vehicle %s kept its LOCAL_POSITION_NED rate: %s", ad.sysid, exc)
+    state = wait_until(ad, lambda s: s.link_ok, t.position_s, "LOCAL_POSITION_NED")
+    if ad.home_amsl_m is None:
+        command(ad, MAV_CMD_REQUEST_MESSAGE, (MSG_HOME_POSITION,), t)
+        state = wait_until(ad, lambda _s: ad.home_amsl_m is not None, t.position_s,
+                           "home altitude")
+    return state
+
+
+def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts) -> VehicleState:
+    """Arm and climb to altitude_m above home; skipped when already there."""
+    if ad.state.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m and ad.state.armed:
+        return ad.state
+    if ad.flavour == ARDUPILOT:
+        set_mode(ad, "GUIDED", t)
+        alt_param = altitude_m
+    else:
+        assert ad.home_amsl_m is not None
+        alt_param = ad.home_amsl_m + altitude_m
+    command(ad, MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), t)
+    command(ad, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, math.nan, math.nan, math.nan, alt_param), t)
+    return wait_until(ad, lambda s: s.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m,
+                      t.takeoff_s, f"take-off to {altitude_m:.1f} m")
+
+
+def start_offboard(ad: MavlinkAdapter, altitude_m: float,
+                   t: StartupTimeouts | None = None) -> VehicleState:
+    """The whole start-up sequence; returns once the vehicle flies our velocity setpoints."""
+    t = t or StartupTimeouts()
+    connect(ad, t)
+    take_off(ad, altitude_m, t)
+    assert ad.flavour is not None
+    wanted = OFFBOARD_MODE[ad.flavour]
+    deadline = ad.clock() + t.stream_s
+    wait_until(ad, lambda _s: ad.clock() >= deadline, t.stream_s + 1.0, "setpoint stream",
+               t.setpoint_hz)
+    if ad.state.mode != wanted:
+        set_mode(ad, wanted, t, t.setpoint_hz)
+    log.info("vehicle %s in %s at %.1f m", ad.sysid, wanted, ad.state.pos_enu_m[2])
+    return ad.state
