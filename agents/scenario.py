@@ -129,7 +129,9 @@ class Scenario:
         return obs
 
     def neighbours(self, i: int) -> tuple[int, ...]:
-        return tuple(sorted({b for a, b in self.edges if a == i} | {a for a, b in self.edges if b == i}))
+        return tuple(
+            sorted({b for a, b in self.edges if a == i} | {a for a, b in self.edges if b == i})
+        )
 
     def steady_from_s(self) -> float:
         start = self.run.steady_from_s

@@ -36,7 +36,8 @@ def _check_connected(scenario: Scenario) -> None:
     if len(seen) != n:
         cut = sorted(set(range(n)) - seen)
         raise InadmissibleError(
-            "graph.edges", f"follower graph is not connected: {[c + 1 for c in cut]} unreachable from 1"
+            "graph.edges",
+            f"follower graph is not connected: {[c + 1 for c in cut]} unreachable from 1",
         )
 
 

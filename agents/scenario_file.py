@@ -110,8 +110,10 @@ def build_scenario(doc: Table, default_name: str = "scenario") -> Scenario:
     followers = doc.get("followers")
     if not isinstance(followers, list) or len(followers) < 2:
         raise InadmissibleError("followers", "needs at least 2 [[followers]] tables")
-    f_pos = tuple(vec2(f.get("pos_m") if isinstance(f, dict) else f, f"followers[{k}].pos_m")
-                  for k, f in enumerate(followers))
+    f_pos = tuple(
+        vec2(f.get("pos_m") if isinstance(f, dict) else f, f"followers[{k}].pos_m")
+        for k, f in enumerate(followers)
+    )
     n = len(f_pos)
     targets = _targets(doc.get("targets"), n)
     edges = _edges(table_of(doc, "graph"), n)
@@ -149,24 +151,30 @@ def _targets(raw: Any, n: int) -> tuple[TargetSpec, ...]:
             raise ScenarioError(where, "must be a table")
         profile = t.get("profile", "constant")
         if profile not in PROFILE_KINDS:
-            raise ScenarioError(f"{where}.profile", f"must be one of {PROFILE_KINDS}, got {profile!r}")
+            raise ScenarioError(
+                f"{where}.profile", f"must be one of {PROFILE_KINDS}, got {profile!r}"
+            )
         observed = follower_numbers(t.get("observed_by"), f"{where}.observed_by", n)
         if not observed:
-            raise InadmissibleError(f"{where}.observed_by", "every target must be observed by a follower")
+            raise InadmissibleError(
+                f"{where}.observed_by", "every target must be observed by a follower"
+            )
         seed = t.get("seed", j)
         if not isinstance(seed, int):
             raise ScenarioError(f"{where}.seed", f"must be an integer, got {seed!r}")
-        specs.append(TargetSpec(
-            initial_pos_m=vec2(t.get("pos_m"), f"{where}.pos_m"),
-            profile=profile,
-            observed_by=tuple(sorted(set(observed))),
-            vel_m_s=vec2(t.get("vel_m_s", [0.0, 0.0]), f"{where}.vel_m_s"),
-            center_m=vec2(t.get("center_m", [0.0, 0.0]), f"{where}.center_m"),
-            omega_rad_s=number(t, "omega_rad_s", where, 0.0),
-            speed_max_m_s=number(t, "speed_max_m_s", where, 0.0),
-            knot_interval_s=positive(t, "knot_interval_s", where, 2.0),
-            seed=seed,
-        ))
+        specs.append(
+            TargetSpec(
+                initial_pos_m=vec2(t.get("pos_m"), f"{where}.pos_m"),
+                profile=profile,
+                observed_by=tuple(sorted(set(observed))),
+                vel_m_s=vec2(t.get("vel_m_s", [0.0, 0.0]), f"{where}.vel_m_s"),
+                center_m=vec2(t.get("center_m", [0.0, 0.0]), f"{where}.center_m"),
+                omega_rad_s=number(t, "omega_rad_s", where, 0.0),
+                speed_max_m_s=number(t, "speed_max_m_s", where, 0.0),
+                knot_interval_s=positive(t, "knot_interval_s", where, 2.0),
+                seed=seed,
+            )
+        )
     return tuple(specs)
 
 
@@ -192,8 +200,10 @@ def _pattern(t: Table, n: int) -> Pattern:
     else:
         if not isinstance(raw, list) or len(raw) != n:
             raise InadmissibleError("pattern.angles_deg", f"needs one angle per follower ({n})")
-        angles = tuple(math.radians(number({"a": a}, "a", f"pattern.angles_deg[{k}]"))
-                       for k, a in enumerate(raw))
+        angles = tuple(
+            math.radians(number({"a": a}, "a", f"pattern.angles_deg[{k}]"))
+            for k, a in enumerate(raw)
+        )
     for k, a in enumerate(angles):
         if a <= 0.0:
             raise InadmissibleError(f"pattern.angles_deg[{k}]", "every included angle must be > 0")

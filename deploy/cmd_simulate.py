@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from agents.core.lockstep import simulate_lockstep
+from agents.core.lockstep import ENGINES, simulate_lockstep
 from agents.errors import ScenarioError
 from agents.scenario_file import load_scenario
 from deploy.report import write_run_outputs
@@ -23,11 +23,25 @@ def register(sub: Any) -> None:
     parser = sub.add_parser(
         "simulate", help="lock-step simulation of a scenario (no network): metrics, CSV, figures"
     )
-    parser.add_argument("scenario", nargs="?", default=None,
-                        help="scenario TOML file or shipped name (default: the paper's case)")
-    parser.add_argument("--dt", type=float, default=None, help="step in seconds (default: scenario)")
+    parser.add_argument(
+        "scenario",
+        nargs="?",
+        default=None,
+        help="scenario TOML file or shipped name (default: the paper's case)",
+    )
+    parser.add_argument(
+        "--dt", type=float, default=None, help="step in seconds (default: scenario)"
+    )
     parser.add_argument("--duration", type=float, default=None, help="seconds (default: scenario)")
-    parser.add_argument("--out", type=Path, default=None, help="run directory (default: runs/simulate-<name>)")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="run directory (default: runs/simulate-<name>)"
+    )
+    parser.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default="auto",
+        help="numba: compiled loop (default when installed); numpy: reference functions",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=_main)
 
@@ -58,13 +72,22 @@ def _main(args: argparse.Namespace) -> int:
     if not 0.0 < dt < duration:
         raise ScenarioError("--dt", f"must satisfy 0 < dt < duration ({duration} s), got {dt}")
     out = args.out or Path("runs") / f"simulate-{scenario.name}"
-    log.info("simulating %s: n=%d m=%d dt=%g s duration=%g s", scenario.name, scenario.n,
-             scenario.m, dt, duration)
+    log.info(
+        "simulating %s: n=%d m=%d dt=%g s duration=%g s",
+        scenario.name,
+        scenario.n,
+        scenario.m,
+        dt,
+        duration,
+    )
     start = time.perf_counter()
-    series = simulate_lockstep(scenario, dt, duration, ProgressBar("simulate", not args.no_progress))
+    bar = ProgressBar("simulate", not args.no_progress)
+    series = simulate_lockstep(scenario, dt, duration, bar, engine=args.engine)
     wall = time.perf_counter() - start
     info = RunInfo.from_scenario(scenario, "lockstep", duration)
-    metrics = write_run_outputs(out, series, info, {"dt_s": dt, "integration_wall_s": wall})
+    metrics = write_run_outputs(
+        out, series, info, {"dt_s": dt, "engine": args.engine, "integration_wall_s": wall}
+    )
     log.info("integration took %.2f s wall; outputs in %s", wall, out)
     print(json.dumps(metrics.as_dict(), indent=2))
     return 0

@@ -7,12 +7,12 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")  # files only: runs on headless machines and in CI
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.axes import Axes  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.axes import Axes
 
-from agents.core.metrics import ErrorSeries  # noqa: E402
-from agents.core.timeseries import RunSeries  # noqa: E402
+from agents.core.metrics import ErrorSeries
+from agents.core.timeseries import RunSeries
 
 PANELS = (
     ("z_m", "z_i = rho'_i - rho_d [m]", "estimated radius error"),
@@ -28,7 +28,9 @@ def _plot_followers(ax: Axes, t: np.ndarray, values: np.ndarray, label: str) -> 
         ax.plot(t, values[:, i], lw=1.0, label=f"{label}{i + 1}")
 
 
-def performance_figure(series: RunSeries, errors: ErrorSeries, eps: tuple[float, float], path: Path) -> None:
+def performance_figure(
+    series: RunSeries, errors: ErrorSeries, eps: tuple[float, float], path: Path
+) -> None:
     fig, axes = plt.subplots(3, 2, figsize=(12, 10), sharex=True)
     t = series.t_s
     for ax, (field, ylabel, title) in zip(axes.flat, PANELS, strict=False):

@@ -1,4 +1,4 @@
-"""Turn a recorded run into metrics.json, series.csv and figures: one code path for every run kind."""
+"""Turn a recorded run into metrics.json, series.csv and figures: one code path for all runs."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def _decimation(t_s: np.ndarray) -> int:
     if len(t_s) < 2:
         return 1
     dt = float(np.median(np.diff(t_s)))
-    return max(1, int(round(1.0 / (MAX_CSV_RATE_HZ * dt)))) if dt > 0 else 1
+    return max(1, round(1.0 / (MAX_CSV_RATE_HZ * dt))) if dt > 0 else 1
 
 
 def _figures(run_dir: Path, series: RunSeries, info: RunInfo) -> None:

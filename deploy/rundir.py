@@ -39,9 +39,14 @@ class RunInfo:
     def from_scenario(scenario: Scenario, kind: str, duration_s: float) -> RunInfo:
         steady = scenario.run.steady_from_s
         return RunInfo(
-            name=scenario.name, kind=kind, n=scenario.n, m=scenario.m,
-            successor=scenario.successor, angles_rad=scenario.pattern.angles_rad,
-            rho_d_m=scenario.pattern.rho_d_m, eps_rho_m=scenario.run.eps_rho_m,
+            name=scenario.name,
+            kind=kind,
+            n=scenario.n,
+            m=scenario.m,
+            successor=scenario.successor,
+            angles_rad=scenario.pattern.angles_rad,
+            rho_d_m=scenario.pattern.rho_d_m,
+            eps_rho_m=scenario.run.eps_rho_m,
             eps_delta=scenario.run.eps_delta,
             steady_from_s=duration_s / 2.0 if steady is None else steady,
         )
@@ -75,18 +80,23 @@ def read_series(path: Path, n: int, m: int) -> RunSeries:
     except (OSError, ValueError) as exc:
         raise EncloseError(f"cannot read {path}: {exc}") from exc
     if data.shape[1] != len(series_columns(n, m)):
-        raise EncloseError(f"{path}: expected {len(series_columns(n, m))} columns, found {data.shape[1]}")
+        raise EncloseError(
+            f"{path}: expected {len(series_columns(n, m))} columns, found {data.shape[1]}"
+        )
     k, col = data.shape[0], 1
     arrays = []
     for count in (n, n, n, m):
-        arrays.append(data[:, col:col + 2 * count].reshape(k, count, 2))
+        arrays.append(data[:, col : col + 2 * count].reshape(k, count, 2))
         col += 2 * count
     return RunSeries(data[:, 0], *arrays)
 
 
 def write_metrics(run_dir: Path, metrics: Metrics, info: RunInfo, extra: dict[str, Any]) -> None:
     payload = {**metrics.as_dict(), **extra}
-    clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in payload.items()}
+    clean = {
+        k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+        for k, v in payload.items()
+    }
     (run_dir / METRICS_FILE).write_text(json.dumps(clean, indent=2) + "\n")
     (run_dir / RUN_FILE).write_text(json.dumps(info.__dict__, indent=2) + "\n")
 

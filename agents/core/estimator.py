@@ -56,7 +56,7 @@ def consensus_rate(
     params: EstimatorParams,
     dt_s: float,
 ) -> FloatArray:
-    """dPhi/dt of one follower from its r (2,), its neighbours' r (d, 2) and their edge fractions (d,)."""
+    """dPhi/dt of one follower from its r (2,), its neighbours' r (d, 2) and edge fractions (d,)."""
     cap = rate_cap(params.step_fraction, dt_s) * nbr_fractions[:, None]
     flow = limited_sig(r_nbrs_m - r_self_m, 1.0 / params.alpha1, params.k_e, cap)
     return np.asarray(flow.sum(axis=0))
@@ -64,7 +64,7 @@ def consensus_rate(
 
 @dataclass(frozen=True)
 class EdgeOperators:
-    """Linear maps of an undirected graph, built once: r -> r_j - r_i per directed edge, and back."""
+    """Linear maps of an undirected graph, built once: r -> r_j - r_i per directed edge and back."""
 
     difference: FloatArray  # (2E, n): row e is +1 at the edge's head j, -1 at its tail i
     gather: FloatArray  # (n, 2E): sums each follower's outgoing edges

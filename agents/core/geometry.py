@@ -9,6 +9,8 @@ from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
 TWO_PI = 2.0 * math.pi
+# Finite so that cap * 0 stays 0; it binds only below ~1e-17 of error, where the laws agree.
+NO_CAP_PER_S = 1e12
 
 
 def sig(x: FloatArray, exponent: float) -> FloatArray:
@@ -45,19 +47,21 @@ def rotate_ccw(vec: FloatArray) -> FloatArray:
     return out
 
 
-def limited_sig(x: FloatArray, exponent: float, gain: float, rate_cap_per_s: FloatArray | float) -> FloatArray:
+def limited_sig(
+    x: FloatArray, exponent: float, gain: float, rate_cap_per_s: FloatArray | float
+) -> FloatArray:
     """gain * sig(x)^a, its magnitude capped at rate_cap_per_s * |x|.
 
     A law with a < 1 has unbounded gain near zero, so an explicit step of dt
     overshoots zero and settles into a 2-cycle (the numerical dithering the paper
     claims to avoid).  Capping the rate at fraction/dt * |x| lets one step remove
     at most that fraction of the error; as dt -> 0 the cap vanishes and the law
-    is the paper's.  An infinite cap gives the plain law.
+    is the paper's.  `NO_CAP_PER_S` gives the plain law.
     """
     mag = np.abs(x)
     return np.copysign(np.minimum(gain * mag**exponent, rate_cap_per_s * mag), x)
 
 
 def rate_cap(step_fraction: float, dt_s: float) -> float:
-    """The cap of `limited_sig` for a step of dt: infinite (no cap) when the fraction is <= 0."""
-    return step_fraction / dt_s if step_fraction > 0.0 else float("inf")
+    """The cap of `limited_sig` for a step of dt: `NO_CAP_PER_S` when the fraction is <= 0."""
+    return step_fraction / dt_s if step_fraction > 0.0 else NO_CAP_PER_S

@@ -3,27 +3,37 @@
 Followers are single integrators p' = u (explicit Euler at dt).  Target positions
 are sampled at every step; followers use only the targets they observe, and
 estimate the targets' velocities by finite differences of those observations,
-as the networked followers do.
+as the networked followers do.  Two engines run the same law: "numpy" calls the
+vectorised reference functions, "numba" a compiled twin (agents.core.fastloop).
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
+from agents.core import fastloop
 from agents.core.controller import ControlGains, enclosing_control
 from agents.core.estimator import (
     EdgeOperators,
     EstimatorParams,
+    edge_fractions,
     estimator_rate,
     observation_weights,
 )
+from agents.core.geometry import rate_cap
 from agents.core.profiles import TargetMotion
 from agents.core.timeseries import RunSeries
 from agents.scenario import Scenario
 
+FloatArray = NDArray[np.float64]
 ProgressFn = Callable[[float], None]
+ENGINES = ("auto", "numpy", "numba")
+CHUNKS = 100
 
 
 def control_gains(scenario: Scenario) -> ControlGains:
@@ -36,44 +46,101 @@ def estimator_params(scenario: Scenario) -> EstimatorParams:
     return EstimatorParams(g.k_e, g.alpha1, g.step_fraction)
 
 
+@dataclass
+class _Loop:
+    """Inputs and in-place outputs of one lock-step run."""
+
+    scenario: Scenario
+    dt_s: float
+    p_tilde: FloatArray  # (k, n, 2) references from exact observations
+    p_tilde_rate: FloatArray  # (k, n, 2) their finite-difference rates
+    phi: FloatArray  # (n, 2) estimator state
+    pos: FloatArray  # (k, n, 2)
+    est: FloatArray
+    cmd: FloatArray
+
+    def numpy_steps(self, k0: int, k1: int) -> None:
+        s, dt = self.scenario, self.dt_s
+        edges = EdgeOperators.from_adjacency(s.adjacency())
+        params, gains = estimator_params(s), control_gains(s)
+        succ, angles = np.asarray(s.successor), np.asarray(s.pattern.angles_rad)
+        phi = self.phi
+        for k in range(k0, k1):
+            r = phi + self.p_tilde[k]
+            phi_rate = estimator_rate(r, edges, params, dt)
+            p = self.pos[k]
+            out = enclosing_control(
+                p, p[succ], r, phi_rate + self.p_tilde_rate[k], angles, gains, dt
+            )
+            self.est[k] = r
+            self.cmd[k] = out.u_m_s
+            if k + 1 < len(self.pos):
+                self.pos[k + 1] = p + dt * out.u_m_s
+                phi = phi + dt * phi_rate
+        self.phi[:] = phi
+
+    def numba_steps(self, k0: int, k1: int) -> None:
+        s = self.scenario
+        g, pat = s.gains, s.pattern
+        adjacency = s.adjacency()
+        tails, heads = np.nonzero(adjacency)
+        gains = np.array(
+            [g.k_e, g.alpha1, g.k_z, g.alpha2, g.k_d, g.alpha3, pat.rho_d_m, pat.w_d_rad_s]
+        )
+        fastloop.run_steps(
+            k0,
+            k1,
+            self.dt_s,
+            rate_cap(g.step_fraction, self.dt_s),
+            gains,
+            tails,
+            heads,
+            edge_fractions(adjacency, tails, heads),
+            np.asarray(s.successor),
+            np.asarray(pat.angles_rad),
+            self.p_tilde,
+            self.p_tilde_rate,
+            self.phi,
+            self.pos,
+            self.est,
+            self.cmd,
+        )
+
+
 def simulate_lockstep(
     scenario: Scenario,
     dt_s: float,
     duration_s: float,
     progress: ProgressFn | None = None,
+    engine: str = "auto",
 ) -> RunSeries:
     """Integrate the closed loop for `duration_s` at step `dt_s`; every step is recorded."""
-    steps = int(round(duration_s / dt_s))
-    t = np.arange(steps + 1) * dt_s
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    use_numba = engine == "numba" or (engine == "auto" and fastloop.HAVE_NUMBA)
+    steps = round(duration_s / dt_s)
+    t = np.arange(steps + 1, dtype=np.float64) * dt_s
     targets, _ = TargetMotion(scenario, horizon_s=duration_s).states(t)
     # Observations are exact here, so p~ and its finite-difference rate are precomputed.
     p_tilde = np.einsum("ij,kjd->kid", observation_weights(scenario.observation()), targets)
     p_tilde_rate = np.zeros_like(p_tilde)
     p_tilde_rate[1:] = np.diff(p_tilde, axis=0) / dt_s
-
-    n = scenario.n
-    edges = EdgeOperators.from_adjacency(scenario.adjacency())
-    succ = np.asarray(scenario.successor)
-    angles = np.asarray(scenario.pattern.angles_rad)
-    gains = control_gains(scenario)
-    params = estimator_params(scenario)
-
-    pos = np.empty((steps + 1, n, 2))
-    est = np.empty_like(pos)
-    cmd = np.zeros_like(pos)
+    pos = np.empty_like(p_tilde)
     pos[0] = np.asarray(scenario.follower_pos_m)
-    phi = np.zeros((n, 2))
-    report_every = max(1, steps // 100)
-    for k in range(steps + 1):
-        r = phi + p_tilde[k]
-        phi_rate = estimator_rate(r, edges, params, dt_s)
-        p = pos[k]
-        out = enclosing_control(p, p[succ], r, phi_rate + p_tilde_rate[k], angles, gains, dt_s)
-        est[k] = r
-        cmd[k] = out.u_m_s
-        if k < steps:
-            pos[k + 1] = p + dt_s * out.u_m_s
-            phi = phi + dt_s * phi_rate
-        if progress is not None and k % report_every == 0:
-            progress(k / steps)
-    return RunSeries(t, pos, est, cmd, targets)
+    loop = _Loop(
+        scenario,
+        dt_s,
+        p_tilde,
+        p_tilde_rate,
+        np.zeros((scenario.n, 2)),
+        pos,
+        np.empty_like(pos),
+        np.zeros_like(pos),
+    )
+    advance = loop.numba_steps if use_numba else loop.numpy_steps
+    bounds = np.linspace(0, steps + 1, min(CHUNKS, steps + 1) + 1).astype(int)
+    for k0, k1 in itertools.pairwise(bounds):
+        advance(int(k0), int(k1))
+        if progress is not None:
+            progress(k1 / (steps + 1))
+    return RunSeries(t, loop.pos, loop.est, loop.cmd, targets)

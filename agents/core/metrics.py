@@ -76,7 +76,9 @@ def compute_metrics(
     steady = series.t_s >= steady_from_s
     if not np.any(steady):
         steady = np.ones_like(series.t_s, dtype=bool)
-    inside = np.all((np.abs(errors.e_rho_m) < eps_rho_m) & (np.abs(errors.e_delta) < eps_delta), axis=1)
+    inside = np.all(
+        (np.abs(errors.e_rho_m) < eps_rho_m) & (np.abs(errors.e_delta) < eps_delta), axis=1
+    )
     jumps = np.linalg.norm(np.diff(series.command_m_s, axis=0), axis=2)
     steady_jumps = jumps[steady[1:] & steady[:-1]]
     return Metrics(

@@ -30,7 +30,7 @@ class RandomWalkKnots:
 def random_walk_knots(spec: TargetSpec, horizon_s: float) -> RandomWalkKnots:
     """Knots for `spec` up to `horizon_s`; a convex mix of knots keeps |v| <= speed_max."""
     rng = np.random.default_rng(spec.seed)
-    count = int(math.ceil(horizon_s / spec.knot_interval_s)) + 2
+    count = math.ceil(horizon_s / spec.knot_interval_s) + 2
     vmax = spec.speed_max_m_s
     vel = np.zeros((count, 2))
     for k in range(1, count):

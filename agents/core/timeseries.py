@@ -29,6 +29,9 @@ class RunSeries:
         """Every `every`-th sample (and always the last one)."""
         idx = np.unique(np.append(np.arange(0, len(self.t_s), max(1, every)), len(self.t_s) - 1))
         return RunSeries(
-            self.t_s[idx], self.follower_pos_m[idx], self.estimate_m[idx],
-            self.command_m_s[idx], self.target_pos_m[idx],
+            self.t_s[idx],
+            self.follower_pos_m[idx],
+            self.estimate_m[idx],
+            self.command_m_s[idx],
+            self.target_pos_m[idx],
         )

@@ -1,0 +1,43 @@
+"""The compiled lock-step twin agrees with the vectorised reference functions."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from agents.core import fastloop
+from agents.core.lockstep import simulate_lockstep
+from agents.scenario_file import load_scenario, parse_scenario
+from tests.unit.test_closed_loop import SIX
+
+pytestmark = pytest.mark.skipif(not fastloop.HAVE_NUMBA, reason="numba not installed")
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize(("dt_s", "fraction"), [(0.001, 0.5), (0.02, 0.5), (0.02, 0.0)])
+def test_numba_engine_matches_numpy_engine_on_the_paper_case(dt_s: float, fraction: float) -> None:
+    paper = load_scenario()
+    scenario = dataclasses.replace(
+        paper, gains=dataclasses.replace(paper.gains, step_fraction=fraction)
+    )
+    ref = simulate_lockstep(scenario, dt_s, 10.0, engine="numpy")
+    fast = simulate_lockstep(scenario, dt_s, 10.0, engine="numba")
+    np.testing.assert_allclose(fast.follower_pos_m, ref.follower_pos_m, atol=1e-9)
+    np.testing.assert_allclose(fast.estimate_m, ref.estimate_m, atol=1e-9)
+    np.testing.assert_allclose(fast.command_m_s, ref.command_m_s, atol=1e-8)
+
+
+@pytest.mark.timeout(120)
+def test_numba_engine_matches_on_a_general_graph() -> None:
+    scenario = parse_scenario(SIX)
+    ref = simulate_lockstep(scenario, 0.02, 20.0, engine="numpy")
+    fast = simulate_lockstep(scenario, 0.02, 20.0, engine="numba")
+    np.testing.assert_allclose(fast.follower_pos_m, ref.follower_pos_m, atol=1e-9)
+    np.testing.assert_allclose(fast.command_m_s, ref.command_m_s, atol=1e-8)
+
+
+def test_unknown_engine_is_refused() -> None:
+    with pytest.raises(ValueError, match="engine"):
+        simulate_lockstep(load_scenario(), 0.1, 1.0, engine="gpu")

@@ -1,0 +1,137 @@
+"""Scenario files: the shipped paper case, and errors that name the bad field."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agents.core.profiles import TargetMotion
+from agents.errors import ConfigError, InadmissibleError, ScenarioError
+from agents.scenario_file import load_scenario, parse_scenario
+
+PAPER = (Path(__file__).parents[2] / "agents" / "scenarios" / "paper.toml").read_text()
+
+
+def test_paper_case_defaults() -> None:
+    s = load_scenario()
+    assert (s.n, s.m) == (4, 2)
+    assert s.follower_pos_m[0] == (10.0, -20.0)
+    assert s.successor == (1, 2, 3, 0)
+    assert s.edges == ((0, 1), (0, 3), (1, 2), (2, 3))
+    assert s.gains.alpha1 == pytest.approx(7.0 / 3.0)
+    assert sum(s.pattern.angles_rad) == pytest.approx(2 * math.pi)
+    assert s.targets[0].observed_by == (0, 1) and s.targets[1].observed_by == (2, 3)
+    np.testing.assert_allclose(s.observation().sum(axis=0), [2, 2])
+
+
+def edit(old: str, new: str) -> str:
+    assert old in PAPER, old
+    return PAPER.replace(old, new, 1)
+
+
+@pytest.mark.parametrize(
+    ("text", "field", "kind"),
+    [
+        (
+            edit(
+                "angles_deg = [72.0, 72.0, 72.0, 144.0]", "angles_deg = [72.0, 72.0, 72.0, 140.0]"
+            ),
+            "pattern.angles_deg",
+            InadmissibleError,
+        ),
+        (
+            edit("angles_deg = [72.0, 72.0, 72.0, 144.0]", "angles_deg = [72.0, 72.0, 216.0]"),
+            "pattern.angles_deg",
+            InadmissibleError,
+        ),
+        (edit("w_d_rad_s = 0.2", "w_d_rad_s = -0.2"), "pattern.w_d_rad_s", InadmissibleError),
+        (edit("rho_d_m = 8.0", "rho_d_m = 2.0"), "pattern.rho_d_m", InadmissibleError),
+        (edit("rho_d_m = 8.0", 'rho_d_m = "eight"'), "pattern.rho_d_m", ScenarioError),
+        (
+            edit("[[1, 2], [2, 3], [3, 4], [4, 1]]", "[[1, 2], [3, 4]]"),
+            "graph.edges",
+            InadmissibleError,
+        ),
+        (
+            edit("[[1, 2], [2, 3], [3, 4], [4, 1]]", "[[1, 2], [2, 9]]"),
+            "graph.edges[1]",
+            ScenarioError,
+        ),
+        (
+            edit("[[1, 2], [2, 3], [3, 4], [4, 1]]", "[[1, 1], [2, 3]]"),
+            "graph.edges[0]",
+            InadmissibleError,
+        ),
+        (
+            edit("observed_by = [3, 4]", "observed_by = []"),
+            "targets[1].observed_by",
+            InadmissibleError,
+        ),
+        (edit('profile = "paper_v1"', 'profile = "teleport"'), "targets[0].profile", ScenarioError),
+        (
+            edit('profile = "paper_v1"', 'profile = "constant"\nvel_m_s = [2.0, 0.0]'),
+            "targets[0].vel_m_s",
+            InadmissibleError,
+        ),
+        (
+            edit("beta_m_s = 1.118033988749895", "beta_m_s = 1.0"),
+            "targets[1].profile",
+            InadmissibleError,
+        ),
+        (edit("k_e = 6.0", "k_e = 0.0"), "gains.k_e", ScenarioError),
+        (edit('alpha1 = "7/3"', 'alpha1 = "3/7"'), "gains.alpha1", InadmissibleError),
+        (edit('alpha1 = "7/3"', 'alpha1 = "7/0"'), "gains.alpha1", ScenarioError),
+        (edit("pos_m = [10.0, -20.0]", "pos_m = [10.0]"), "followers[0].pos_m", ScenarioError),
+        (edit("order = [1, 2, 3, 4]", "order = [1, 2, 2, 4]"), "pattern.order", InadmissibleError),
+        (
+            edit("duration_s = 200.0", "duration_s = 200.0\nsteady_from_s = 300.0"),
+            "run.steady_from_s",
+            ScenarioError,
+        ),
+        (edit("beta_m_s = 1.118033988749895", ""), "beta_m_s", ScenarioError),
+    ],
+)
+def test_bad_scenarios_name_their_field(text: str, field: str, kind: type[ConfigError]) -> None:
+    with pytest.raises(kind) as info:
+        parse_scenario(text)
+    assert info.value.field == field
+    assert field in str(info.value)
+
+
+def test_broken_toml_and_missing_files_are_clear_errors(tmp_path: Path) -> None:
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        parse_scenario("[pattern\nrho_d_m = 8")
+    with pytest.raises(ScenarioError, match="cannot read"):
+        load_scenario(tmp_path / "missing.toml")
+    with pytest.raises(ScenarioError, match="no shipped scenario"):
+        load_scenario("nope")
+
+
+def test_profiles_velocity_is_the_derivative_of_position() -> None:
+    text = PAPER.replace(
+        'profile = "paper_v1"', 'profile = "random_walk"\nspeed_max_m_s = 1.0\nseed = 3'
+    )
+    text = text.replace(
+        'profile = "paper_v2"', 'profile = "circle"\ncenter_m = [0.0, 0.0]\nomega_rad_s = 0.5'
+    )
+    text = text.replace("rho_d_m = 8.0", "rho_d_m = 30.0")
+    s = parse_scenario(text)
+    motion = TargetMotion(s)
+    t = np.linspace(0.0, 150.0, 30001)
+    pos, vel = motion.states(t)
+    numeric = np.gradient(pos, t, axis=0)
+    np.testing.assert_allclose(numeric[1:-1], vel[1:-1], atol=2e-3)
+    assert np.linalg.norm(vel[:, 0], axis=1).max() <= 1.0 + 1e-9
+    assert np.linalg.norm(vel[:, 1], axis=1) == pytest.approx(0.5 * math.sqrt(2.0))
+    again, _ = TargetMotion(s).states(t)
+    np.testing.assert_array_equal(pos, again)  # seeded: reproducible
+
+
+def test_paper_v2_matches_the_paper() -> None:
+    motion = TargetMotion(load_scenario())
+    pos, vel = motion.state(10.0)
+    np.testing.assert_allclose(vel[1], [1.0, 0.5 * math.sin(1.0 + math.pi / 4)])
+    np.testing.assert_allclose(pos[0], [10.0, 0.0])
