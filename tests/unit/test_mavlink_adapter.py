@@ -1,0 +1,123 @@
+"""Adapter message handling with an injected clock: ENU state, clock mapping, link loss."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from agents.errors import LinkLostError, MavlinkError
+from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
+from agents.mavlink.modes import encode_custom_mode
+from agents.mavlink.timemap import BootClockMap
+from agents.mavlink.wire import decode_datagram, new_codec
+
+ADDR = ("127.0.0.1", 14580)
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def feed(ad: MavlinkAdapter, msg, now: float, sysid: int = 1) -> None:
+    sender = new_codec(sysid, 1)
+    for m in decode_datagram(new_codec(99, 0), msg(sender).pack(sender)).messages:
+        ad.handle(m, ADDR, now)
+
+
+def heartbeat(mode: str = "OFFBOARD", armed: bool = True, autopilot: int = 12):
+    return lambda mav: mav.heartbeat_encode(2, autopilot, 1 | (128 if armed else 0),
+                                            encode_custom_mode("px4", mode), 4)
+
+
+def local_pos(boot_ms: int, x: float = 1.0):
+    return lambda mav: mav.local_position_ned_encode(boot_ms, x, 2.0, -3.0, 0.5, -0.5, -1.0)
+
+
+def make() -> tuple[MavlinkAdapter, FakeClock]:
+    clock = FakeClock()
+    return MavlinkAdapter(AdapterConfig(local_port=0, target_sysid=1), clock=clock), clock
+
+
+def test_heartbeat_gives_flavour_mode_and_remote() -> None:
+    ad, clock = make()
+    feed(ad, heartbeat(), clock.t)
+    assert ad.flavour == "px4" and ad.remote == ADDR
+    assert ad.state.mode == "OFFBOARD" and ad.state.armed
+
+
+def test_ground_station_and_other_vehicles_ignored() -> None:
+    ad, clock = make()
+    feed(ad, heartbeat(autopilot=8), clock.t)  # a GCS heartbeat
+    feed(ad, heartbeat(), clock.t, sysid=7)
+    feed(ad, local_pos(10), clock.t, sysid=7)
+    assert ad.flavour is None and not ad.state.link_ok
+    assert ad.counters["ignored_other_system"] == 2
+
+
+def test_position_converted_to_enu_and_stamped_on_agent_clock() -> None:
+    ad, _ = make()
+    feed(ad, local_pos(5000), 100.0)
+    s = ad.state
+    assert s.pos_enu_m == pytest.approx((2.0, 1.0, 3.0))
+    assert s.vel_enu_m_s == pytest.approx((-0.5, 0.5, 1.0))
+    assert s.stamp_s == pytest.approx(100.0)
+    feed(ad, local_pos(5020), 100.030)  # 10 ms later than the best path: stamp is not delayed
+    assert ad.state.stamp_s == pytest.approx(100.020)
+    feed(ad, local_pos(5040), 100.035)  # faster path found: offset shrinks
+    assert ad.state.stamp_s == pytest.approx(100.035)
+
+
+def test_clock_map_resets_on_reboot() -> None:
+    m = BootClockMap()
+    assert m.stamp(100.0, 1000.0) == 1000.0
+    assert m.stamp(0.5, 1001.0) == 1001.0
+    assert m.resets == 1
+
+
+def test_link_loss_after_half_a_second_without_telemetry() -> None:
+    ad, clock = make()
+    feed(ad, local_pos(1000), clock.t)
+    assert ad.poll().link_ok
+    clock.t += 0.49
+    assert ad.poll().link_ok
+    clock.t += 0.02
+    assert not ad.poll().link_ok
+    assert ad.counters["link_losses"] == 1
+    with pytest.raises(LinkLostError):
+        ad.check_link()
+    feed(ad, local_pos(1600), clock.t)
+    assert ad.poll().link_ok
+
+
+def test_non_finite_telemetry_ignored() -> None:
+    ad, clock = make()
+    feed(ad, local_pos(1000, x=math.nan), clock.t)
+    assert not ad.state.link_ok and ad.counters["ignored_nonfinite"] == 1
+
+
+def test_velocity_refused_when_non_finite_or_not_connected() -> None:
+    ad, clock = make()
+    assert not ad.send_velocity_enu((1.0, 0.0, 0.0))
+    assert ad.counters["refused_not_connected"] == 1
+    feed(ad, heartbeat(), clock.t)
+    assert not ad.send_velocity_enu((math.nan, 0.0, 0.0))
+    assert not ad.send_velocity_enu((1.0, 0.0, 0.0), yaw_enu_rad=math.inf)
+    assert ad.counters["refused_nonfinite"] == 2
+
+
+def test_command_needs_a_vehicle() -> None:
+    ad = MavlinkAdapter(AdapterConfig(local_port=0), clock=FakeClock())
+    with pytest.raises(MavlinkError):
+        ad.send_command(400, (1.0,))
+
+
+def test_ack_recorded() -> None:
+    ad, clock = make()
+    feed(ad, heartbeat(), clock.t)
+    feed(ad, lambda mav: mav.command_ack_encode(400, 0, 0, 0, 245, 191), clock.t)
+    assert ad.acks[400] == 0
