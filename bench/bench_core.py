@@ -26,9 +26,11 @@ EPS_RHO_M, EPS_DELTA = 0.0999, 0.0199
 RATES_HZ = (1000.0, 100.0, 50.0, 20.0, 10.0, 5.0, 2.0)
 
 
-def run(scenario: Scenario, dt_s: float, duration_s: float) -> tuple[Metrics, float]:
+def run(
+    scenario: Scenario, dt_s: float, duration_s: float, engine: str = "auto"
+) -> tuple[Metrics, float]:
     start = time.perf_counter()
-    series = simulate_lockstep(scenario, dt_s, duration_s)
+    series = simulate_lockstep(scenario, dt_s, duration_s, engine=engine)
     wall = time.perf_counter() - start
     angles = np.asarray(scenario.pattern.angles_rad)
     errors = error_series(series, scenario.successor, angles, scenario.pattern.rho_d_m)
@@ -75,15 +77,17 @@ def main() -> None:
     args = parser.parse_args()
     paper = load_scenario()
 
-    walls = []
-    for _ in range(max(1, args.repeat)):
-        m1, wall = run(paper, 0.001, args.duration)
-        walls.append(wall)
-    print(
-        f"dt = 1 ms, {args.duration:g} s: wall {min(walls):.2f} s (runs: "
-        f"{', '.join(f'{w:.2f}' for w in walls)}); target <= 4 s"
-    )
-    print(f"  {m1.as_dict()}")
+    for engine in ("numba", "numpy"):
+        walls = []
+        for _ in range(max(1, args.repeat)):
+            m1, wall = run(paper, 0.001, args.duration, engine)
+            walls.append(wall)
+        runs = ", ".join(f"{w:.2f}" for w in walls)
+        print(
+            f"dt = 1 ms, {args.duration:g} s, engine {engine}: best wall {min(walls):.2f} s "
+            f"(runs: {runs}; a first numba run compiles unless cached); target <= 4 s"
+        )
+        print(f"  {m1.as_dict()}")
     m20, _ = run(paper, 0.02, args.duration)
     print(f"dt = 20 ms: {m20.as_dict()}")
 

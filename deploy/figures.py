@@ -58,7 +58,12 @@ def performance_figure(
 
 
 def trajectory_figure(series: RunSeries, rho_d_m: float, path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(10, 7))
+    xy_all = np.concatenate(
+        [series.follower_pos_m.reshape(-1, 2), series.target_pos_m.reshape(-1, 2)]
+    )
+    span = np.ptp(xy_all, axis=0) + 1.0
+    # Size the canvas to the data's aspect so long tracks are not a thin strip.
+    fig, ax = plt.subplots(figsize=(12, float(np.clip(12 * span[1] / span[0] + 1.5, 4, 11))))
     for i in range(series.follower_pos_m.shape[1]):
         xy = series.follower_pos_m[:, i]
         ax.plot(xy[:, 0], xy[:, 1], lw=0.9, label=f"follower {i + 1}")
@@ -76,7 +81,7 @@ def trajectory_figure(series: RunSeries, rho_d_m: float, path: Path) -> None:
     ax.set_ylabel("y north [m]")
     ax.set_title(f"trajectories over {series.t_s[-1] - series.t_s[0]:.0f} s (dashed: targets)")
     ax.grid(alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
