@@ -23,10 +23,12 @@ import msgpack
 from agents.errors import CodecError
 from transport.messages import (
     PROCESS_STATES,
+    RUN_COMMANDS,
     FollowerState,
     Header,
     Message,
     ProcessStatus,
+    RunControl,
     TargetObservation,
     TruthSnapshot,
 )
@@ -41,7 +43,7 @@ _HEADER_LEN = 5
 @dataclass(frozen=True)
 class Field:
     name: str
-    kind: str  # int | float | opt_float | str | state | vec2 | vec2s | vec3s | counters
+    kind: str  # int | float | opt_float | str | state | command | vec2 | vec2s | vec3s | counters
     since: int = 1
 
 
@@ -63,6 +65,10 @@ SCHEMAS: dict[type, tuple[int, tuple[Field, ...]]] = {
     ProcessStatus: (4, (
         Field("role", "str"), Field("index", "int"), Field("state", "state"),
         Field("counters", "counters"), Field("detail", "str"),
+    )),
+    RunControl: (5, (
+        Field("command", "command"), Field("start_stamp_s", "float"),
+        Field("duration_s", "float"),
     )),
 }
 _BY_TAG = {tag: (cls, fields) for cls, (tag, fields) in SCHEMAS.items()}
@@ -126,9 +132,10 @@ def _check(kind: str, v: Any, name: str) -> Any:
         return _int(v, name)
     if kind == "str":
         return _str(v, name)
-    if kind == "state":
-        if v not in PROCESS_STATES:
-            raise _fail("schema", f"{name} = {v!r} not in {PROCESS_STATES}")
+    if kind in ("state", "command"):
+        allowed = PROCESS_STATES if kind == "state" else RUN_COMMANDS
+        if v not in allowed:
+            raise _fail("schema", f"{name} = {v!r} not in {allowed}")
         return v
     if kind == "vec2":
         return _vec(v, name, 2)

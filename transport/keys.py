@@ -64,6 +64,10 @@ class SwarmKeys:
     def truth(self) -> str:
         return f"{self.prefix}/truth"
 
+    def control(self) -> str:
+        """The launcher's start/stop word to every process of the swarm."""
+        return f"{self.prefix}/control"
+
     def status(self, role: str, i: int) -> str:
         return f"{self.prefix}/status/{validate_name(role, 'role')}/{_index(i, 'index')}"
 
@@ -90,7 +94,7 @@ class SwarmKeys:
 
 @dataclass(frozen=True)
 class KeyInfo:
-    """What a concrete key names: `kind` is follower|sensor|truth|status|alive."""
+    """What a concrete key names: `kind` is follower|sensor|truth|control|status|alive."""
 
     swarm: str
     kind: str
@@ -104,7 +108,7 @@ def parse_key(key: str) -> KeyInfo | None:
     if len(parts) < 3 or parts[0] != ROOT:
         return None
     swarm, kind, rest = parts[1], parts[2], parts[3:]
-    if kind == "truth" and not rest:
+    if kind in ("truth", "control") and not rest:
         return KeyInfo(swarm, kind)
     if kind in ("follower", "sensor") and len(rest) == 2 and rest[0].isdigit():
         return KeyInfo(swarm, kind, "follower", int(rest[0]))

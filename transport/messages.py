@@ -120,4 +120,17 @@ class ProcessStatus:
     detail: str = ""
 
 
-Message = FollowerState | TargetObservation | TruthSnapshot | ProcessStatus
+RUN_COMMANDS = ("start", "stop")
+
+
+@dataclass(frozen=True)
+class RunControl:
+    """The launcher's word to every process: start the experiment clock, or stop."""
+
+    header: Header
+    command: str  # one of RUN_COMMANDS
+    start_stamp_s: float  # sender clock at which experiment time 0 is (targets start moving)
+    duration_s: float  # experiment length after start
+
+
+Message = FollowerState | TargetObservation | TruthSnapshot | ProcessStatus | RunControl

@@ -19,6 +19,7 @@ from transport.messages import (
     Header,
     Message,
     ProcessStatus,
+    RunControl,
     Stamper,
     TargetObservation,
     TruthSnapshot,
@@ -43,6 +44,7 @@ ALL_MESSAGES: list[Message] = [
     TruthSnapshot(H, 12.5, ((0.0, 1.0, 10.0), (2.0, 3.0, 10.0)), ((0.1, 0.0, 0.0),) * 2,
                   ((1.0, 1.0),), ((1.0, 0.5),)),
     ProcessStatus(H, "follower", 1, "linked", {"drop_msgpack": 3, "overruns": 0}, "ok"),
+    RunControl(H, "start", 1700000001.0, 120.0),
 ]
 
 
@@ -142,6 +144,11 @@ def test_non_finite_rejected_on_encode() -> None:
 def test_unknown_process_state_rejected() -> None:
     with pytest.raises(CodecError):
         encode(ProcessStatus(H, "follower", 0, "sleeping"))
+
+
+def test_unknown_run_command_rejected() -> None:
+    with pytest.raises(CodecError):
+        encode(RunControl(H, "pause", 0.0, 1.0))
 
 
 def test_too_large_payload_rejected() -> None:

@@ -14,6 +14,7 @@ def test_keys_are_namespaced_per_swarm() -> None:
     assert K.follower_state(3) == "enclose/s1/follower/3/state"
     assert K.sensor_targets(0) == "enclose/s1/sensor/0/targets"
     assert K.truth() == "enclose/s1/truth"
+    assert K.control() == "enclose/s1/control"
     assert K.status("sim", 0) == "enclose/s1/status/sim/0"
     assert K.alive("follower", 2) == "enclose/s1/alive/follower/2"
     assert not key_matches(SwarmKeys("s2").everything(), K.truth())
@@ -60,6 +61,7 @@ def test_parse_key_finds_the_sender() -> None:
     assert parse_key(K.sensor_targets(2)) == KeyInfo("s1", "sensor", "follower", 2)
     assert parse_key(K.status("sim", 0)) == KeyInfo("s1", "status", "sim", 0)
     assert parse_key(K.truth()) == KeyInfo("s1", "truth")
+    assert parse_key(K.control()) == KeyInfo("s1", "control")
     assert parse_key("other/s1/truth") is None
     assert parse_key("enclose/s1/follower/x/state") is None
 
