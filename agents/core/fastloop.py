@@ -9,9 +9,11 @@ the two to 1e-9 of each other.
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,12 +23,9 @@ IntArray = NDArray[np.intp]
 TWO_PI = 2.0 * math.pi
 MIN_RANGE_M = 1e-9
 
-try:  # numba is optional: without it the numpy engine runs
-    from numba import njit as _njit
-
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - exercised only where numba is absent
-    HAVE_NUMBA = False
+# numba is optional (without it the numpy engine runs) and imported on first use:
+# follower processes import the core too and should not pay for it.
+HAVE_NUMBA = importlib.util.find_spec("numba") is not None
 
 
 def _limited(x: float, exponent: float, gain: float, cap: float) -> float:
@@ -86,14 +85,19 @@ def _steps(
 
 
 StepsFn = Callable[..., None]
-compiled_steps: StepsFn | None = None
-if HAVE_NUMBA:
-    _limited = _njit(cache=True)(_limited)
-    compiled_steps = _njit(cache=True)(_steps)
+
+
+@functools.cache
+def compiled_steps() -> StepsFn:
+    """`_steps` compiled (cached on disk by numba); raises if numba is not installed."""
+    if not HAVE_NUMBA:
+        raise RuntimeError("numba is not installed")
+    from numba import njit
+
+    global _limited  # _steps resolves _limited as a global: it must be compiled first
+    _limited = njit(cache=True)(_limited)
+    return cast(StepsFn, njit(cache=True)(_steps))
 
 
 def run_steps(k0: int, k1: int, *args: Any) -> None:
-    """The compiled kernel; raises if numba is not installed."""
-    if compiled_steps is None:
-        raise RuntimeError("numba is not installed")
-    compiled_steps(k0, k1, *args)
+    compiled_steps()(k0, k1, *args)

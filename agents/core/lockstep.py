@@ -17,15 +17,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.core import fastloop
-from agents.core.controller import ControlGains, enclosing_control
+from agents.core.controller import enclosing_control
 from agents.core.estimator import (
     EdgeOperators,
-    EstimatorParams,
     edge_fractions,
     estimator_rate,
     observation_weights,
 )
 from agents.core.geometry import rate_cap
+from agents.core.params import control_gains, estimator_params
 from agents.core.profiles import TargetMotion
 from agents.core.timeseries import RunSeries
 from agents.scenario import Scenario
@@ -34,16 +34,6 @@ FloatArray = NDArray[np.float64]
 ProgressFn = Callable[[float], None]
 ENGINES = ("auto", "numpy", "numba")
 CHUNKS = 100
-
-
-def control_gains(scenario: Scenario) -> ControlGains:
-    g, p = scenario.gains, scenario.pattern
-    return ControlGains(g.k_z, g.alpha2, g.k_d, g.alpha3, p.rho_d_m, p.w_d_rad_s, g.step_fraction)
-
-
-def estimator_params(scenario: Scenario) -> EstimatorParams:
-    g = scenario.gains
-    return EstimatorParams(g.k_e, g.alpha1, g.step_fraction)
 
 
 @dataclass

@@ -1,0 +1,17 @@
+"""Core parameter bundles derived from a scenario."""
+
+from __future__ import annotations
+
+from agents.core.controller import ControlGains
+from agents.core.estimator import EstimatorParams
+from agents.scenario import Scenario
+
+
+def control_gains(scenario: Scenario) -> ControlGains:
+    g, p = scenario.gains, scenario.pattern
+    return ControlGains(g.k_z, g.alpha2, g.k_d, g.alpha3, p.rho_d_m, p.w_d_rad_s, g.step_fraction)
+
+
+def estimator_params(scenario: Scenario) -> EstimatorParams:
+    g = scenario.gains
+    return EstimatorParams(g.k_e, g.alpha1, g.step_fraction)

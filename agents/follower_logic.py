@@ -1,0 +1,187 @@
+"""One follower's estimator and controller on asynchronous, timestamped data: pure.
+
+The networked follower sees the world as the latest timestamped samples: its own
+vehicle state, observations of the targets it watches, and the states its
+neighbours and its successor published.  `follower_tick` extrapolates every input
+to `now_s` with its own rate (first order), integrates the estimator over the
+measured time since the previous tick, and returns the command.  It holds no
+clock and does no I/O; time is an argument.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.core.controller import ControlGains, enclosing_control
+from agents.core.estimator import (
+    EstimatorParams,
+    consensus_rate,
+    edge_fractions,
+    finite_difference_velocity,
+    observation_weights,
+)
+from agents.core.params import control_gains, estimator_params
+from agents.scenario import Scenario
+
+FloatArray = NDArray[np.float64]
+ZERO2 = np.zeros(2)
+
+
+@dataclass(frozen=True)
+class FollowerSetup:
+    """What follower `index` knows of the scenario, fixed for a run."""
+
+    index: int
+    weights: FloatArray  # (m,) its row of W: p~_i = weights @ target positions
+    observed: tuple[int, ...]  # targets with a non-zero weight
+    neighbours: tuple[int, ...]
+    nbr_fractions: FloatArray  # (d,) edge fractions, aligned with neighbours
+    successor: int
+    angle_rad: float
+    estimator: EstimatorParams
+    control: ControlGains
+    period_s: float
+    stale_after_s: float = 0.5
+    target_vel_tau_s: float = 0.1
+    max_gap_s: float = 0.25  # longest dt the estimator integrates over one tick
+
+    @staticmethod
+    def from_scenario(scenario: Scenario, index: int) -> FollowerSetup:
+        weights = observation_weights(scenario.observation())[index]
+        adjacency = scenario.adjacency()
+        nbrs = scenario.neighbours(index)
+        fractions = edge_fractions(adjacency, np.full(len(nbrs), index), np.asarray(nbrs, int))
+        return FollowerSetup(
+            index=index,
+            weights=weights,
+            observed=tuple(int(j) for j in np.nonzero(weights)[0]),
+            neighbours=nbrs,
+            nbr_fractions=fractions,
+            successor=scenario.successor[index],
+            angle_rad=scenario.pattern.angles_rad[index],
+            estimator=estimator_params(scenario),
+            control=control_gains(scenario),
+            period_s=1.0 / scenario.run.rate_hz,
+        )
+
+
+@dataclass(frozen=True)
+class Sample:
+    """A timestamped position (or estimate) with its rate, for first-order extrapolation."""
+
+    value: FloatArray  # (2,)
+    rate: FloatArray  # (2,)
+    stamp_s: float
+
+    def at(self, t_s: float) -> FloatArray:
+        return self.value + self.rate * (t_s - self.stamp_s)
+
+
+@dataclass(frozen=True)
+class PeerView:
+    """Latest state a neighbour or the successor published."""
+
+    r: Sample  # its estimate r_j and dr_j/dt
+    pos: Sample  # its position and velocity
+
+
+@dataclass(frozen=True)
+class FollowerMemory:
+    """Estimator state carried from tick to tick."""
+
+    phi_m: FloatArray = field(default_factory=lambda: np.zeros(2))
+    phi_rate_m_s: FloatArray = field(default_factory=lambda: np.zeros(2))
+    last_tick_s: float | None = None
+    targets: dict[int, Sample] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class TickOutput:
+    u_m_s: FloatArray
+    r_m: FloatArray
+    dr_m_s: FloatArray
+    z_m: float
+    delta: float
+    stale: tuple[str, ...]  # inputs older than stale_after_s (or missing)
+
+
+def observe_target(
+    memory: FollowerMemory, setup: FollowerSetup, target: int, pos_m: FloatArray, stamp_s: float
+) -> FollowerMemory:
+    """Fold one observation in: position, and velocity by filtered finite difference."""
+    if target not in setup.observed:
+        return memory
+    prev = memory.targets.get(target)
+    if prev is None:
+        track = Sample(np.asarray(pos_m, float), ZERO2, stamp_s)
+    elif stamp_s <= prev.stamp_s:
+        return memory  # duplicate or reordered: the newer sample stands
+    else:
+        vel = finite_difference_velocity(
+            prev.value, prev.stamp_s, pos_m, stamp_s, prev.rate, setup.target_vel_tau_s
+        )
+        track = Sample(np.asarray(pos_m, float), vel, stamp_s)
+    return replace(memory, targets={**memory.targets, target: track})
+
+
+def ready(memory: FollowerMemory, setup: FollowerSetup, peers: dict[int, PeerView]) -> bool:
+    """True once every observed target and every neighbour and the successor was heard."""
+    needed = set(setup.neighbours) | {setup.successor}
+    return all(j in memory.targets for j in setup.observed) and needed <= peers.keys()
+
+
+def _stale(
+    memory: FollowerMemory, setup: FollowerSetup, peers: dict[int, PeerView], now_s: float
+) -> tuple[str, ...]:
+    old = [
+        f"target{j}"
+        for j in setup.observed
+        if now_s - memory.targets[j].stamp_s > setup.stale_after_s
+    ]
+    for j in sorted(set(setup.neighbours) | {setup.successor}):
+        if now_s - peers[j].r.stamp_s > setup.stale_after_s:
+            old.append(f"follower{j}")
+    return tuple(old)
+
+
+def follower_tick(
+    memory: FollowerMemory,
+    setup: FollowerSetup,
+    own: Sample,
+    peers: dict[int, PeerView],
+    now_s: float,
+) -> tuple[FollowerMemory, TickOutput]:
+    """One control cycle at `now_s`; call only when `ready`."""
+    dt = (
+        0.0
+        if memory.last_tick_s is None
+        else min(max(now_s - memory.last_tick_s, 0.0), setup.max_gap_s)
+    )
+    phi = memory.phi_m + dt * memory.phi_rate_m_s
+    tracks = [memory.targets[j] for j in setup.observed]
+    w = setup.weights[list(setup.observed)]
+    p_tilde = sum((wj * s.at(now_s) for wj, s in zip(w, tracks, strict=True)), ZERO2)
+    p_tilde_rate = sum((wj * s.rate for wj, s in zip(w, tracks, strict=True)), ZERO2)
+    r = phi + p_tilde
+    r_nbrs = np.array([peers[j].r.at(now_s) for j in setup.neighbours]).reshape(-1, 2)
+    phi_rate = consensus_rate(r, r_nbrs, setup.nbr_fractions, setup.estimator, setup.period_s)
+    dr = phi_rate + p_tilde_rate
+    out = enclosing_control(
+        own.at(now_s)[None, :],
+        peers[setup.successor].pos.at(now_s)[None, :],
+        r[None, :],
+        dr[None, :],
+        np.array([setup.angle_rad]),
+        setup.control,
+        setup.period_s,
+    )
+    new_memory = replace(memory, phi_m=phi, phi_rate_m_s=phi_rate, last_tick_s=now_s)
+    u = out.u_m_s[0].copy()
+    z, delta = float(out.z_m[0]), float(out.delta[0])
+    if not (np.all(np.isfinite(u)) and math.isfinite(z)):
+        u = np.zeros(2)  # never fly a NaN: hold, and let the caller count it
+    return new_memory, TickOutput(u, r, dr, z, delta, _stale(memory, setup, peers, now_s))
