@@ -1,0 +1,86 @@
+"""The swarm's recorder process: bus + ground truth in, MCAP + metrics + figures out.
+
+    python -m deploy.recorder --scenario paper --swarm NAME --out RUN_DIR \
+        --connect tcp/127.0.0.1:PORT [--listen tcp/127.0.0.1:PORT]
+
+Declares liveliness token `alive/recorder/0`, publishes `status/recorder/0` about once a
+second ("linked", then "running" once the launcher's RunControl "start" is heard), records
+every key of the swarm to `RUN_DIR/recording.mcap` and writes `RUN_DIR/progress.json` each
+second.  On RunControl "stop", SIGTERM or SIGINT it closes the MCAP and writes series.csv,
+metrics.json, run.json and the figures (`enclose report RUN_DIR` redraws them).
+Exit 0 on a clean stop with metrics; 1 if the run gave no usable truth (metrics.json then has
+an "error" field; the MCAP is kept); 2 on a configuration or transport error at start.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from types import FrameType
+
+from agents.errors import EncloseError
+from agents.scenario_file import load_scenario
+from deploy.recording.loop import Recorder
+from transport.zenoh_bus import ZenohBus
+from transport.zenoh_config import ZenohConfig
+
+log = logging.getLogger("deploy.recorder")
+
+
+class StopFlag:
+    """Set by SIGTERM/SIGINT; read by the loop (the handler does nothing else)."""
+
+    def __init__(self) -> None:
+        self.set = False
+
+    def __call__(self) -> bool:
+        return self.set
+
+    def handle(self, _sig: int, _frame: FrameType | None) -> None:
+        self.set = True
+
+
+def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="python -m deploy.recorder", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenario", default=None, help="scenario name or TOML file")
+    parser.add_argument("--swarm", required=True, help="swarm name (key prefix)")
+    parser.add_argument("--out", type=Path, required=True, help="run directory")
+    parser.add_argument("--connect", action="append", default=[], help="Zenoh endpoint")
+    parser.add_argument("--listen", action="append", default=[], help="Zenoh endpoint")
+    parser.add_argument("--index", type=int, default=0, help="recorder index (default 0)")
+    parser.add_argument("-v", "--verbose", action="store_true")
+    return parser.parse_args(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(levelname)s recorder: %(message)s")
+    stop = StopFlag()
+    signal.signal(signal.SIGTERM, stop.handle)
+    signal.signal(signal.SIGINT, stop.handle)
+    try:
+        scenario = load_scenario(args.scenario)
+        cfg = ZenohConfig(listen=tuple(args.listen), connect=tuple(args.connect))
+        with ZenohBus(cfg) as bus:
+            recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index)
+            try:
+                recorder.run(stop)
+            except Exception:  # a bug in the loop must still leave a finished MCAP behind
+                log.exception("recorder loop failed")
+                recorder.stop_reason = "loop_error"
+            ok = recorder.finish()
+    except EncloseError as exc:
+        log.error("%s: %s", type(exc).__name__, exc)
+        return 2
+    log.info("outputs in %s", args.out)
+    return 0 if ok and recorder.stop_reason != "loop_error" else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,172 @@
+"""The recorder's single loop: drain the bus, decode, log to MCAP, feed the assembler.
+
+Side effects live here only: the MCAP file, progress.json, the recorder's ProcessStatus and
+liveliness token, and at the end the run's outputs.  Bad payloads are counted by the
+`Decoder` and never reach the MCAP or the series.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from agents.errors import CodecError, TransportError
+from agents.scenario import Scenario
+from deploy.recording.assembler import RunAssembler
+from deploy.recording.mcap_log import McapLog
+from deploy.recording.outputs import write_final_outputs
+from deploy.recording.progress import PROGRESS_FILE, live_errors, write_json_atomic
+from deploy.rundir import RunInfo
+from transport.bus import Bus, Congestion
+from transport.codec import encode
+from transport.decoder import Decoder
+from transport.keys import SwarmKeys
+from transport.messages import ProcessStatus, Stamper
+
+log = logging.getLogger(__name__)
+
+ROLE = "recorder"
+MCAP_FILE = "recording.mcap"
+QUEUE_CAPACITY = 16384  # ~10 s of a 16-follower swarm: survives the pauses of chunk writes
+OVERDUE_GRACE_S = 30.0  # stop on our own this long after the planned end if no "stop" came
+
+
+class Recorder:
+    """Owns the subscription, decoder, assembler and MCAP file of one recording."""
+
+    def __init__(self, bus: Bus, swarm: str, scenario: Scenario, run_dir: Path,
+                 index: int = 0, period_s: float = 1.0) -> None:
+        self.bus, self.scenario, self.run_dir = bus, scenario, run_dir
+        self.keys = SwarmKeys(swarm)
+        self.index = index
+        self.period_s = period_s
+        run_dir.mkdir(parents=True, exist_ok=True)
+        self.mcap = McapLog(run_dir / MCAP_FILE,
+                            metadata={"swarm": swarm, "scenario": scenario.name})
+        self.decoder = Decoder()
+        self.asm = RunAssembler(scenario.n, scenario.m)
+        self.state = "starting"
+        self.stop_reason = ""
+        self._info = RunInfo.from_scenario(scenario, "networked", scenario.run.duration_s)
+        self._stamper = Stamper(f"{ROLE}-{index}", bus.now_s)
+        self._status = bus.declare_publisher(self.keys.status(ROLE, index), Congestion.DROP)
+        self._sub = bus.subscribe(self.keys.everything(), QUEUE_CAPACITY)
+        self._token = bus.declare_token(self.keys.alive(ROLE, index))
+        self._started_wall_s = bus.now_s()
+        self._next_tick_s = 0.0
+        self._set_state("linked")
+
+    # ---- one iteration -------------------------------------------------------------------
+    def step(self) -> int:
+        """Drain and handle every queued sample; the number decoded."""
+        inbound = self.decoder.drain(self._sub)
+        for item in inbound:
+            self.mcap.write(item.received.key, item.message, item.received.recv_stamp_s)
+            self.asm.add(item.message)
+        if self.asm.start is not None and self.state == "linked":
+            self._info = RunInfo.from_scenario(self.scenario, "networked",
+                                               self.asm.start.duration_s)
+            self._set_state("running")
+        return len(inbound)
+
+    def tick(self) -> None:
+        """Once a period: flush the MCAP, publish status, write progress.json."""
+        now = self.bus.now_s()
+        if now < self._next_tick_s:
+            return
+        self._next_tick_s = now + self.period_s
+        self.mcap.flush()
+        self._publish_status()
+        write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
+
+    def overdue(self) -> bool:
+        start = self.asm.start
+        if start is None:
+            return False
+        return self.bus.now_s() > start.start_stamp_s + start.duration_s + OVERDUE_GRACE_S
+
+    def run(self, stop_requested: Callable[[], bool], poll_s: float = 0.005) -> str:
+        """Loop until RunControl "stop", a signal (`stop_requested`) or overdue; the reason."""
+        while True:
+            self.step()
+            self.tick()
+            if self.asm.stopped:
+                self.stop_reason = "control_stop"
+            elif stop_requested():
+                self.stop_reason = "signal"
+            elif self.overdue():
+                self.stop_reason = "overdue"
+            if self.stop_reason:
+                break
+            time.sleep(poll_s)
+        self.step()  # whatever arrived with the stop word
+        log.info("recording stops: %s", self.stop_reason)
+        return self.stop_reason
+
+    # ---- the end -------------------------------------------------------------------------
+    def finish(self) -> bool:
+        """Close the MCAP first (it must survive), then write outputs; True if metrics exist."""
+        self._set_state("stopping")
+        self.mcap.close()
+        try:
+            metrics = write_final_outputs(self.run_dir, self.scenario, self.asm, self.counters())
+        except Exception:
+            log.exception("writing the run outputs failed")
+            metrics = None
+        write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
+        self._set_state("done" if metrics is not None else "failed")
+        return metrics is not None
+
+    # ---- reporting -----------------------------------------------------------------------
+    def counters(self) -> dict[str, Any]:
+        """The recorder's share of metrics.json."""
+        dropped = dict(self.decoder.dropped) | {
+            f"assembler_{k}": v for k, v in self.asm.drops.items()
+        }
+        return {
+            "recorder": {
+                "messages_per_topic": dict(sorted(self.mcap.messages.items())),
+                "messages_total": sum(self.mcap.messages.values()),
+                "dropped": dropped,
+                "decoder": self.decoder.counters(),
+                "stop_reason": self.stop_reason,
+                "wall_s": self.bus.now_s() - self._started_wall_s,
+                "mcap_file": MCAP_FILE,
+            }
+        }
+
+    def progress(self) -> dict[str, Any]:
+        return {
+            "state": self.state,
+            "t_s": self.asm.latest_experiment_time_s(),
+            "duration_s": None if self.asm.start is None else self.asm.start.duration_s,
+            **live_errors(self.asm, self._info),
+            "truth_samples": self.asm.truth_count,
+            "follower_states": self.asm.state_counts(),
+            "messages_total": sum(self.mcap.messages.values()),
+            "dropped_total": self.decoder.dropped_total,
+            "wall_stamp_s": self.bus.now_s(),
+        }
+
+    def _status_counters(self) -> dict[str, int]:
+        out = self.decoder.counters()
+        out["truth"] = self.asm.truth_count
+        out["mcap_messages"] = sum(self.mcap.messages.values())
+        return out
+
+    def _publish_status(self) -> None:
+        msg = ProcessStatus(self._stamper.header(), ROLE, self.index, self.state,
+                            self._status_counters(), self.stop_reason)
+        try:
+            self._status.put(encode(msg))
+        except (TransportError, CodecError):  # best effort: never ends the recording
+            log.exception("status publish failed")
+
+    def _set_state(self, state: str) -> None:
+        if state != self.state:
+            log.info("recorder %s", state)
+            self.state = state
+            self._publish_status()

@@ -1,0 +1,145 @@
+"""A streaming MCAP recording of the bus: one JSON channel per key, JSON schemas per type.
+
+Foxglove and PlotJuggler read `json` messages described by `jsonschema` schemas.  The schemas
+are generated from the message dataclasses, so a field added to a message shows up here
+without an edit.  log_time is the recorder's receive time, publish_time the sender's stamp.
+Messages go into compressed chunks of `chunk_size` bytes written as soon as they fill, and
+the file object is flushed each `flush()`: a crash loses at most the chunk being built.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import types
+import typing
+from collections import Counter
+from collections.abc import Mapping
+from pathlib import Path
+from typing import IO, Any
+
+from mcap.writer import CompressionType, Writer
+
+from transport.messages import Message
+
+MESSAGE_ENCODING = "json"
+SCHEMA_ENCODING = "jsonschema"
+DEFAULT_CHUNK_BYTES = 64 * 1024
+_NS = 1_000_000_000
+
+
+def _compression() -> CompressionType:
+    try:
+        import zstandard  # noqa: F401  # only probing: mcap needs it for ZSTD
+    except ImportError:
+        return CompressionType.NONE
+    return CompressionType.ZSTD
+
+
+def _type_schema(tp: Any) -> dict[str, Any]:
+    """JSON schema of one annotated field type (numbers, strings, tuples, maps, Header)."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is float:
+        return {"type": "number"}
+    if tp is int:
+        return {"type": "integer"}
+    if tp is str:
+        return {"type": "string"}
+    if tp is bool:
+        return {"type": "boolean"}
+    if dataclasses.is_dataclass(tp) and isinstance(tp, type):
+        return dataclass_schema(tp)
+    if origin in (types.UnionType, typing.Union):
+        inner = [a for a in args if a is not type(None)]
+        if len(inner) == 1 and len(args) == 2:
+            sub = _type_schema(inner[0])
+            return {**sub, "type": [sub["type"], "null"]}
+        return {"anyOf": [_type_schema(a) for a in args]}
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            return {"type": "array", "items": _type_schema(args[0])}
+        items = [_type_schema(a) for a in args]
+        if all(i == items[0] for i in items):
+            return {"type": "array", "items": items[0], "minItems": len(args),
+                    "maxItems": len(args)}
+        return {"type": "array", "prefixItems": items}
+    if origin in (Mapping, dict) or tp is dict:
+        value = _type_schema(args[1]) if args else {}
+        return {"type": "object", "additionalProperties": value}
+    raise TypeError(f"no JSON schema for field type {tp!r}")
+
+
+def dataclass_schema(cls: type) -> dict[str, Any]:
+    """JSON schema (object) of a message dataclass, from its type-annotated fields."""
+    hints = typing.get_type_hints(cls)
+    fields = dataclasses.fields(cls)
+    return {
+        "type": "object",
+        "title": cls.__name__,
+        "properties": {f.name: _type_schema(hints[f.name]) for f in fields},
+        "required": [f.name for f in fields],
+    }
+
+
+def message_json(msg: Message) -> bytes:
+    """The JSON a channel carries: the dataclass as an object, vectors as arrays."""
+    return json.dumps(dataclasses.asdict(msg), separators=(",", ":")).encode()
+
+
+def schema_name(cls: type) -> str:
+    return f"enclose.{cls.__name__}"
+
+
+class McapLog:
+    """Incremental MCAP writer; `close()` writes the summary (always call it, e.g. in finally)."""
+
+    def __init__(self, path: Path, chunk_size: int = DEFAULT_CHUNK_BYTES,
+                 metadata: Mapping[str, str] | None = None) -> None:
+        self.path = path
+        self.messages: Counter[str] = Counter()  # per key
+        self._stream: IO[bytes] = open(path, "wb")  # noqa: SIM115  # closed in close()
+        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=_compression())
+        self._writer.start(profile="", library="enclose-recorder")
+        self._schemas: dict[type, int] = {}
+        self._channels: dict[str, int] = {}
+        self.closed = False
+        if metadata:
+            self._writer.add_metadata("enclose", dict(metadata))
+
+    def _channel(self, key: str, cls: type) -> int:
+        channel = self._channels.get(key)
+        if channel is None:
+            schema = self._schemas.get(cls)
+            if schema is None:
+                data = json.dumps(dataclass_schema(cls)).encode()
+                schema = self._writer.register_schema(schema_name(cls), SCHEMA_ENCODING, data)
+                self._schemas[cls] = schema
+            channel = self._writer.register_channel(key, MESSAGE_ENCODING, schema)
+            self._channels[key] = channel
+        return channel
+
+    def write(self, key: str, msg: Message, recv_stamp_s: float) -> None:
+        channel = self._channel(key, type(msg))
+        self._writer.add_message(
+            channel_id=channel,
+            log_time=int(recv_stamp_s * _NS),
+            data=message_json(msg),
+            publish_time=max(0, int(msg.header.stamp_s * _NS)),
+            sequence=msg.header.seq & 0xFFFFFFFF,
+        )
+        self.messages[key] += 1
+
+    def flush(self) -> None:
+        """Push finished chunks to the OS, so they survive a crash of this process."""
+        if not self.closed:
+            self._stream.flush()
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            self._writer.finish()
+        finally:
+            self._stream.close()
+

@@ -1,0 +1,51 @@
+"""The end of a recorded run: the same metrics.json, run.json, series.csv and figures as
+`enclose simulate`, through the same `deploy.report.write_run_outputs`."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+from agents.core.metrics import Metrics
+from agents.errors import DeployError
+from agents.scenario import Scenario
+from deploy.recording.assembler import Assembly, RunAssembler, assembly_extra
+from deploy.recording.progress import write_json_atomic
+from deploy.report import write_run_outputs
+from deploy.rundir import METRICS_FILE, RunInfo
+
+log = logging.getLogger(__name__)
+RUN_KIND = "networked"
+# A run whose last truth sample is this far short of the planned end was stopped early;
+# its steady-state window is then judged on what was recorded.
+_EARLY_STOP_FRACTION = 0.95
+
+
+def judged_duration_s(asm: Assembly) -> float:
+    """The duration the run is judged over (steady state = its second half by default)."""
+    t_last = float(asm.series.t_s[-1])
+    return asm.duration_s if t_last >= _EARLY_STOP_FRACTION * asm.duration_s else t_last
+
+
+def write_final_outputs(
+    run_dir: Path, scenario: Scenario, asm: RunAssembler, recorder_extra: dict[str, Any]
+) -> Metrics | None:
+    """Metrics, CSV and figures of the run; None (and metrics.json with "error") if none."""
+    try:
+        assembly = asm.build()
+    except DeployError as exc:
+        log.error("no metrics: %s", exc)
+        write_error_metrics(run_dir, str(exc), {**recorder_extra,
+                                                 "assembler_drops": dict(asm.drops)})
+        return None
+    duration = judged_duration_s(assembly)
+    info = RunInfo.from_scenario(scenario, RUN_KIND, duration)
+    extra = {**assembly_extra(assembly, asm.drops), **recorder_extra,
+             "stopped_early": duration != assembly.duration_s}
+    return write_run_outputs(run_dir, assembly.series, info, extra)
+
+
+def write_error_metrics(run_dir: Path, reason: str, extra: dict[str, Any]) -> None:
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(run_dir / METRICS_FILE, {"error": reason, "kind": RUN_KIND, **extra})

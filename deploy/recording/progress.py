@@ -1,0 +1,46 @@
+"""Live progress of a networked run, for the launcher: `RUN_DIR/progress.json`.
+
+Errors are those of `agents.core.metrics.error_series` -- the same definitions as the final
+metrics -- over the last second of truth with each follower's latest state aligned.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.core.metrics import error_series
+from deploy.recording.assembler import RunAssembler
+from deploy.rundir import RunInfo
+
+PROGRESS_FILE = "progress.json"
+WINDOW_S = 1.0
+
+
+def _finite_or_none(v: float) -> float | None:
+    return v if math.isfinite(v) else None
+
+
+def live_errors(asm: RunAssembler, info: RunInfo, window_s: float = WINDOW_S) -> dict[str, Any]:
+    """Max |e_rho|, |e_delta| and estimator error over the last `window_s` of truth."""
+    series = asm.recent_series(window_s)
+    if series is None:
+        return {"max_abs_e_rho_m": None, "max_abs_e_delta": None, "max_estimator_error_m": None}
+    errors = error_series(series, info.successor, np.asarray(info.angles_rad), info.rho_d_m)
+    return {
+        "max_abs_e_rho_m": _finite_or_none(float(np.abs(errors.e_rho_m).max())),
+        "max_abs_e_delta": _finite_or_none(float(np.abs(errors.e_delta).max())),
+        "max_estimator_error_m": _finite_or_none(float(errors.estimator_error_m.max())),
+    }
+
+
+def write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
+    """Readers never see a half-written file: write a sibling, then rename over."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(payload, indent=2) + "\n")
+    os.replace(tmp, path)
