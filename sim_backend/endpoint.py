@@ -14,7 +14,7 @@ from collections import Counter
 from pymavlink.dialects.v20 import common as mavlink2
 
 from agents.mavlink.modes import MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, decode_custom_mode
-from agents.mavlink.wire import decode_datagram, new_codec
+from agents.mavlink.wire import decode_datagram, encode, new_codec
 from agents.scenario import HomeConfig
 from sim_backend import telemetry as tm
 from sim_backend.autopilot import ACCEPTED, DENIED, Autopilot
@@ -34,7 +34,7 @@ class VehicleEndpoint:
 
     def __init__(self, sysid: int, sock: socket.socket, default_dest: Addr, autopilot: Autopilot,
                  params: ParamStore, home: HomeConfig, telemetry_hz: float,
-                 counters: Counter[str]) -> None:
+                 counters: Counter[str], index: int = 0, tick_s: float = 0.01) -> None:
         self.sysid = sysid
         self.sock = sock
         self.default_dest = default_dest
@@ -51,7 +51,11 @@ class VehicleEndpoint:
             tm.MSG_GLOBAL_POSITION_INT: fast, tm.MSG_ATTITUDE: fast,
         }
         self.intervals = dict(self.default_intervals)
-        self.next_due: dict[int, float] = dict.fromkeys(self.intervals, 0.0)
+        # Vehicle `index` starts each stream at its own tick within the stream's period, so
+        # that all ticks carry about the same work instead of a burst once per period.
+        self.next_due: dict[int, float] = {
+            msg_id: (index % max(1, round(interval / tick_s))) * tick_s
+            for msg_id, interval in self.intervals.items()}
         self._announced: tuple[str, bool] = ("", False)
 
     # ---- receive ------------------------------------------------------------------------
@@ -120,7 +124,7 @@ class VehicleEndpoint:
     def _command(self, msg: mavlink2.MAVLink_message, params: tuple[float, ...], addr: Addr,
                  now_s: float, row: tm.Row) -> None:
         self.counters["commands"] += 1
-        reply: mavlink2.MAVLink_message | None = None
+        reply: bytes | None = None
         cmd = msg.command
         if not all(math.isfinite(p) for p in params[:2]):
             result = DENIED
@@ -137,7 +141,7 @@ class VehicleEndpoint:
             self.counters["commands_not_accepted"] += 1
         ack = self.mav.command_ack_encode(cmd, result, 0, 0, msg.get_srcSystem(),
                                           msg.get_srcComponent())
-        self._send_to(ack.pack(self.mav) + (reply.pack(self.mav) if reply else b""), addr)
+        self._send_to(encode(self.mav, ack) + (reply or b""), addr)
 
     def _set_interval(self, msg_id: int, interval_us: float, now_s: float) -> int:
         if msg_id not in self.default_intervals:
@@ -169,8 +173,9 @@ class VehicleEndpoint:
                 self.counters["ignored_params"] += 1
                 continue
             value, ptype = self.params.wire(name)
-            out += self.mav.param_value_encode(name.encode(), value, ptype, len(self.params),
-                                               self.params.index_of(name)).pack(self.mav)
+            msg = self.mav.param_value_encode(name.encode(), value, ptype, len(self.params),
+                                               self.params.index_of(name))
+            out += encode(self.mav, msg)
         if out:
             self._send_to(out, addr)
 
@@ -182,13 +187,14 @@ class VehicleEndpoint:
             self.autopilot.default_takeoff_alt_m = self.params.get("MIS_TAKEOFF_ALT")
 
     # ---- send ---------------------------------------------------------------------------
-    def build(self, msg_id: int, row: tm.Row) -> mavlink2.MAVLink_message | None:
+    def build(self, msg_id: int, row: tm.Row) -> bytes | None:
+        """One packed message of id msg_id describing `row`, or None if not produced here."""
+        if msg_id in tm.FAST_IDS:
+            return tm.fast_bytes(self.mav, msg_id, row, self.home)
         ap = self.autopilot
-        msg = tm.stream_message(self.mav, msg_id, row, self.home)
-        if msg is None:
-            msg = tm.status_message(self.mav, msg_id, row, ap.flavour, ap.mode, ap.armed,
-                                    self.sysid)
-        return msg
+        msg = tm.status_message(self.mav, msg_id, row, self.home, ap.flavour, ap.mode, ap.armed,
+                                self.sysid)
+        return None if msg is None else encode(self.mav, msg)
 
     def telemetry(self, now_s: float, row: tm.Row) -> None:
         """Send every stream that is due at sim time `now_s`, as one datagram per destination."""
@@ -203,9 +209,9 @@ class VehicleEndpoint:
                 continue
             due = self.next_due[msg_id] + interval
             self.next_due[msg_id] = due if due > now_s else now_s + interval
-            msg = self.build(msg_id, row)
-            if msg is not None:
-                out += msg.pack(self.mav)
+            data = self.build(msg_id, row)
+            if data is not None:
+                out += data
         if not out:
             return
         stale = [a for a, t in self.peers.items() if now_s - t > PEER_TIMEOUT_S]

@@ -31,6 +31,7 @@ from sim_backend.telemetry import Row
 log = logging.getLogger(__name__)
 TickHook = Callable[[float, model.FleetState], None]
 RESYNC_TICKS = 5
+MAX_VEHICLES = 255
 
 
 @dataclass(frozen=True)
@@ -83,6 +84,8 @@ class Simulator:
                  cfg: SimConfig, clock: Callable[[], float] = time.monotonic) -> None:
         if cfg.flavour not in FLAVOURS:
             raise SimulatorError(f"flavour must be one of {FLAVOURS}, got {cfg.flavour!r}")
+        if not 1 <= len(spawn_ned_m) <= MAX_VEHICLES:
+            raise SimulatorError(f"1..{MAX_VEHICLES} vehicles per process (sysid i+1 is one byte)")
         if not 0 < cfg.telemetry_hz <= cfg.rate_hz:
             raise SimulatorError("telemetry rate must be > 0 and not above the tick rate")
         self.cfg = cfg
@@ -120,7 +123,7 @@ class Simulator:
         autopilot = Autopilot(flavour, home.alt_m)
         dest = (self.cfg.host, self.cfg.send_base_port + i)
         endpoint = VehicleEndpoint(sysid, sock, dest, autopilot, store, home,
-                                   self.cfg.telemetry_hz, self.counters)
+                                   self.cfg.telemetry_hz, self.counters, index=i, tick_s=self.dt_s)
         self._selector.register(sock, selectors.EVENT_READ, i)
         return endpoint
 
@@ -141,7 +144,10 @@ class Simulator:
     # ---- one tick -----------------------------------------------------------------------
     def step_once(self) -> None:
         """Receive what is queued, then advance the fleet by one tick and send telemetry."""
-        self.receive(0.0)
+        self.receive_until(-1.0)
+        self._advance()
+
+    def _advance(self) -> None:
         now = self.sim_time_s
         for i, ep in enumerate(self.endpoints):
             ap = ep.autopilot
@@ -182,20 +188,33 @@ class Simulator:
                                                 roll.tolist(), pitch.tolist(), s.yaw_rad.tolist(),
                                                 s.yaw_rate_rad_s.tolist(), on_ground, strict=True)]
 
-    def receive(self, timeout_s: float) -> None:
-        """Handle datagrams arriving within timeout_s (0: only those already queued)."""
-        for key, _ in self._selector.select(timeout_s):
-            i = key.data
-            ep = self.endpoints[i]
-            for _ in range(64):  # bounded so one chatty peer cannot starve the tick
-                try:
-                    data, addr = ep.sock.recvfrom(65535)
-                except (BlockingIOError, InterruptedError):
-                    break
-                except OSError:
-                    self.counters["rx_errors"] += 1
-                    break
-                ep.on_datagram(data, addr, self.sim_time_s, self._rows[i])
+    def receive_until(self, deadline: float) -> None:
+        """Handle datagrams until the clock reaches `deadline` (past deadline: what is queued).
+
+        The clock is checked after each socket, so a burst of datagrams delays the next
+        tick by at most one socket's worth of work; the rest waits in the socket buffers.
+        """
+        while True:
+            remaining = deadline - self._clock()
+            events = self._selector.select(max(0.0, remaining))
+            for key, _ in events:
+                self._drain(key.data)
+                if deadline >= 0.0 and self._clock() >= deadline:
+                    return
+            if not events or remaining <= 0.0:
+                return
+
+    def _drain(self, i: int) -> None:
+        ep = self.endpoints[i]
+        for _ in range(16):  # bounded so one chatty peer cannot starve the others
+            try:
+                data, addr = ep.sock.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                self.counters["rx_errors"] += 1
+                return
+            ep.on_datagram(data, addr, self.sim_time_s, self._rows[i])
 
     # ---- real time ----------------------------------------------------------------------
     def run(self, should_stop: Callable[[], bool], max_ticks: int | None = None) -> LoopStats:
@@ -203,7 +222,7 @@ class Simulator:
         start = self._clock()
         k = 0
         while not should_stop() and (max_ticks is None or k < max_ticks):
-            self.step_once()
+            self._advance()
             k += 1
             deadline = start + k * self.dt_s
             now = self._clock()
@@ -213,10 +232,9 @@ class Simulator:
                 if now - deadline > RESYNC_TICKS * self.dt_s:
                     start = now - k * self.dt_s
                     self.stats.resyncs += 1
-                continue
-            while now < deadline:
-                self.receive(deadline - now)
-                now = self._clock()
+                # Even when late, serve commands and setpoints for a fifth of a tick.
+                deadline = now + 0.2 * self.dt_s
+            self.receive_until(deadline)
         return self.stats
 
     def snapshot(self) -> Snapshot:

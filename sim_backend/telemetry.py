@@ -14,6 +14,7 @@ from agents.mavlink.modes import (
     autopilot_of_flavour,
     encode_custom_mode,
 )
+from agents.mavlink.wire import encode_fields
 from agents.scenario import HomeConfig
 
 MSG_HEARTBEAT = 0
@@ -74,34 +75,38 @@ def landed_state(row: Row, mode: str, armed: bool) -> int:
     return LANDED_TAKEOFF if mode == "TAKEOFF" else LANDED_IN_AIR
 
 
-def stream_message(mav: mavlink2.MAVLink, msg_id: int, row: Row,
-                   home: HomeConfig) -> mavlink2.MAVLink_message | None:
-    """A position-type message for `row`, or None for an id this module does not stream."""
+FAST_IDS = (MSG_LOCAL_POSITION_NED, MSG_ATTITUDE, MSG_GLOBAL_POSITION_INT)
+
+
+def fast_bytes(mav: mavlink2.MAVLink, msg_id: int, row: Row, home: HomeConfig) -> bytes:
+    """The high-rate position and attitude messages, packed without message objects."""
     if msg_id == MSG_LOCAL_POSITION_NED:
-        return mav.local_position_ned_encode(row.time_boot_ms, *row.pos, *row.vel)
+        return encode_fields(mav, mavlink2.MAVLink_local_position_ned_message, row.time_boot_ms,
+                             *row.pos, *row.vel)
     if msg_id == MSG_ATTITUDE:
-        return mav.attitude_encode(row.time_boot_ms, row.roll, row.pitch, row.yaw, 0.0, 0.0,
-                                   row.yaw_rate)
-    if msg_id == MSG_GLOBAL_POSITION_INT:
-        lat, lon = geodetic(home, row.pos[0], row.pos[1])
-        hdg = round(math.degrees(row.yaw) * 100.0) % 36000
-        vel_cm = [max(-32768, min(32767, round(v * 100.0))) for v in row.vel]
-        return mav.global_position_int_encode(row.time_boot_ms, lat, lon,
-                                              round((home.alt_m - row.pos[2]) * 1000.0),
-                                              round(-row.pos[2] * 1000.0), *vel_cm, hdg)
-    if msg_id == MSG_HOME_POSITION:
-        lat, lon = geodetic(home, 0.0, 0.0)
-        return mav.home_position_encode(lat, lon, round(home.alt_m * 1000.0), 0.0, 0.0, 0.0,
-                                        [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
-                                        row.time_boot_ms * 1000)
-    return None
+        return encode_fields(mav, mavlink2.MAVLink_attitude_message, row.time_boot_ms, row.roll,
+                             row.pitch, row.yaw, 0.0, 0.0, row.yaw_rate)
+    lat, lon = geodetic(home, row.pos[0], row.pos[1])
+    hdg = round(math.degrees(row.yaw) * 100.0) % 36000
+    vel_cm = [max(-32768, min(32767, round(v * 100.0))) for v in row.vel]
+    return encode_fields(mav, mavlink2.MAVLink_global_position_int_message, row.time_boot_ms,
+                         lat, lon, round((home.alt_m - row.pos[2]) * 1000.0),
+                         round(-row.pos[2] * 1000.0), *vel_cm, hdg)
 
 
-def status_message(mav: mavlink2.MAVLink, msg_id: int, row: Row, flavour: str, mode: str,
-                   armed: bool, sysid: int) -> mavlink2.MAVLink_message | None:
-    """A status-type message, or None for an id this module does not produce."""
+def home_position(mav: mavlink2.MAVLink, row: Row, home: HomeConfig) -> mavlink2.MAVLink_message:
+    lat, lon = geodetic(home, 0.0, 0.0)
+    return mav.home_position_encode(lat, lon, round(home.alt_m * 1000.0), 0.0, 0.0, 0.0,
+                                    [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, row.time_boot_ms * 1000)
+
+
+def status_message(mav: mavlink2.MAVLink, msg_id: int, row: Row, home: HomeConfig, flavour: str,
+                   mode: str, armed: bool, sysid: int) -> mavlink2.MAVLink_message | None:
+    """A low-rate message object, or None for an id this module does not produce."""
     if msg_id == MSG_HEARTBEAT:
         return heartbeat(mav, flavour, mode, armed)
+    if msg_id == MSG_HOME_POSITION:
+        return home_position(mav, row, home)
     if msg_id == MSG_SYS_STATUS:
         return mav.sys_status_encode(SENSORS_OK, SENSORS_OK, SENSORS_OK, 200, 16200, -1, 100,
                                      0, 0, 0, 0, 0, 0)

@@ -28,7 +28,7 @@ from agents.mavlink.modes import (
     flavour_of_autopilot,
 )
 from agents.mavlink.timemap import BootClockMap
-from agents.mavlink.wire import MAVLinkMessage, decode_datagram, new_codec
+from agents.mavlink.wire import MAVLinkMessage, decode_datagram, encode, new_codec
 
 log = logging.getLogger(__name__)
 Addr = tuple[str, int]
@@ -265,6 +265,6 @@ class MavlinkAdapter:
             self.counters["tx_dropped"] += 1
             return
         try:
-            self.sock.sendto(msg.pack(self.mav), self.remote)
+            self.sock.sendto(encode(self.mav, msg), self.remote)
         except OSError:
             self.counters["tx_errors"] += 1

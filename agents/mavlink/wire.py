@@ -7,10 +7,12 @@ then never corrupt the next datagram.
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.dialects.v20.common import MAVLink_message as MAVLinkMessage
+from pymavlink.dialects.v20.common import mcrf4xx
 
 
 def new_codec(sysid: int, compid: int) -> mavlink2.MAVLink:
@@ -48,3 +50,31 @@ def decode_datagram(mav: mavlink2.MAVLink, data: bytes) -> Decoded:
     if mav.buf_len() > 0:
         bad += 1
     return Decoded(tuple(good), bad)
+
+
+_HEADER_V2 = struct.Struct("<BBBBBBBHB")
+
+
+def encode(mav: mavlink2.MAVLink, msg: MAVLinkMessage) -> bytes:
+    """Pack as the next packet of `mav`'s stream (pymavlink's pack() leaves seq alone)."""
+    data: bytes = msg.pack(mav)
+    mav.seq = (mav.seq + 1) & 0xFF
+    return data
+
+
+def encode_fields(mav: mavlink2.MAVLink, msg_cls: type[MAVLinkMessage], *fields: float) -> bytes:
+    """Pack a message straight from its wire-ordered fields, skipping the message object.
+
+    Same bytes as `encode(mav, msg_cls(*fields))` for messages whose wire order equals
+    their declaration order (the position and attitude messages the simulator streams at
+    high rate); about three times faster, which sets how many vehicles one process holds.
+    """
+    payload = msg_cls.unpacker.pack(*fields)
+    payload = payload.rstrip(b"\x00") or payload[:1]
+    msg_id = msg_cls.id
+    header = _HEADER_V2.pack(0xFD, len(payload), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent,
+                             msg_id & 0xFFFF, msg_id >> 16)
+    mav.seq = (mav.seq + 1) & 0xFF
+    body = header + payload
+    crc = mcrf4xx(body[1:] + bytes((msg_cls.crc_extra,)), 0xFFFF)
+    return body + crc.to_bytes(2, "little")
