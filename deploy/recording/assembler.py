@@ -165,7 +165,7 @@ class RunAssembler:
     def build(self, duration_s: float | None = None) -> Assembly:
         """The run between start and start + duration; DeployError says why if impossible."""
         start = self.start_stamp_s()
-        if start is None:
+        if start is None or not self._truth_stamps_s:
             raise DeployError("no truth samples were received: nothing to assemble")
         duration = duration_s if duration_s is not None else self._planned_duration_s()
         stamps = np.asarray(self._truth_stamps_s)

@@ -116,8 +116,8 @@ class Recorder:
         except Exception:
             log.exception("writing the run outputs failed")
             metrics = None
-        write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
         self._set_state("done" if metrics is not None else "failed")
+        write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
         return metrics is not None
 
     # ---- reporting -----------------------------------------------------------------------

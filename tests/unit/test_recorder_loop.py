@@ -1,0 +1,100 @@
+"""The recorder loop on an in-memory bus: bad payloads counted not fatal, stop, outputs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import msgpack
+import pytest
+from mcap.reader import make_reader
+
+from agents.scenario import Scenario
+from agents.scenario_file import load_scenario
+from deploy.recording.loop import MCAP_FILE, Recorder
+from deploy.report import regenerate_figures
+from tests.recorder_synth import SynthRun
+from transport.codec import decode, encode
+from transport.keys import SwarmKeys
+from transport.memory_bus import MemoryBus, MemoryHub
+from transport.messages import ProcessStatus, Stamper
+
+START_S = 1_700_000_000.0
+
+
+@pytest.fixture(scope="module")
+def paper() -> Scenario:
+    return load_scenario("paper")
+
+
+def topics(path: Path) -> dict[str, int]:
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    counts = summary.statistics.channel_message_counts
+    return {c.topic: counts.get(c.id, 0) for c in summary.channels.values()}
+
+
+@pytest.mark.timeout(60)
+def test_garbage_is_counted_and_the_run_is_recorded(paper: Scenario, tmp_path: Path) -> None:
+    hub, keys = MemoryHub(), SwarmKeys("loop")
+    run = SynthRun(paper, keys, START_S, duration_s=1.0)
+    with MemoryBus(hub, "recorder") as rbus, MemoryBus(hub, "swarm") as sbus:
+        status = rbus.subscribe(keys.status("recorder", 0))
+        recorder = Recorder(rbus, "loop", paper, tmp_path)
+        first = decode(status.drain()[0].payload)
+        assert isinstance(first, ProcessStatus) and first.state == "linked"
+        control = Stamper("launcher-0")
+        sbus.publish(keys.control(), encode(run.control(control, "start")))
+        for i, (key, msg) in enumerate(run.samples()):
+            sbus.publish(key, encode(msg))
+            if i == 100:
+                sbus.publish(keys.truth(), b"\xc1 garbage")
+                sbus.publish(keys.follower_state(1), msgpack.packb([7, 1, "f", 0, 1.0]))
+        sbus.publish(keys.control(), encode(run.control(control, "stop")))
+        assert recorder.run(lambda: False, poll_s=0.0) == "control_stop"
+        assert recorder.finish()
+        states = [decode(r.payload) for r in status.drain()]
+    assert [s.state for s in states if isinstance(s, ProcessStatus)][-3:] == [
+        "running", "stopping", "done"]
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    dropped = metrics["recorder"]["dropped"]
+    assert dropped == {"msgpack": 1, "version": 1}
+    assert metrics["samples"] == 51 and metrics["radius_error_m"] < 1e-9
+    assert metrics["recorder"]["stop_reason"] == "control_stop"
+    recorded = topics(tmp_path / MCAP_FILE)
+    assert recorded[keys.truth()] == 71 and recorded[keys.follower_state(3)] == 71
+    assert recorded[keys.control()] == 2
+    progress = json.loads((tmp_path / "progress.json").read_text())
+    assert progress["state"] == "done" and progress["max_abs_e_rho_m"] < 1e-9
+    # `enclose report` works on the recorder's run directory.
+    for png in regenerate_figures(tmp_path):
+        assert png.stat().st_size > 1000
+
+
+@pytest.mark.timeout(60)
+def test_no_truth_gives_error_metrics_and_keeps_the_mcap(
+    paper: Scenario, tmp_path: Path
+) -> None:
+    hub, keys = MemoryHub(), SwarmKeys("empty")
+    run = SynthRun(paper, keys, START_S)
+    with MemoryBus(hub, "recorder") as rbus, MemoryBus(hub, "swarm") as sbus:
+        recorder = Recorder(rbus, "empty", paper, tmp_path)
+        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "start")))
+        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "stop")))
+        recorder.run(lambda: False, poll_s=0.0)
+        assert not recorder.finish()
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert "no truth" in metrics["error"]
+    assert topics(tmp_path / MCAP_FILE)[keys.control()] == 2
+    assert not (tmp_path / "series.csv").exists()
+
+
+@pytest.mark.timeout(30)
+def test_signal_stops_the_loop(paper: Scenario, tmp_path: Path) -> None:
+    with MemoryBus(MemoryHub(), "recorder") as rbus:
+        recorder = Recorder(rbus, "sig", paper, tmp_path)
+        calls = iter([False, False, True])
+        assert recorder.run(lambda: next(calls), poll_s=0.0) == "signal"
+        recorder.finish()
+    assert (tmp_path / MCAP_FILE).stat().st_size > 0
