@@ -1,0 +1,201 @@
+"""A follower process: its vehicle through MAVLink, its peers through the bus, one loop.
+
+python -m agents.follower --index I --scenario paper --swarm S --connect tcp/127.0.0.1:P
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+from collections import deque
+from collections.abc import Sequence
+
+import numpy as np
+
+from agents.errors import EncloseError
+from agents.follower_logic import (
+    FollowerMemory,
+    FollowerSetup,
+    PeerView,
+    Sample,
+    follower_tick,
+    observe_target,
+    ready,
+)
+from agents.mavlink.adapter import MavlinkAdapter, VehicleState
+from agents.process import StatusReporter, add_bus_arguments, setup_logging
+from agents.scenario import Scenario
+from agents.scenario_file import load_scenario
+from agents.vehicle_loop import fly
+from transport.bus import Bus
+from transport.codec import encode
+from transport.decoder import Decoder
+from transport.keys import SwarmKeys
+from transport.messages import FollowerState, RunControl, Stamper, TargetObservation, vec2
+
+log = logging.getLogger("enclose.follower")
+ALTITUDE_GAIN_PER_S = 1.0
+AGE_WINDOW = 20_000
+
+
+class FollowerNode:
+    """All of one follower's state; `tick` is the loop body, the only place with side effects."""
+
+    def __init__(
+        self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter, swarm: str
+    ) -> None:
+        self.setup = FollowerSetup.from_scenario(scenario, index)
+        self.index, self.bus, self.vehicle = index, bus, vehicle
+        self.altitude_m = scenario.vehicle.altitude_m
+        self.keys = SwarmKeys(swarm)
+        peers = sorted(set(self.setup.neighbours) | {self.setup.successor})
+        self.subs = [
+            bus.subscribe(self.keys.sensor_targets(index)),
+            bus.subscribe(self.keys.control()),
+        ]
+        self.subs += [bus.subscribe(self.keys.follower_state(j)) for j in peers]
+        self.out = bus.declare_publisher(self.keys.follower_state(index))
+        self.stamper = Stamper(f"follower-{index}", bus.now_s)
+        self.decoder = Decoder()
+        self.status = StatusReporter(bus, self.keys, "follower", index)
+        self.memory = FollowerMemory()
+        self.peers: dict[int, PeerView] = {}
+        self.start_s: float | None = None
+        self.stop_s = math.inf
+        self.ages_s: deque[float] = deque(maxlen=AGE_WINDOW)
+
+    def ingest(self) -> None:
+        for sub in self.subs:
+            for inbound in self.decoder.drain(sub):
+                self._apply(inbound.message)
+
+    def _apply(self, msg: object) -> None:
+        if isinstance(msg, TargetObservation) and msg.observer_index == self.index:
+            self.memory = observe_target(
+                self.memory,
+                self.setup,
+                msg.target_index,
+                np.asarray(msg.pos_m),
+                msg.observed_stamp_s,
+            )
+        elif isinstance(msg, FollowerState) and msg.index != self.index:
+            known = self.peers.get(msg.index)
+            if known is None or msg.header.stamp_s > known.r.stamp_s:
+                self.peers[msg.index] = PeerView(
+                    Sample(np.asarray(msg.r_m), np.asarray(msg.dr_m_s), msg.header.stamp_s),
+                    Sample(np.asarray(msg.pos_m), np.asarray(msg.vel_m_s), msg.vehicle_stamp_s),
+                )
+        elif isinstance(msg, RunControl):
+            if msg.command == "start":
+                self.start_s = msg.start_stamp_s
+                self.stop_s = msg.start_stamp_s + msg.duration_s
+            else:
+                self.stop_s = min(self.stop_s, self.bus.now_s())
+
+    def tick(self, now_s: float) -> None:
+        self.ingest()
+        state = self.vehicle.poll()
+        own = Sample(
+            np.asarray(state.pos_enu_m[:2]), np.asarray(state.vel_enu_m_s[:2]), state.stamp_s
+        )
+        r, dr = self.setup.weights @ self._target_positions(now_s), np.zeros(2)
+        u = np.zeros(2)
+        running = self.start_s is not None and now_s >= self.start_s
+        if not state.link_ok:
+            self.status.counters["ticks_without_vehicle"] += 1
+        elif running and ready(self.memory, self.setup, self.peers):
+            self.memory, out = follower_tick(self.memory, self.setup, own, self.peers, now_s)
+            r, dr, u = out.r_m, out.dr_m_s, out.u_m_s
+            self.status.counters["stale_inputs"] += len(out.stale)
+            self.ages_s.extend(now_s - self.peers[j].r.stamp_s for j in self.setup.neighbours)
+        elif running:
+            self.status.counters["ticks_not_ready"] += 1
+        self._command(state, u)
+        self._publish(now_s, state, r, dr, u)
+
+    def _target_positions(self, now_s: float) -> np.ndarray:
+        pos = np.zeros((len(self.setup.weights), 2))
+        for j, track in self.memory.targets.items():
+            pos[j] = track.at(now_s)
+        return pos
+
+    def _command(self, state: VehicleState, u: np.ndarray) -> None:
+        climb = ALTITUDE_GAIN_PER_S * (self.altitude_m - state.pos_enu_m[2])
+        if not math.isfinite(climb):
+            climb = 0.0
+        if not self.vehicle.send_velocity_enu((float(u[0]), float(u[1]), climb)):
+            self.status.counters["setpoints_refused"] += 1
+
+    def _publish(
+        self, now_s: float, state: VehicleState, r: np.ndarray, dr: np.ndarray, u: np.ndarray
+    ) -> None:
+        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(state.pos_enu_m))):
+            self.status.counters["states_not_published"] += 1
+            return
+        msg = FollowerState(
+            self.stamper.header(now_s),
+            self.index,
+            vec2(r),
+            vec2(dr),
+            vec2(self.memory.phi_m),
+            vec2(state.pos_enu_m[:2]),
+            vec2(state.vel_enu_m_s[:2]),
+            vec2(u),
+            state.stamp_s,
+        )
+        self.out.put(encode(msg))
+
+    def counters(self) -> dict[str, int]:
+        """Decoder drops and gaps, and the age of neighbour states at use (p50, p99)."""
+        ages = {}
+        if self.ages_s:
+            p50, p99 = np.percentile(np.asarray(self.ages_s), [50, 99]) * 1e6
+            ages = {"nbr_age_p50_us": round(float(p50)), "nbr_age_p99_us": round(float(p99))}
+        return {**self.decoder.counters(), **ages}
+
+    def close(self) -> None:
+        for sub in self.subs:
+            sub.close()
+        self.out.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    scenario = load_scenario(args.scenario)
+    if not 0 <= args.index < scenario.n:
+        raise EncloseError(f"--index must be within 0..{scenario.n - 1}")
+
+    def make(bus: Bus, mav: MavlinkAdapter) -> FollowerNode:
+        return FollowerNode(scenario, args.index, bus, mav, args.swarm)
+
+    return fly(args, scenario, "follower", args.index, args.index, make)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="enclose-follower", description=__doc__)
+    add_bus_arguments(parser)
+    parser.add_argument("--index", type=int, required=True, help="follower number, 0-based")
+    parser.add_argument(
+        "--mav-local-base",
+        type=int,
+        default=14540,
+        help="adapter of vehicle i binds BASE+i (PX4 SITL: 14540)",
+    )
+    parser.add_argument(
+        "--mav-vehicle-base",
+        type=int,
+        default=14580,
+        help="vehicle i listens on BASE+i (PX4 SITL: 14580)",
+    )
+    args = parser.parse_args(argv)
+    setup_logging(args.log_level, f"follower-{args.index}")
+    try:
+        return run(args)
+    except EncloseError as exc:
+        log.error("%s: %s", type(exc).__name__, exc)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,130 @@
+"""Plumbing every swarm process shares: arguments, the bus, signals, the tick loop, status.
+
+Entry points (follower, target, simulator, recorder) only wire these together.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import time
+from collections import Counter
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from types import FrameType
+
+from transport.bus import Bus
+from transport.codec import encode
+from transport.keys import SwarmKeys
+from transport.messages import ProcessStatus, Stamper
+from transport.zenoh_bus import ZenohBus
+from transport.zenoh_config import ZenohConfig
+
+log = logging.getLogger(__name__)
+Clock = Callable[[], float]
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenario", default=None, help="scenario TOML or shipped name")
+    parser.add_argument("--swarm", default="enclose", help="swarm name (key prefix)")
+    parser.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
+                        help="Zenoh listen endpoint, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    parser.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                        help="Zenoh endpoint to connect to (repeatable)")
+    parser.add_argument("--zenoh-config", default=None, metavar="JSON5",
+                        help="your own Zenoh config file, used as the base")
+    parser.add_argument("--log-level", default="INFO")
+
+
+def open_bus(args: argparse.Namespace) -> Bus:
+    cfg = ZenohConfig(listen=tuple(args.listen), connect=tuple(args.connect),
+                      user_config_path=args.zenoh_config)
+    return ZenohBus(cfg)
+
+
+def setup_logging(level: str, name: str) -> None:
+    logging.basicConfig(level=level.upper(),
+                        format=f"%(asctime)s %(levelname)s {name} %(name)s: %(message)s")
+
+
+@dataclass
+class StopFlag:
+    """Set by SIGINT/SIGTERM; the loop checks it, so shutdown happens between ticks."""
+
+    raised: bool = False
+    signum: int | None = None
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        self.raised, self.signum = True, signum
+
+
+@contextmanager
+def stop_on_signals() -> Iterator[StopFlag]:
+    flag = StopFlag()
+    previous = {s: signal.signal(s, flag) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield flag
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+@dataclass
+class Ticker:
+    """Fixed-rate schedule on an injected clock: `wait()` sleeps to the next tick."""
+
+    period_s: float
+    clock: Clock = time.time
+    sleep: Callable[[float], None] = time.sleep
+    overruns: int = 0
+    ticks: int = 0
+    _next_s: float | None = None
+
+    def wait(self) -> float:
+        """Sleep until the next tick and return its time; a late tick is counted, not caught up."""
+        now = self.clock()
+        if self._next_s is None:
+            self._next_s = now
+        elif now > self._next_s + self.period_s:
+            self.overruns += 1
+            self._next_s = now  # skip missed ticks rather than bursting to catch up
+        elif now < self._next_s:
+            self.sleep(self._next_s - now)
+        self._next_s += self.period_s
+        self.ticks += 1
+        return self.clock()
+
+
+@dataclass
+class StatusReporter:
+    """Publishes ProcessStatus at about 1 Hz, or at once on a state change."""
+
+    bus: Bus
+    keys: SwarmKeys
+    role: str
+    index: int
+    period_s: float = 1.0
+    counters: Counter[str] = field(default_factory=Counter)
+    state: str = "starting"
+    _stamper: Stamper | None = None
+    _last_s: float = -1e18
+
+    def set(self, state: str, detail: str = "", extra: Mapping[str, int] | None = None) -> None:
+        changed = state != self.state
+        self.state = state
+        self.publish(detail, extra, force=changed)
+
+    def publish(self, detail: str = "", extra: Mapping[str, int] | None = None,
+                force: bool = False) -> None:
+        now = self.bus.now_s()
+        if not force and now - self._last_s < self.period_s:
+            return
+        self._last_s = now
+        if self._stamper is None:
+            self._stamper = Stamper(f"{self.role}-{self.index}", self.bus.now_s)
+        counters = {**self.counters, **(extra or {})}
+        msg = ProcessStatus(self._stamper.header(), self.role, self.index, self.state,
+                            {k: int(v) for k, v in counters.items()}, detail)
+        self.bus.publish(self.keys.status(self.role, self.index), encode(msg))

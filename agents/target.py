@@ -1,0 +1,110 @@
+"""A target process: flies target vehicle j along its scenario profile through the MAVLink adapter.
+
+    python -m agents.target --index J --scenario paper --swarm S --connect tcp/127.0.0.1:P
+
+Before the launcher's start it holds its start point; afterwards it tracks the
+profile with feed-forward velocity and a proportional position correction.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+
+from agents.core.profiles import TargetMotion
+from agents.errors import EncloseError
+from agents.mavlink.adapter import MavlinkAdapter
+from agents.process import StatusReporter, add_bus_arguments, setup_logging
+from agents.scenario import Scenario
+from agents.scenario_file import load_scenario
+from agents.vehicle_loop import add_vehicle_arguments, fly
+from transport.bus import Bus
+from transport.decoder import Decoder
+from transport.keys import SwarmKeys
+from transport.messages import RunControl
+
+log = logging.getLogger("enclose.target")
+POSITION_GAIN_PER_S = 1.0
+ALTITUDE_GAIN_PER_S = 1.0
+
+
+def tracking_command(ref_pos_m: np.ndarray, ref_vel_m_s: np.ndarray, pos_m: np.ndarray,
+                     speed_max_m_s: float) -> np.ndarray:
+    """Feed-forward plus proportional correction, bounded by the vehicle's speed."""
+    u = ref_vel_m_s + POSITION_GAIN_PER_S * (ref_pos_m - pos_m)
+    speed = float(np.hypot(*u))
+    return u if speed <= speed_max_m_s else u * (speed_max_m_s / speed)
+
+
+class TargetNode:
+    def __init__(self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter,
+                 swarm: str) -> None:
+        self.index, self.bus, self.vehicle = index, bus, vehicle
+        self.motion = TargetMotion(scenario, horizon_s=scenario.run.duration_s + 60.0)
+        self.altitude_m = scenario.vehicle.altitude_m
+        self.speed_max_m_s = scenario.vehicle.max_speed_xy_m_s
+        self.keys = SwarmKeys(swarm)
+        self.control = bus.subscribe(self.keys.control())
+        self.decoder = Decoder(expect=(RunControl,))
+        self.status = StatusReporter(bus, self.keys, "target", index)
+        self.start_s: float | None = None
+        self.stop_s = math.inf
+
+    def tick(self, now_s: float) -> None:
+        for inbound in self.decoder.drain(self.control):
+            msg = inbound.message
+            if isinstance(msg, RunControl) and msg.command == "start":
+                self.start_s, self.stop_s = msg.start_stamp_s, msg.start_stamp_s + msg.duration_s
+            elif isinstance(msg, RunControl):
+                self.stop_s = min(self.stop_s, now_s)
+        state = self.vehicle.poll()
+        t = 0.0 if self.start_s is None else max(0.0, now_s - self.start_s)
+        ref_pos, ref_vel = self.motion.state(t)
+        pos = np.asarray(state.pos_enu_m)
+        if not state.link_ok or not np.all(np.isfinite(pos)):
+            self.status.counters["ticks_without_vehicle"] += 1
+            return
+        u = tracking_command(ref_pos[self.index], ref_vel[self.index], pos[:2], self.speed_max_m_s)
+        climb = ALTITUDE_GAIN_PER_S * (self.altitude_m - pos[2])
+        if not self.vehicle.send_velocity_enu((float(u[0]), float(u[1]), float(climb))):
+            self.status.counters["setpoints_refused"] += 1
+
+    def counters(self) -> dict[str, int]:
+        return self.decoder.counters()
+
+    def close(self) -> None:
+        self.control.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    scenario = load_scenario(args.scenario)
+    if not 0 <= args.index < scenario.m:
+        raise EncloseError(f"--index must be within 0..{scenario.m - 1}")
+
+    def make(bus: Bus, mav: MavlinkAdapter) -> TargetNode:
+        return TargetNode(scenario, args.index, bus, mav, args.swarm)
+
+    return fly(args, scenario, "target", args.index, scenario.n + args.index, make)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="enclose-target", description=__doc__)
+    add_bus_arguments(parser)
+    parser.add_argument("--index", type=int, required=True, help="target number, 0-based")
+    add_vehicle_arguments(parser)
+    args = parser.parse_args(argv)
+    setup_logging(args.log_level, f"target-{args.index}")
+    try:
+        return run(args)
+    except EncloseError as exc:
+        log.error("%s: %s", type(exc).__name__, exc)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

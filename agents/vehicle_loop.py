@@ -1,0 +1,65 @@
+"""The life of a process that flies one vehicle: bus, MAVLink, start-up, fixed-rate loop, stop."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from collections.abc import Callable
+from typing import Protocol
+
+from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
+from agents.mavlink.startup import start_offboard
+from agents.process import StatusReporter, Ticker, open_bus, stop_on_signals
+from agents.scenario import Scenario
+from transport.bus import Bus
+from transport.keys import SwarmKeys
+
+log = logging.getLogger(__name__)
+
+
+class VehicleNode(Protocol):
+    status: StatusReporter
+    start_s: float | None
+    stop_s: float
+
+    def tick(self, now_s: float) -> None: ...
+
+    def counters(self) -> dict[str, int]: ...
+
+    def close(self) -> None: ...
+
+
+NodeFactory = Callable[[Bus, MavlinkAdapter], VehicleNode]
+
+
+def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--mav-local-base", type=int, default=14540,
+                        help="the adapter of vehicle v binds BASE+v (PX4 SITL: 14540)")
+    parser.add_argument("--mav-vehicle-base", type=int, default=14580,
+                        help="vehicle v listens on BASE+v (PX4 SITL: 14580)")
+
+
+def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, vehicle: int,
+        make_node: NodeFactory) -> int:
+    """Take off, declare the process linked, tick until stopped; returns the exit code."""
+    cfg = AdapterConfig.px4_sitl(vehicle, args.mav_local_base, args.mav_vehicle_base)
+    keys = SwarmKeys(args.swarm)
+    with stop_on_signals() as stop, open_bus(args) as bus, MavlinkAdapter(cfg, bus.now_s) as mav:
+        node = make_node(bus, mav)
+        node.status.set("starting")
+        start_offboard(mav, scenario.vehicle.altitude_m)
+        token = bus.declare_token(keys.alive(role, index))
+        node.status.set("linked")
+        ticker = Ticker(1.0 / scenario.run.rate_hz, bus.now_s)
+        try:
+            while not stop.raised and bus.now_s() < node.stop_s:
+                node.tick(ticker.wait())
+                node.status.state = "running" if node.start_s is not None else "linked"
+                node.status.publish(extra={"overruns": ticker.overruns, **node.counters()})
+            node.status.set("done", extra={"overruns": ticker.overruns, **node.counters()})
+            log.info("%s %d done: ticks=%d overruns=%d %s", role, index, ticker.ticks,
+                     ticker.overruns, node.counters())
+        finally:
+            token.close()
+            node.close()
+    return 0

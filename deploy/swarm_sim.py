@@ -1,0 +1,166 @@
+"""The simulator of a swarm run: MAVLink vehicles, plus ground truth and target sensing on the bus.
+
+    python -m deploy.swarm_sim --scenario paper --swarm S --listen tcp/127.0.0.1:P
+
+Vehicles 0..n-1 are the followers, n..n+m-1 the targets.  Acting as each
+follower's sensor, it publishes the targets that follower observes in the
+scenario, stamped with the time they were true (optionally with noise).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+
+from agents.errors import EncloseError
+from agents.frames import ned_to_enu
+from agents.process import (
+    StatusReporter,
+    add_bus_arguments,
+    open_bus,
+    setup_logging,
+    stop_on_signals,
+)
+from agents.scenario import Scenario
+from agents.scenario_file import load_scenario
+from sim_backend.model import FleetState
+from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
+from transport.bus import Bus
+from transport.codec import encode
+from transport.keys import SwarmKeys
+from transport.messages import Stamper, TargetObservation, TruthSnapshot, vec2, vec3
+
+log = logging.getLogger("enclose.sim")
+
+
+class SensorPublisher:
+    """A tick hook: truth for the recorder and observations for each follower, at their rates."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        bus: Bus,
+        keys: SwarmKeys,
+        every_ticks: int,
+        noise_std_m: float = 0.0,
+        seed: int = 0,
+    ) -> None:
+        self.n, self.m = scenario.n, scenario.m
+        self.bus, self.keys, self.every = bus, keys, max(1, every_ticks)
+        self.observers = [t.observed_by for t in scenario.targets]
+        self.noise_std_m = noise_std_m
+        self.rng = np.random.default_rng(seed)
+        self.truth_stamper = Stamper("sim-0", bus.now_s)
+        self.sensor_stampers = [Stamper("sim-0", bus.now_s) for _ in range(self.n)]
+        self.truth_out = bus.declare_publisher(keys.truth())
+        self.sensor_out = [bus.declare_publisher(keys.sensor_targets(i)) for i in range(self.n)]
+        self.ticks = 0
+
+    def __call__(self, sim_time_s: float, state: FleetState) -> None:
+        self.ticks += 1
+        if self.ticks % self.every:
+            return
+        now = self.bus.now_s()
+        pos = ned_to_enu(state.pos_ned_m)
+        vel = ned_to_enu(state.vel_ned_m_s)
+        truth = TruthSnapshot(
+            self.truth_stamper.header(now),
+            sim_time_s,
+            tuple(vec3(p) for p in pos[: self.n]),
+            tuple(vec3(v) for v in vel[: self.n]),
+            tuple(vec2(p[:2]) for p in pos[self.n :]),
+            tuple(vec2(v[:2]) for v in vel[self.n :]),
+        )
+        self.truth_out.put(encode(truth))
+        noise_std = self.noise_std_m if self.noise_std_m > 0.0 else None
+        for j, observers in enumerate(self.observers):
+            for i in observers:
+                seen = pos[self.n + j, :2]
+                if noise_std is not None:
+                    seen = seen + self.rng.normal(0.0, noise_std, 2)
+                msg = TargetObservation(
+                    self.sensor_stampers[i].header(now), i, j, vec2(seen), now, noise_std
+                )
+                self.sensor_out[i].put(encode(msg))
+
+    def close(self) -> None:
+        for pub in [self.truth_out, *self.sensor_out]:
+            pub.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    scenario = load_scenario(args.scenario)
+    cfg = SimConfig(
+        rate_hz=args.rate_hz,
+        telemetry_hz=args.telemetry_hz,
+        flavour=scenario.vehicle.flavour,
+        listen_base_port=args.base_port,
+        send_base_port=args.send_base_port,
+    )
+    keys = SwarmKeys(args.swarm)
+    with stop_on_signals() as stop, open_bus(args) as bus:
+        sim = Simulator(spawn_points_ned(scenario), scenario.vehicle, scenario.home, cfg)
+        sensor = SensorPublisher(
+            scenario, bus, keys, round(args.rate_hz / args.sensor_hz), args.noise_std_m, args.seed
+        )
+        status = StatusReporter(bus, keys, "sim", 0)
+        sim.on_tick.append(sensor)
+        sim.on_tick.append(
+            lambda _t, _s: status.publish(
+                extra={"overruns": sim.stats.overruns, **dict(sim.counters)}
+            )
+        )
+        token = bus.declare_token(keys.alive("sim", 0))
+        status.set("running")
+        try:
+            stats = sim.run(lambda: stop.raised)
+        finally:
+            token.close()
+            sensor.close()
+            sim.close()
+        status.set("done", extra={"overruns": stats.overruns, **dict(sim.counters)})
+    log.info(
+        "simulator stopped at t=%.1f s: ticks=%d overruns=%d %s",
+        sim.sim_time_s,
+        stats.ticks,
+        stats.overruns,
+        dict(sim.counters),
+    )
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="enclose-swarm-sim", description=__doc__)
+    add_bus_arguments(parser)
+    parser.add_argument("--rate-hz", type=float, default=100.0, help="simulation tick rate")
+    parser.add_argument("--telemetry-hz", type=float, default=50.0)
+    parser.add_argument(
+        "--sensor-hz",
+        type=float,
+        default=50.0,
+        help="rate of truth snapshots and target observations",
+    )
+    parser.add_argument(
+        "--noise-std-m",
+        type=float,
+        default=0.0,
+        help="std of Gaussian noise added to target observations",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the observation noise")
+    parser.add_argument("--base-port", type=int, default=14580)
+    parser.add_argument("--send-base-port", type=int, default=14540)
+    args = parser.parse_args(argv)
+    setup_logging(args.log_level, "sim")
+    try:
+        return run(args)
+    except EncloseError as exc:
+        log.error("%s: %s", type(exc).__name__, exc)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
