@@ -1,0 +1,83 @@
+"""Cost of the recorder's loop on a long synthetic run (issue: recorder).
+
+Feeds a perfect-formation run of the paper's case (truth + n follower states at 50 Hz, one
+batch per second of experiment time) through an in-memory bus into `Recorder.step()`, and
+prints: decode + MCAP + assembly throughput, CPU per message, the progress tick cost at the
+end of the run, the final outputs time (assembly, metrics, CSV, figures) and MCAP size.
+
+Run: python -m bench.bench_recorder [--duration 200]   (from the repo root: it reuses tests/)
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import tempfile
+import time
+from pathlib import Path
+
+from agents.scenario_file import load_scenario
+from deploy.recording.loop import MCAP_FILE, Recorder
+from deploy.recording.progress import live_errors
+from tests.recorder_synth import SynthRun
+from transport.codec import encode
+from transport.keys import SwarmKeys
+from transport.memory_bus import MemoryBus, MemoryHub
+from transport.messages import Stamper
+
+START_S = 1_700_000_000.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--duration", type=float, default=200.0)
+    args = parser.parse_args()
+    scenario = load_scenario("paper")
+    keys = SwarmKeys("bench")
+    run = SynthRun(scenario, keys, START_S, duration_s=args.duration, pre_s=0.0, post_s=0.0)
+    with tempfile.TemporaryDirectory() as tmp, MemoryBus(MemoryHub(), "rec") as rbus:
+        sbus = MemoryBus(rbus.hub, "swarm")
+        recorder = Recorder(rbus, "bench", scenario, Path(tmp), period_s=1e9)
+        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "start")))
+        per_batch = round(run.rate_hz) * (1 + scenario.n)
+        batch: list[tuple[str, bytes]] = []
+        handled, wall, cpu = 0, 0.0, 0.0
+
+        def flush() -> None:
+            nonlocal handled, wall, cpu
+            for key, payload in batch:
+                sbus.publish(key, payload)
+            batch.clear()
+            w0, c0 = time.perf_counter(), time.process_time()
+            handled += recorder.step()
+            wall += time.perf_counter() - w0
+            cpu += time.process_time() - c0
+
+        for key, msg in run.samples():
+            batch.append((key, encode(msg)))
+            if len(batch) == per_batch:
+                flush()
+        flush()
+        t0 = time.perf_counter()
+        live = live_errors(recorder.asm, dataclasses.replace(
+            recorder._info, steady_from_s=args.duration / 2))
+        tick_ms = 1000 * (time.perf_counter() - t0)
+        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "stop")))
+        recorder.step()
+        t0 = time.perf_counter()
+        ok = recorder.finish()
+        final_s = time.perf_counter() - t0
+        size = (Path(tmp) / MCAP_FILE).stat().st_size
+        sbus.close()
+    print(f"recorder, paper case ({scenario.n} followers), {args.duration:g} s at 50 Hz")
+    print(f"  messages handled        {handled}")
+    print(f"  loop throughput         {handled / wall:,.0f} msg/s "
+          f"(swarm sends {per_batch} msg/s)")
+    print(f"  CPU per message         {1e6 * cpu / handled:.1f} us")
+    print(f"  progress errors tick    {tick_ms:.2f} ms  (max |e_rho| {live['max_abs_e_rho_m']})")
+    print(f"  final outputs           {final_s:.2f} s  (metrics ok: {ok})")
+    print(f"  MCAP size               {size / 1e6:.2f} MB ({size / handled:.0f} B/msg)")
+
+
+if __name__ == "__main__":
+    main()
