@@ -11,7 +11,12 @@ from collections.abc import Sequence
 from agents.errors import EncloseError
 
 # Each module exposes `register(subparsers)`, which adds its subparser and sets `func(args) -> int`.
-COMMAND_MODULES: tuple[str, ...] = ("deploy.cmd_simulate", "deploy.report", "deploy.cmd_sim")
+COMMAND_MODULES: tuple[str, ...] = (
+    "deploy.cmd_simulate",
+    "deploy.cmd_run",
+    "deploy.report",
+    "deploy.cmd_sim",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

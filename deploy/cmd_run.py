@@ -1,0 +1,267 @@
+"""`enclose run`: the whole swarm as OS processes on this machine, linked by Zenoh on loopback."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import sys
+import time
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+from agents.errors import DeployError
+from agents.scenario import Scenario
+from agents.scenario_file import load_scenario
+from deploy.ports import HOST, free_tcp_port, mavlink_bases
+from deploy.supervisor import Child, Supervisor
+from transport.bus import Bus
+from transport.codec import encode
+from transport.keys import SwarmKeys
+from transport.messages import RunControl, Stamper
+from transport.zenoh_bus import ZenohBus
+from transport.zenoh_config import ZenohConfig
+
+log = logging.getLogger("enclose.run")
+START_DELAY_S = 1.0
+PROGRESS_PERIOD_S = 2.0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "run", help="run the swarm: simulator, targets, one process per follower, recorder"
+    )
+    p.add_argument(
+        "scenario", nargs="?", default=None, help="scenario TOML or shipped name (default: paper)"
+    )
+    p.add_argument(
+        "--duration", type=float, default=None, help="seconds after the start (default: scenario)"
+    )
+    p.add_argument(
+        "--out", type=Path, default=None, help="run directory (default: runs/run-<name>-<time>)"
+    )
+    p.add_argument("--swarm", default=None, help="swarm name on the bus (default: unique per run)")
+    p.add_argument("--noise-std-m", type=float, default=0.0, help="noise on target observations")
+    p.add_argument("--zenoh-config", default=None, metavar="JSON5", help="your Zenoh config file")
+    p.add_argument(
+        "--link-timeout", type=float, default=120.0, help="seconds to wait for all to link"
+    )
+    p.set_defaults(func=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    scenario = load_scenario(args.scenario)
+    duration = scenario.run.duration_s if args.duration is None else args.duration
+    if duration <= 0:
+        raise DeployError("--duration must be > 0")
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    out = (args.out or Path("runs") / f"run-{scenario.name}-{stamp}").resolve()
+    swarm = args.swarm or f"{scenario.name}-{stamp}".replace("_", "-")
+    previous = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as cleanly as Ctrl-C
+    try:
+        return Launch(scenario, args, out, swarm, duration).execute()
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt
+
+
+class Launch:
+    """One run: wiring of all processes, the start word, progress, and an orderly stop."""
+
+    def __init__(
+        self, scenario: Scenario, args: argparse.Namespace, out: Path, swarm: str, duration_s: float
+    ) -> None:
+        self.scenario, self.args, self.out, self.duration_s = scenario, args, out, duration_s
+        self.keys = SwarmKeys(swarm)
+        self.sup = Supervisor(out / "logs")
+        self.endpoint = f"tcp/{HOST}:{free_tcp_port()}"
+        self.vehicle_base, self.adapter_base = mavlink_bases(scenario.n + scenario.m)
+        self.timings: dict[str, float] = {}
+
+    def common(self) -> list[str]:
+        scen = self.args.scenario
+        scen = str(Path(scen).resolve()) if scen and scen.endswith(".toml") else (scen or "paper")
+        extra = ["--zenoh-config", self.args.zenoh_config] if self.args.zenoh_config else []
+        return ["--scenario", scen, "--swarm", self.keys.swarm, *extra]
+
+    def start_all(self) -> None:
+        c, s = self.common(), self.scenario
+        mav = [
+            "--mav-local-base",
+            str(self.adapter_base),
+            "--mav-vehicle-base",
+            str(self.vehicle_base),
+        ]
+        self.sup.start(
+            "sim",
+            "deploy.swarm_sim",
+            [
+                *c,
+                "--listen",
+                self.endpoint,
+                "--base-port",
+                str(self.vehicle_base),
+                "--send-base-port",
+                str(self.adapter_base),
+                "--noise-std-m",
+                str(self.args.noise_std_m),
+            ],
+        )
+        joins = [*c, "--connect", self.endpoint]
+        self.sup.start("recorder", "deploy.recorder", [*joins, "--out", str(self.out)])
+        for i in range(s.n):
+            self.sup.start(f"follower-{i}", "agents.follower", [*joins, *mav, "--index", str(i)])
+        for j in range(s.m):
+            self.sup.start(f"target-{j}", "agents.target", [*joins, *mav, "--index", str(j)])
+
+    def expected_tokens(self) -> set[str]:
+        k, s = self.keys, self.scenario
+        return (
+            {k.alive("sim", 0), k.alive("recorder", 0)}
+            | {k.alive("follower", i) for i in range(s.n)}
+            | {k.alive("target", j) for j in range(s.m)}
+        )
+
+    def wait_linked(self, bus: Bus, t0: float) -> None:
+        watch = bus.watch_alive(self.keys.all_alive())
+        expected, shown = self.expected_tokens(), -1
+        deadline = t0 + self.args.link_timeout
+        while True:
+            alive = watch.poll() & expected
+            if alive == expected:
+                return
+            self._check_children()
+            if len(alive) != shown:
+                shown = len(alive)
+                log.info("linked %d/%d processes", shown, len(expected))
+            if time.monotonic() > deadline:
+                missing = sorted(
+                    k.rsplit("/", 2)[-2] + "-" + k.rsplit("/", 1)[-1] for k in expected - alive
+                )
+                raise DeployError(
+                    f"not linked after {self.args.link_timeout:.0f} s: {', '.join(missing)}"
+                )
+            time.sleep(0.05)
+
+    def _check_children(self) -> None:
+        dead = self.sup.dead()
+        if dead:
+            c = dead[0]
+            raise DeployError(
+                f"{c.name} exited with code {c.exit_code}; last lines of {c.log_path}:\n{c.tail()}"
+            )
+
+    def execute(self) -> int:
+        self.out.mkdir(parents=True, exist_ok=True)
+        log.info(
+            "run directory %s; swarm %s; Zenoh rendezvous %s",
+            self.out,
+            self.keys.swarm,
+            self.endpoint,
+        )
+        t0 = time.monotonic()
+        interrupted = False
+        try:
+            self.start_all()
+            with ZenohBus(
+                ZenohConfig(connect=(self.endpoint,), user_config_path=self.args.zenoh_config)
+            ) as bus:
+                self.wait_linked(bus, t0)
+                self.timings["link_s"] = time.monotonic() - t0
+                log.info(
+                    "all %d processes linked in %.1f s",
+                    len(self.expected_tokens()),
+                    self.timings["link_s"],
+                )
+                try:
+                    self.fly(bus)
+                except KeyboardInterrupt:
+                    interrupted = True
+                    log.warning("interrupted: stopping the run, keeping what was recorded")
+                bus.publish(
+                    self.keys.control(),
+                    encode(
+                        RunControl(
+                            Stamper("launcher-0", bus.now_s).header(), "stop", bus.now_s(), 0.0
+                        )
+                    ),
+                )
+                self.finish()
+        except KeyboardInterrupt:
+            interrupted = True
+            log.warning("interrupted before the start")
+        finally:
+            self.sup.stop_all()
+            (self.out / "launch.json").write_text(json.dumps(self.report(), indent=2) + "\n")
+        return self.exit_code(interrupted)
+
+    def fly(self, bus: Bus) -> None:
+        start = bus.now_s() + START_DELAY_S
+        bus.publish(
+            self.keys.control(),
+            encode(
+                RunControl(
+                    Stamper("launcher-0", bus.now_s).header(), "start", start, self.duration_s
+                )
+            ),
+        )
+        next_report = start
+        while bus.now_s() < start + self.duration_s:
+            self._check_children()
+            if bus.now_s() >= next_report:
+                next_report += PROGRESS_PERIOD_S
+                self.show_progress(bus.now_s() - start)
+            time.sleep(0.05)
+
+    def show_progress(self, t_s: float) -> None:
+        try:
+            p = json.loads((self.out / "progress.json").read_text())
+        except (OSError, ValueError):
+            p = {}
+        errs = "  ".join(
+            f"{k}={v:.4g}" for k, v in p.items() if "err" in k and isinstance(v, float)
+        )
+        line = f"t = {max(0.0, t_s):6.1f} / {self.duration_s:.0f} s  {errs}"
+        if sys.stderr.isatty():
+            sys.stderr.write("\r" + line.ljust(100))
+            sys.stderr.flush()
+        else:
+            log.info("%s", line)
+
+    def finish(self) -> None:
+        """Movers end on the stop word; the recorder then writes its outputs; the sim last."""
+        movers = [c for c in self.sup.children if c.name.startswith(("follower", "target"))]
+        if not self.sup.wait(movers, 10.0):
+            self.sup.terminate(movers)
+        recorder = [c for c in self.sup.children if c.name == "recorder"]
+        if not self.sup.wait(recorder, 120.0):
+            log.error("recorder did not finish writing in 120 s; stopping it")
+            self.sup.terminate(recorder)
+        self.sup.terminate([c for c in self.sup.children if c.name == "sim"])
+
+    def report(self) -> dict[str, Any]:
+        return {
+            "swarm": self.keys.swarm,
+            "zenoh_endpoint": self.endpoint,
+            "vehicle_base_port": self.vehicle_base,
+            "adapter_base_port": self.adapter_base,
+            "duration_s": self.duration_s,
+            **self.timings,
+            "processes": {c.name: {"pid": c.pid, "exit_code": c.poll()} for c in self.sup.children},
+        }
+
+    def exit_code(self, interrupted: bool) -> int:
+        failed: list[Child] = [c for c in self.sup.children if c.poll() not in (0, None)]
+        for c in failed:
+            log.error("%s exited with code %s (log: %s)", c.name, c.exit_code, c.log_path)
+        metrics = self.out / "metrics.json"
+        if metrics.exists():
+            print(metrics.read_text())
+        if failed:
+            return 1
+        return 130 if interrupted else 0

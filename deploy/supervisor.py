@@ -1,0 +1,106 @@
+"""Start, watch and stop the OS processes of a run, by PID, leaving none behind."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+Clock = Callable[[], float]
+
+
+@dataclass
+class Child:
+    name: str
+    argv: list[str]
+    log_path: Path
+    proc: subprocess.Popen[bytes] | None = None
+    exit_code: int | None = None
+
+    @property
+    def pid(self) -> int | None:
+        return None if self.proc is None else self.proc.pid
+
+    def poll(self) -> int | None:
+        if self.proc is not None and self.exit_code is None:
+            self.exit_code = self.proc.poll()
+        return self.exit_code
+
+    def tail(self, lines: int = 12) -> str:
+        try:
+            return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
+        except OSError:
+            return "(no log)"
+
+
+@dataclass
+class Supervisor:
+    """Owns the children of one run; every child runs in its own session so that a
+    terminal's Ctrl-C reaches only the launcher, which then stops them in order."""
+
+    log_dir: Path
+    children: list[Child] = field(default_factory=list)
+    clock: Clock = time.monotonic
+
+    def start(self, name: str, module: str, args: Sequence[str]) -> Child:
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        child = Child(name, [sys.executable, "-m", module, *args], self.log_dir / f"{name}.log")
+        with open(child.log_path, "wb") as out:
+            child.proc = subprocess.Popen(
+                child.argv,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                start_new_session=True,
+                env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            )
+        self.children.append(child)
+        log.debug("started %s pid %d: %s", name, child.pid, " ".join(child.argv))
+        return child
+
+    def dead(self) -> list[Child]:
+        """Children that exited with a non-zero code so far."""
+        return [c for c in self.children if c.poll() not in (None, 0)]
+
+    def running(self, names: Sequence[str] | None = None) -> list[Child]:
+        pool = self.children if names is None else [c for c in self.children if c.name in names]
+        return [c for c in pool if c.poll() is None]
+
+    def wait(self, children: Sequence[Child], timeout_s: float) -> bool:
+        """Poll until `children` have exited or the timeout passes; True when all exited."""
+        deadline = self.clock() + timeout_s
+        while any(c.poll() is None for c in children):
+            if self.clock() >= deadline:
+                return False
+            time.sleep(0.05)
+        return True
+
+    def terminate(self, children: Sequence[Child], grace_s: float = 5.0) -> None:
+        """SIGTERM, then SIGKILL whoever is still there after `grace_s`."""
+        alive = [c for c in children if c.poll() is None]
+        for c in alive:
+            _signal(c, signal.SIGTERM)
+        if not self.wait(alive, grace_s):
+            for c in alive:
+                if c.poll() is None:
+                    log.warning("%s (pid %s) ignored SIGTERM; killing it", c.name, c.pid)
+                    _signal(c, signal.SIGKILL)
+            self.wait(alive, 2.0)
+
+    def stop_all(self, grace_s: float = 5.0) -> None:
+        self.terminate(self.children, grace_s)
+
+
+def _signal(child: Child, signum: int) -> None:
+    if child.proc is None:
+        return
+    with contextlib.suppress(ProcessLookupError):
+        child.proc.send_signal(signum)
