@@ -27,6 +27,11 @@ from transport.zenoh_config import ZenohConfig
 log = logging.getLogger("enclose.run")
 START_DELAY_S = 1.0
 PROGRESS_PERIOD_S = 2.0
+PROGRESS_FIELDS = (
+    ("max_estimator_error_m", "|r-LAP| m"),
+    ("max_abs_e_rho_m", "|e_rho| m"),
+    ("max_abs_e_delta", "|e_delta|"),
+)
 
 
 def register(sub: Any) -> None:
@@ -224,7 +229,9 @@ class Launch:
         except (OSError, ValueError):
             p = {}
         errs = "  ".join(
-            f"{k}={v:.4g}" for k, v in p.items() if "err" in k and isinstance(v, float)
+            f"{label} {p[key]:.3g}"
+            for key, label in PROGRESS_FIELDS
+            if isinstance(p.get(key), float)
         )
         line = f"t = {max(0.0, t_s):6.1f} / {self.duration_s:.0f} s  {errs}"
         if sys.stderr.isatty():
