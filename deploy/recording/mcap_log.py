@@ -81,9 +81,29 @@ def dataclass_schema(cls: type) -> dict[str, Any]:
     }
 
 
+_FIELD_NAMES: dict[type, tuple[str, ...]] = {}
+
+
+def _mapping_as_dict(obj: object) -> dict[str, Any]:
+    if isinstance(obj, Mapping):
+        return dict(obj)
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
 def message_json(msg: Message) -> bytes:
-    """The JSON a channel carries: the dataclass as an object, vectors as arrays."""
-    return json.dumps(dataclasses.asdict(msg), separators=(",", ":")).encode()
+    """The JSON a channel carries: the dataclass as an object, vectors as arrays.
+
+    Equal to `json.dumps(dataclasses.asdict(msg))`, at a fraction of its cost (asdict
+    deep-copies every tuple): messages are flat but for the header.
+    """
+    names = _FIELD_NAMES.get(type(msg))
+    if names is None:
+        names = _FIELD_NAMES[type(msg)] = tuple(f.name for f in dataclasses.fields(msg))
+    h = msg.header
+    body: dict[str, Any] = {"header": {"sender_id": h.sender_id, "seq": h.seq,
+                                       "stamp_s": h.stamp_s}}
+    body.update((name, getattr(msg, name)) for name in names if name != "header")
+    return json.dumps(body, separators=(",", ":"), default=_mapping_as_dict).encode()
 
 
 def schema_name(cls: type) -> str:
