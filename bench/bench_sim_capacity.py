@@ -131,7 +131,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--sizes", default="50,100,150,200,255")
     ap.add_argument("--seconds", type=float, default=8.0)
-    ap.add_argument("--rate-hz", type=float, default=100.0)
+    ap.add_argument("--rate-hz", type=float, default=50.0)
     ap.add_argument("--telemetry-hz", type=float, default=50.0)
     ap.add_argument("--base-port", type=int, default=26000)
     ap.add_argument("--no-setpoints", action="store_true")

@@ -38,7 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="N vehicles on a 5 m grid instead of a scenario")
     parser.add_argument("--flavour", choices=FLAVOURS, default=None,
                         help="autopilot flavour (default: the scenario's, else px4)")
-    parser.add_argument("--rate-hz", type=float, default=100.0, help="simulation tick rate")
+    parser.add_argument("--rate-hz", type=float, default=50.0, help="simulation tick rate")
     parser.add_argument("--telemetry-hz", type=float, default=50.0,
                         help="default rate of LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE")
     parser.add_argument("--host", default="127.0.0.1", help="loopback address to use")

@@ -38,7 +38,7 @@ MAX_VEHICLES = 255
 class SimConfig:
     """Loop rate and PX4 SITL ports: vehicle i listens on listen_base+i, sends to send_base+i."""
 
-    rate_hz: float = 100.0
+    rate_hz: float = 50.0
     telemetry_hz: float = 50.0
     flavour: str = "px4"
     host: str = "127.0.0.1"
