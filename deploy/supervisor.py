@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import signal
@@ -63,8 +64,17 @@ class Supervisor:
                 env={**os.environ, "PYTHONUNBUFFERED": "1"},
             )
         self.children.append(child)
+        self._write_pids()
         log.debug("started %s pid %d: %s", name, child.pid, " ".join(child.argv))
         return child
+
+    def _write_pids(self) -> None:
+        """PIDs on disk as soon as they exist, so that an outside cleanup can find them
+        even if the launcher itself is killed."""
+        pids = {c.name: c.pid for c in self.children}
+        tmp = self.log_dir / "pids.json.tmp"
+        tmp.write_text(json.dumps(pids, indent=2) + "\n")
+        tmp.replace(self.log_dir / "pids.json")
 
     def dead(self) -> list[Child]:
         """Children that exited with a non-zero code so far."""

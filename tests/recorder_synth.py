@@ -1,8 +1,8 @@
 """Synthetic recorder input: a perfect formation around moving targets, as bus messages.
 
 Followers sit exactly on the pattern (radius rho_d, the scenario's included angles) around
-the true LAP, and each estimate r_i is the LAP at its own stamp, so every error is ~0 (the
-estimator error is the LAP motion during `state_lag_s`).
+the true LAP, and each estimate r_i is the LAP at its own stamp, with the LAP's velocity as
+dr_i, so every error is ~0.
 """
 
 from __future__ import annotations
