@@ -51,13 +51,20 @@ def setup_logging(level: str, name: str) -> None:
 
 @dataclass
 class StopFlag:
-    """Set by SIGINT/SIGTERM; the loop checks it, so shutdown happens between ticks."""
+    """Set by SIGINT/SIGTERM; the loop checks it, so shutdown happens between ticks.
+
+    While `interrupt` is true (blocking start-up phases that do not look at the flag)
+    the signal raises KeyboardInterrupt instead, so that `with` blocks still close.
+    """
 
     raised: bool = False
     signum: int | None = None
+    interrupt: bool = False
 
     def __call__(self, signum: int, frame: FrameType | None) -> None:
         self.raised, self.signum = True, signum
+        if self.interrupt:
+            raise KeyboardInterrupt
 
 
 @contextmanager

@@ -47,7 +47,14 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
     with stop_on_signals() as stop, open_bus(args) as bus, MavlinkAdapter(cfg, bus.now_s) as mav:
         node = make_node(bus, mav)
         node.status.set("starting")
-        start_offboard(mav, scenario.vehicle.altitude_m)
+        stop.interrupt = True
+        try:
+            start_offboard(mav, scenario.vehicle.altitude_m)
+        except KeyboardInterrupt:
+            log.info("%s %d stopped during start-up", role, index)
+            node.close()
+            return 0
+        stop.interrupt = False
         token = bus.declare_token(keys.alive(role, index))
         node.status.set("linked")
         ticker = Ticker(1.0 / scenario.run.rate_hz, bus.now_s)

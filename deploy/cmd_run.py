@@ -269,6 +269,6 @@ class Launch:
         metrics = self.out / "metrics.json"
         if metrics.exists():
             print(metrics.read_text())
-        if failed:
-            return 1
-        return 130 if interrupted else 0
+        if interrupted:
+            return 130
+        return 1 if failed else 0

@@ -86,9 +86,10 @@ def test_ctrl_c_stops_every_process_and_keeps_the_recording(tmp_path: Path) -> N
     with launched(out, "--duration", "600") as proc:
         def running() -> bool:
             try:
-                return (json.loads((out / "progress.json").read_text()).get("t_s") or 0.0) > 3.0
+                progress = json.loads((out / "progress.json").read_text())
             except (OSError, ValueError):
                 return False
+            return progress.get("state") == "running" and (progress.get("t_s") or 0.0) > 3.0
 
         wait_for(running, 120.0, "the run to be 3 s in")
         proc.send_signal(signal.SIGINT)
