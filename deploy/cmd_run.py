@@ -17,10 +17,11 @@ from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
 from deploy.ports import HOST, free_tcp_port, mavlink_bases
 from deploy.supervisor import Child, Supervisor
-from transport.bus import Bus
+from transport.bus import Bus, Subscription
 from transport.codec import encode
+from transport.decoder import Decoder
 from transport.keys import SwarmKeys
-from transport.messages import RunControl, Stamper
+from transport.messages import ProcessStatus, RunControl, Stamper
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
@@ -87,6 +88,9 @@ class Launch:
         self.endpoint = f"tcp/{HOST}:{free_tcp_port()}"
         self.vehicle_base, self.adapter_base = mavlink_bases(scenario.n + scenario.m)
         self.timings: dict[str, float] = {}
+        self.statuses: Subscription | None = None
+        self.last_status: dict[str, ProcessStatus] = {}
+        self.decoder = Decoder(expect=(ProcessStatus,))
 
     def common(self) -> list[str]:
         scen = self.args.scenario
@@ -176,8 +180,10 @@ class Launch:
             with ZenohBus(
                 ZenohConfig(connect=(self.endpoint,), user_config_path=self.args.zenoh_config)
             ) as bus:
+                self.statuses = bus.subscribe(self.keys.all_status())
                 self.wait_linked(bus, t0)
                 self.timings["link_s"] = time.monotonic() - t0
+                self.timings["linked_wall_s"] = time.time()
                 log.info(
                     "all %d processes linked in %.1f s",
                     len(self.expected_tokens()),
@@ -218,6 +224,7 @@ class Launch:
         next_report = start
         while bus.now_s() < start + self.duration_s:
             self._check_children()
+            self.collect_status()
             if bus.now_s() >= next_report:
                 next_report += PROGRESS_PERIOD_S
                 self.show_progress(bus.now_s() - start)
@@ -245,11 +252,26 @@ class Launch:
         movers = [c for c in self.sup.children if c.name.startswith(("follower", "target"))]
         if not self.sup.wait(movers, 10.0):
             self.sup.terminate(movers)
+        deadline = time.monotonic() + 1.0  # their final status may still be on the wire
+        while time.monotonic() < deadline and not all(
+            getattr(self.last_status.get(c.name), "state", "") == "done" for c in movers
+        ):
+            self.collect_status()
+            time.sleep(0.02)
         recorder = [c for c in self.sup.children if c.name == "recorder"]
         if not self.sup.wait(recorder, 120.0):
             log.error("recorder did not finish writing in 120 s; stopping it")
             self.sup.terminate(recorder)
         self.sup.terminate([c for c in self.sup.children if c.name == "sim"])
+
+    def collect_status(self) -> None:
+        """Keep each process's latest ProcessStatus (its final counters go to launch.json)."""
+        if self.statuses is None:
+            return
+        for inbound in self.decoder.drain(self.statuses):
+            msg = inbound.message
+            if isinstance(msg, ProcessStatus):
+                self.last_status[f"{msg.role}-{msg.index}"] = msg
 
     def report(self) -> dict[str, Any]:
         return {
@@ -260,6 +282,9 @@ class Launch:
             "duration_s": self.duration_s,
             **self.timings,
             "processes": {c.name: {"pid": c.pid, "exit_code": c.poll()} for c in self.sup.children},
+            "status": {
+                name: {"state": s.state, **s.counters} for name, s in self.last_status.items()
+            },
         }
 
     def exit_code(self, interrupted: bool) -> int:

@@ -1,0 +1,103 @@
+"""The networked swarm on loopback (issue: swarm): accuracy, timing, load, memory.
+
+Runs `enclose run` as a real multi-process swarm for each case and prints:
+  metrics (estimator, radius, angle errors, settle time, command jump),
+  neighbour-state age at use (p50, p99 over followers), loop tick overruns,
+  RSS per follower (max over the run), and the time from the command to all
+  processes linked.
+
+Run: python bench/bench_swarm.py [--duration 120] [--cases paper ring16] [--out runs/bench]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+
+def rss_mb(pid: int) -> float | None:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    except OSError:
+        return None
+    return None
+
+
+def run_case(scenario: str, duration_s: float, out: Path) -> dict[str, Any]:
+    argv = [
+        sys.executable,
+        "-m",
+        "deploy.cli",
+        "run",
+        scenario,
+        "--duration",
+        str(duration_s),
+        "--out",
+        str(out),
+    ]
+    t_command = time.time()
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    peak: dict[str, float] = {}
+    try:
+        while proc.poll() is None:
+            pids_file = out / "logs" / "pids.json"
+            if pids_file.exists():
+                for name, pid in json.loads(pids_file.read_text()).items():
+                    if name.startswith("follower"):
+                        rss = rss_mb(pid)
+                        if rss is not None:
+                            peak[name] = max(peak.get(name, 0.0), rss)
+            time.sleep(1.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    launch = json.loads((out / "launch.json").read_text())
+    metrics = json.loads((out / "metrics.json").read_text())
+    followers = {k: v for k, v in launch["status"].items() if k.startswith("follower")}
+    return {
+        "exit_code": proc.returncode,
+        "metrics": {
+            k: metrics[k]
+            for k in (
+                "estimator_error_m",
+                "radius_error_m",
+                "angle_error",
+                "settle_time_s",
+                "command_jump_m_s",
+            )
+        },
+        "command_to_linked_s": launch.get("linked_wall_s", t_command) - t_command,
+        "nbr_age_p50_ms": max(f.get("nbr_age_p50_us", 0) for f in followers.values()) / 1000.0,
+        "nbr_age_p99_ms": max(f.get("nbr_age_p99_us", 0) for f in followers.values()) / 1000.0,
+        "overruns_total": sum(f.get("overruns", 0) for f in followers.values()),
+        "ticks_per_follower": duration_s * 50.0,
+        "rss_follower_mb_max": max(peak.values()) if peak else None,
+        "rss_follower_mb_mean": sum(peak.values()) / len(peak) if peak else None,
+        "followers": len(followers),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--duration", type=float, default=120.0)
+    parser.add_argument("--cases", nargs="+", default=["paper", "ring16"])
+    parser.add_argument("--out", type=Path, default=Path("runs/bench-swarm"))
+    args = parser.parse_args()
+    for case in args.cases:
+        out = (args.out / case).resolve()
+        result = run_case(case, args.duration, out)
+        print(f"== {case} ({args.duration:g} s, 50 Hz, loopback): {out}")
+        print(json.dumps(result, indent=2), flush=True)
+
+
+if __name__ == "__main__":
+    main()
