@@ -25,9 +25,8 @@ from agents.follower_logic import (
     ready,
 )
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
-from agents.process import StatusReporter, add_bus_arguments, setup_logging
+from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, setup_logging
 from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
 from agents.vehicle_loop import fly
 from transport.bus import Bus
 from transport.codec import encode
@@ -162,7 +161,7 @@ class FollowerNode:
 
 
 def run(args: argparse.Namespace) -> int:
-    scenario = load_scenario(args.scenario)
+    scenario = load_run_scenario(args)
     if not 0 <= args.index < scenario.n:
         raise EncloseError(f"--index must be within 0..{scenario.n - 1}")
 

@@ -15,6 +15,9 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from types import FrameType
 
+from agents.network_args import add_network_arguments, apply_network_arguments
+from agents.scenario import Scenario
+from agents.scenario_file import load_scenario
 from transport.bus import Bus
 from transport.codec import encode
 from transport.keys import SwarmKeys
@@ -36,6 +39,12 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--zenoh-config", default=None, metavar="JSON5",
                         help="your own Zenoh config file, used as the base")
     parser.add_argument("--log-level", default="INFO")
+    add_network_arguments(parser)
+
+
+def load_run_scenario(args: argparse.Namespace) -> Scenario:
+    """The scenario named on the command line, with the command line's network overrides."""
+    return apply_network_arguments(load_scenario(args.scenario), args)
 
 
 def open_bus(args: argparse.Namespace) -> Bus:

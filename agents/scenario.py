@@ -17,6 +17,9 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 PROFILE_KINDS = ("paper_v1", "paper_v2", "constant", "circle", "random_walk")
+ESTIMATORS = ("paper", "robust")
+LINK_PROTOCOLS = ("tcp", "udp")
+LOSS_MODELS = ("independent", "gilbert_elliott")
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,40 @@ class HomeConfig:
 
 
 @dataclass(frozen=True)
+class LinkImpairment:
+    """What one directed link does to each message: seeded, applied at the receiver."""
+
+    delay_ms: float = 0.0
+    jitter_ms: float = 0.0  # std of a zero-mean normal added to the delay (clipped at 0)
+    loss: float = 0.0  # long-run fraction of messages lost
+    loss_model: str = "independent"  # or gilbert_elliott: bursts, mean length burst_len
+    burst_len: float = 1.0  # mean number of messages lost in a row (gilbert_elliott)
+    duplicate: float = 0.0  # probability a delivered message arrives twice
+    reorder: float = 0.0  # probability a message is held back behind the next one
+
+    @property
+    def is_identity(self) -> bool:
+        return self == LinkImpairment()
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """Estimator variant, Zenoh link protocol and impairment of the follower links."""
+
+    estimator: str = "paper"
+    link: str = "tcp"
+    default: LinkImpairment = field(default_factory=LinkImpairment)
+    links: tuple[tuple[int, int, LinkImpairment], ...] = ()  # (from, to) 0-based overrides
+    seed: int = 0
+
+    def impairment(self, sender: int, receiver: int) -> LinkImpairment:
+        for src, dst, spec in self.links:
+            if (src, dst) == (sender, receiver):
+                return spec
+        return self.default
+
+
+@dataclass(frozen=True)
 class Scenario:
     """Everything one run needs; built only by `agents.scenario_file`."""
 
@@ -105,6 +142,7 @@ class Scenario:
     run: RunConfig = field(default_factory=RunConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     home: HomeConfig = field(default_factory=HomeConfig)
+    network: NetworkConfig = field(default_factory=NetworkConfig)
 
     @property
     def n(self) -> int:

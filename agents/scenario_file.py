@@ -26,6 +26,7 @@ from agents.scenario import (
     successor_is_cycle,
 )
 from agents.scenario_checks import check_admissible
+from agents.scenario_network import network
 
 DEFAULT_SCENARIO = "paper"
 Table = dict[str, Any]
@@ -136,6 +137,7 @@ def build_scenario(doc: Table, default_name: str = "scenario") -> Scenario:
         run=_run(table_of(doc, "run")),
         vehicle=_vehicle(table_of(doc, "vehicle")),
         home=_home(table_of(doc, "home")),
+        network=network(table_of(doc, "network"), n),
     )
     check_admissible(scenario)
     return scenario

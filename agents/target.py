@@ -19,9 +19,8 @@ import numpy as np
 from agents.core.profiles import TargetMotion
 from agents.errors import EncloseError
 from agents.mavlink.adapter import MavlinkAdapter
-from agents.process import StatusReporter, add_bus_arguments, setup_logging
+from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, setup_logging
 from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
 from agents.vehicle_loop import add_vehicle_arguments, fly
 from transport.bus import Bus
 from transport.decoder import Decoder
@@ -82,7 +81,7 @@ class TargetNode:
 
 
 def run(args: argparse.Namespace) -> int:
-    scenario = load_scenario(args.scenario)
+    scenario = load_run_scenario(args)
     if not 0 <= args.index < scenario.m:
         raise EncloseError(f"--index must be within 0..{scenario.m - 1}")
 

@@ -13,6 +13,7 @@ from types import FrameType
 from typing import Any
 
 from agents.errors import DeployError
+from agents.network_args import add_network_arguments, apply_network_arguments, network_overrides
 from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
 from deploy.ports import HOST, free_tcp_port, mavlink_bases
@@ -54,11 +55,12 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--link-timeout", type=float, default=120.0, help="seconds to wait for all to link"
     )
+    add_network_arguments(p)
     p.set_defaults(func=_main)
 
 
 def _main(args: argparse.Namespace) -> int:
-    scenario = load_scenario(args.scenario)
+    scenario = apply_network_arguments(load_scenario(args.scenario), args)  # fail early
     duration = scenario.run.duration_s if args.duration is None else args.duration
     if duration <= 0:
         raise DeployError("--duration must be > 0")
@@ -96,6 +98,7 @@ class Launch:
         scen = self.args.scenario
         scen = str(Path(scen).resolve()) if scen and scen.endswith(".toml") else (scen or "paper")
         extra = ["--zenoh-config", self.args.zenoh_config] if self.args.zenoh_config else []
+        extra += network_overrides(self.args)
         return ["--scenario", scen, "--swarm", self.keys.swarm, *extra]
 
     def start_all(self) -> None:

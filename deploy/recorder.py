@@ -23,10 +23,8 @@ from pathlib import Path
 from types import FrameType
 
 from agents.errors import EncloseError
-from agents.scenario_file import load_scenario
+from agents.process import add_bus_arguments, load_run_scenario, open_bus
 from deploy.recording.loop import Recorder
-from transport.zenoh_bus import ZenohBus
-from transport.zenoh_config import ZenohConfig
 
 log = logging.getLogger("deploy.recorder")
 
@@ -47,11 +45,8 @@ class StopFlag:
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m deploy.recorder", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scenario", default=None, help="scenario name or TOML file")
-    parser.add_argument("--swarm", required=True, help="swarm name (key prefix)")
+    add_bus_arguments(parser)
     parser.add_argument("--out", type=Path, required=True, help="run directory")
-    parser.add_argument("--connect", action="append", default=[], help="Zenoh endpoint")
-    parser.add_argument("--listen", action="append", default=[], help="Zenoh endpoint")
     parser.add_argument("--index", type=int, default=0, help="recorder index (default 0)")
     parser.add_argument("-v", "--verbose", action="store_true")
     return parser.parse_args(argv)
@@ -65,9 +60,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop.handle)
     signal.signal(signal.SIGINT, stop.handle)
     try:
-        scenario = load_scenario(args.scenario)
-        cfg = ZenohConfig(listen=tuple(args.listen), connect=tuple(args.connect))
-        with ZenohBus(cfg) as bus:
+        scenario = load_run_scenario(args)
+        with open_bus(args) as bus:
             recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index)
             try:
                 recorder.run(stop)

@@ -21,12 +21,12 @@ from agents.frames import ned_to_enu
 from agents.process import (
     StatusReporter,
     add_bus_arguments,
+    load_run_scenario,
     open_bus,
     setup_logging,
     stop_on_signals,
 )
 from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
 from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from transport.bus import Bus
@@ -93,7 +93,7 @@ class SensorPublisher:
 
 
 def run(args: argparse.Namespace) -> int:
-    scenario = load_scenario(args.scenario)
+    scenario = load_run_scenario(args)
     cfg = SimConfig(
         rate_hz=args.rate_hz,
         telemetry_hz=args.telemetry_hz,

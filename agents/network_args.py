@@ -1,0 +1,53 @@
+"""Command-line overrides of the `[network]` table, for `enclose run` and its children."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LOSS_MODELS, Scenario
+from agents.scenario_network import IMPAIRMENT_KEYS, impairment
+
+FLAGS = {key: "--" + key.replace("_", "-") for key in IMPAIRMENT_KEYS}
+
+
+def add_network_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("network (overrides the scenario's [network] table)")
+    g.add_argument("--estimator", choices=ESTIMATORS, default=None, help="paper | robust")
+    g.add_argument("--link", choices=LINK_PROTOCOLS, default=None, help="Zenoh link protocol")
+    g.add_argument("--delay-ms", type=float, default=None, help="added one-way delay per message")
+    g.add_argument("--jitter-ms", type=float, default=None, help="std of the added delay")
+    g.add_argument("--loss", type=float, default=None, help="fraction of messages lost")
+    g.add_argument("--loss-model", choices=LOSS_MODELS, default=None)
+    g.add_argument(
+        "--burst-len", type=float, default=None, help="mean loss burst (gilbert_elliott)"
+    )
+    g.add_argument("--duplicate", type=float, default=None, help="probability of a duplicate")
+    g.add_argument("--reorder", type=float, default=None, help="probability of a reordering")
+    g.add_argument("--impair-seed", type=int, default=None, help="seed of the impairment")
+
+
+def network_overrides(args: argparse.Namespace) -> list[str]:
+    """The flags given, as argv for a child process."""
+    argv: list[str] = []
+    for dest in ("estimator", "link", *IMPAIRMENT_KEYS, "impair_seed"):
+        value = getattr(args, dest, None)
+        if value is not None:
+            argv += ["--" + dest.replace("_", "-"), str(value)]
+    return argv
+
+
+def apply_network_arguments(scenario: Scenario, args: argparse.Namespace) -> Scenario:
+    """`scenario` with the flags applied to its network (and to every per-link override)."""
+    given = {k: getattr(args, k) for k in IMPAIRMENT_KEYS if getattr(args, k, None) is not None}
+    net = scenario.network
+    if given:
+        default = impairment(given, "command line", net.default)
+        links = tuple((s, d, impairment(given, "command line", spec)) for s, d, spec in net.links)
+        net = dataclasses.replace(net, default=default, links=links)
+    for dest in ("estimator", "link"):
+        if getattr(args, dest, None) is not None:
+            net = dataclasses.replace(net, **{dest: getattr(args, dest)})
+    if getattr(args, "impair_seed", None) is not None:
+        net = dataclasses.replace(net, seed=args.impair_seed)
+    return dataclasses.replace(scenario, network=net)

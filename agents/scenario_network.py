@@ -1,0 +1,78 @@
+"""The `[network]` table of a scenario: estimator, link protocol, impairment (seeded)."""
+
+from __future__ import annotations
+
+from dataclasses import fields, replace
+from typing import Any
+
+from agents.errors import ScenarioError
+from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LOSS_MODELS, LinkImpairment, NetworkConfig
+
+Table = dict[str, Any]
+IMPAIRMENT_KEYS = tuple(f.name for f in fields(LinkImpairment))
+PROBABILITIES = ("loss", "duplicate", "reorder")
+
+
+def choice(value: Any, allowed: tuple[str, ...], where: str) -> str:
+    if value not in allowed:
+        raise ScenarioError(where, f"must be one of {allowed}, got {value!r}")
+    return str(value)
+
+
+def impairment(table: Table, where: str, base: LinkImpairment) -> LinkImpairment:
+    """`base` with the impairment keys of `table` applied and checked."""
+    updates: dict[str, Any] = {}
+    for key in IMPAIRMENT_KEYS:
+        if key not in table:
+            continue
+        raw = table[key]
+        if key == "loss_model":
+            updates[key] = choice(raw, LOSS_MODELS, f"{where}.{key}")
+            continue
+        if isinstance(raw, bool) or not isinstance(raw, int | float):
+            raise ScenarioError(f"{where}.{key}", f"must be a number, got {raw!r}")
+        value = float(raw)
+        if key in PROBABILITIES and not 0.0 <= value <= 1.0:
+            raise ScenarioError(f"{where}.{key}", f"must be a probability in [0, 1], got {value}")
+        if key == "loss" and value >= 1.0:
+            raise ScenarioError(f"{where}.{key}", "a link that loses everything is no link")
+        if key == "burst_len" and value < 1.0:
+            raise ScenarioError(f"{where}.{key}", f"must be >= 1 message, got {value}")
+        if value < 0.0 or value != value or value == float("inf"):
+            raise ScenarioError(f"{where}.{key}", f"must be finite and >= 0, got {value}")
+        updates[key] = value
+    return replace(base, **updates)
+
+
+def network(table: Table, n: int) -> NetworkConfig:
+    unknown = set(table) - set(IMPAIRMENT_KEYS) - {"estimator", "link", "seed", "links"}
+    if unknown:
+        raise ScenarioError(f"network.{sorted(unknown)[0]}", "is not a known network setting")
+    seed = table.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise ScenarioError("network.seed", f"must be an integer, got {seed!r}")
+    default = impairment(table, "network", LinkImpairment())
+    links = []
+    raw_links = table.get("links", [])
+    if not isinstance(raw_links, list):
+        raise ScenarioError("network.links", "must be an array of [[network.links]] tables")
+    for k, link in enumerate(raw_links):
+        where = f"network.links[{k}]"
+        if not isinstance(link, dict):
+            raise ScenarioError(where, "must be a table with from, to and impairment keys")
+        ends = []
+        for end in ("from", "to"):
+            v = link.get(end)
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= n:
+                raise ScenarioError(
+                    f"{where}.{end}", f"must be a follower number 1..{n}, got {v!r}"
+                )
+            ends.append(v - 1)
+        links.append((ends[0], ends[1], impairment(link, where, default)))
+    return NetworkConfig(
+        estimator=choice(table.get("estimator", "paper"), ESTIMATORS, "network.estimator"),
+        link=choice(table.get("link", "tcp"), LINK_PROTOCOLS, "network.link"),
+        default=default,
+        links=tuple(links),
+        seed=seed,
+    )
