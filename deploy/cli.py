@@ -16,6 +16,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "deploy.cmd_run",
     "deploy.report",
     "deploy.cmd_sim",
+    "deploy.sweep",
 )
 
 

@@ -1,0 +1,237 @@
+"""A sweep file (TOML): a grid of `enclose run` network flags, validated once; its cells."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from agents.errors import ConfigError, ScenarioError
+from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LinkImpairment
+from agents.scenario_file import load_scenario
+from agents.scenario_network import IMPAIRMENT_KEYS, choice, impairment
+
+# The network flags of `enclose run`, as sweep keys (--impair-seed comes from seed0 + repeat).
+AXIS_KEYS: tuple[str, ...] = ("estimator", "link", *IMPAIRMENT_KEYS)
+TOP_KEYS = ("scenario", "duration_s", "out", "repeats", "seed0", "grid", "fixed", "heatmap")
+Value = str | float
+
+
+def flag(key: str) -> str:
+    return "--" + key.replace("_", "-")
+
+
+def format_value(value: Value) -> str:
+    """Stable text of a value, for directory names and tables: 50.0 -> "50", 0.1 -> "0.1"."""
+    if isinstance(value, str):
+        return value
+    text = repr(float(value))
+    return text[:-2] if text.endswith(".0") else text
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One run of the sweep: the grid values (file order) and the impairment seed."""
+
+    index: int
+    values: tuple[tuple[str, Value], ...]
+    seed: int
+
+    @property
+    def name(self) -> str:
+        parts = [f"{k}={format_value(v)}" for k, v in self.values]
+        return "__".join([*parts, f"seed={self.seed}"])
+
+    def label(self) -> str:
+        return " ".join([*(f"{k}={format_value(v)}" for k, v in self.values), f"seed={self.seed}"])
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    path: Path
+    scenario: str  # shipped name, or an absolute path to a TOML file
+    duration_s: float
+    out: Path
+    repeats: int
+    seed0: int
+    # Each axis: its keys (more than one when values go in pairs, "delay_ms+jitter_ms") and
+    # one tuple of values per point.
+    grid: tuple[tuple[tuple[str, ...], tuple[tuple[Value, ...], ...]], ...]
+    fixed: tuple[tuple[str, Value], ...]
+    heatmap: tuple[str, str] | None
+    eps_rho_m: float = 0.0999
+    eps_delta: float = 0.0199
+
+    @property
+    def axes(self) -> tuple[str, ...]:
+        """Every grid key, in file order (paired keys one after the other)."""
+        return tuple(k for keys, _ in self.grid for k in keys)
+
+    def partners(self, key: str) -> tuple[str, ...]:
+        """The keys that vary together with `key` (itself included)."""
+        return next((keys for keys, _ in self.grid if key in keys), (key,))
+
+    def varying(self) -> tuple[str, ...]:
+        """The first key of each axis that has more than one point."""
+        return tuple(keys[0] for keys, points in self.grid if len(points) > 1)
+
+    def cells(self) -> list[Cell]:
+        """The product of the grid in file order (last axis fastest), then the seeds."""
+        lists = [points for _, points in self.grid]
+        seeds = range(self.seed0, self.seed0 + self.repeats)
+        combos = itertools.product(itertools.product(*lists), seeds)
+        return [
+            Cell(i, tuple(zip(self.axes, itertools.chain(*combo), strict=True)), seed)
+            for i, (combo, seed) in enumerate(combos)
+        ]
+
+    def run_argv(self, cell: Cell, cell_dir: Path) -> list[str]:
+        """Arguments of `enclose run` for one cell."""
+        argv = ["run", self.scenario, "--duration", format_value(self.duration_s)]
+        argv += ["--out", str(cell_dir)]
+        for key, value in (*self.fixed, *cell.values):
+            argv += [flag(key), format_value(value)]
+        return [*argv, "--impair-seed", str(cell.seed)]
+
+
+def load_sweep(path: Path, out_override: Path | None = None) -> SweepSpec:
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError("sweep", f"cannot read {path}: {exc.strerror}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("sweep", f"{path} is not valid TOML: {exc}") from exc
+    return parse_sweep(doc, path.resolve(), out_override)
+
+
+def parse_sweep(doc: dict[str, Any], path: Path, out_override: Path | None = None) -> SweepSpec:
+    unknown = sorted(set(doc) - set(TOP_KEYS))
+    if unknown:
+        raise ConfigError(unknown[0], f"is not a sweep setting (known: {', '.join(TOP_KEYS)})")
+    base = path.parent
+    scenario_ref = _scenario(doc.get("scenario", "paper"), base)
+    try:
+        scenario = load_scenario(scenario_ref)
+    except ScenarioError as exc:
+        raise ConfigError("scenario", str(exc)) from exc
+    grid = _table(doc.get("grid", {}), "grid")
+    fixed = _table(doc.get("fixed", {}), "fixed")
+    axes = tuple(_axis(key, raw) for key, raw in grid.items())
+    flat = [k for keys, _ in axes for k in keys]
+    twice = sorted({k for k in flat if flat.count(k) > 1} | (set(flat) & set(fixed)))
+    if twice:
+        raise ConfigError(f"grid.{twice[0]}", "is given more than once (grid or fixed)")
+    spec = SweepSpec(
+        path=path,
+        scenario=scenario_ref,
+        duration_s=_positive(doc.get("duration_s"), "duration_s"),
+        out=out_override or base / _string(doc.get("out", f"runs/sweep-{path.stem}"), "out"),
+        repeats=_integer(doc.get("repeats", 1), "repeats", 1),
+        seed0=_integer(doc.get("seed0", 1), "seed0", 0),
+        grid=axes,
+        fixed=tuple((key, _value(key, raw, f"fixed.{key}")) for key, raw in fixed.items()),
+        heatmap=_heatmap(doc.get("heatmap"), tuple(keys for keys, _ in axes)),
+        eps_rho_m=scenario.run.eps_rho_m,
+        eps_delta=scenario.run.eps_delta,
+    )
+    return spec
+
+
+def _scenario(raw: Any, base: Path) -> str:
+    name = _string(raw, "scenario")
+    return str((base / name).resolve()) if name.endswith(".toml") else name
+
+
+def _string(raw: Any, where: str) -> str:
+    if not isinstance(raw, str) or not raw:
+        raise ConfigError(where, f"must be a non-empty string, got {raw!r}")
+    return raw
+
+
+def _positive(raw: Any, where: str) -> float:
+    if raw is None:
+        raise ConfigError(where, "is required (seconds of each run after its start)")
+    if isinstance(raw, bool) or not isinstance(raw, int | float) or not math.isfinite(raw):
+        raise ConfigError(where, f"must be a number, got {raw!r}")
+    if raw <= 0:
+        raise ConfigError(where, f"must be > 0, got {raw}")
+    return float(raw)
+
+
+def _integer(raw: Any, where: str, minimum: int) -> int:
+    if isinstance(raw, bool) or not isinstance(raw, int):
+        raise ConfigError(where, f"must be an integer, got {raw!r}")
+    if raw < minimum:
+        raise ConfigError(where, f"must be >= {minimum}, got {raw}")
+    return raw
+
+
+def _table(raw: Any, where: str) -> dict[str, Any]:
+    if not isinstance(raw, dict):
+        raise ConfigError(where, "must be a table")
+    for name in raw:
+        for key in name.split("+") if where == "grid" else [name]:
+            if key == "impair_seed":
+                raise ConfigError(f"{where}.{key}", "comes from seed0 and repeats; set those")
+            if key not in AXIS_KEYS:
+                raise ConfigError(
+                    f"{where}.{name}",
+                    f"{key!r} is not a network flag of enclose run ({', '.join(AXIS_KEYS)})",
+                )
+    return raw
+
+
+def _axis(name: str, raw: Any) -> tuple[tuple[str, ...], tuple[tuple[Value, ...], ...]]:
+    """`key = [v, ...]`, or paired keys `"a+b" = [[a1, b1], [a2, b2], ...]`."""
+    where, keys = f"grid.{name}", tuple(name.split("+"))
+    if not isinstance(raw, list):
+        raise ConfigError(where, f"must be a list of values, got {raw!r}")
+    if not raw:
+        raise ConfigError(where, "must not be empty")
+    points = []
+    for i, item in enumerate(raw):
+        parts = [item] if len(keys) == 1 else item
+        if not isinstance(parts, list) or len(parts) != len(keys):
+            raise ConfigError(f"{where}[{i}]", f"must be a list of {len(keys)} values ({name})")
+        points.append(
+            tuple(_value(k, v, f"{where}[{i}]") for k, v in zip(keys, parts, strict=True))
+        )
+    names = [tuple(format_value(v) for v in p) for p in points]
+    for i, text in enumerate(names):
+        if text in names[:i]:
+            raise ConfigError(f"{where}[{i}]", f"repeats the point {', '.join(text)}")
+    return keys, tuple(points)
+
+
+def _value(key: str, raw: Any, where: str) -> Value:
+    """One value of a flag, checked as the scenario's [network] table checks it."""
+    try:
+        if key == "estimator":
+            return choice(raw, ESTIMATORS, where)
+        if key == "link":
+            return choice(raw, LINK_PROTOCOLS, where)
+        checked = impairment({key: raw}, "x", LinkImpairment())
+    except ScenarioError as exc:
+        raise ConfigError(where, exc.reason) from exc
+    value = getattr(checked, key)
+    return value if isinstance(value, str) else float(value)
+
+
+def _heatmap(raw: Any, groups: tuple[tuple[str, ...], ...]) -> tuple[str, str] | None:
+    if raw is None:
+        return None
+    if not isinstance(raw, list) or len(raw) != 2:
+        raise ConfigError("heatmap", f"must be two grid axes, got {raw!r}")
+    found = []
+    for i, key in enumerate(raw):
+        group = next((g for g in groups if key in g), None)
+        if group is None:
+            known = ", ".join(k for g in groups for k in g)
+            raise ConfigError(f"heatmap[{i}]", f"{key!r} is not a grid axis ({known})")
+        found.append(group)
+    if found[0] == found[1]:
+        raise ConfigError("heatmap", f"{raw[0]} and {raw[1]} vary together: pick two axes")
+    return (raw[0], raw[1])
