@@ -21,6 +21,7 @@ from agents.follower_logic import (
     PeerView,
     Sample,
     follower_tick,
+    link_flows,
     observe_target,
     ready,
 )
@@ -37,6 +38,24 @@ from transport.messages import FollowerState, RunControl, Stamper, TargetObserva
 log = logging.getLogger("enclose.follower")
 ALTITUDE_GAIN_PER_S = 1.0
 AGE_WINDOW = 20_000
+
+
+def peer_view(msg: FollowerState, receiver: int) -> PeerView:
+    """What `receiver` keeps of a neighbour's state (its robust link sum towards `receiver`)."""
+    stamp = msg.header.stamp_s
+    flow = next(
+        (
+            Sample(np.array(f[1:3]), np.array(f[3:5]), stamp)
+            for f in msg.link_flows
+            if f[0] == receiver
+        ),
+        None,
+    )
+    return PeerView(
+        Sample(np.asarray(msg.r_m), np.asarray(msg.dr_m_s), stamp),
+        Sample(np.asarray(msg.pos_m), np.asarray(msg.vel_m_s), msg.vehicle_stamp_s),
+        flow,
+    )
 
 
 class FollowerNode:
@@ -82,10 +101,7 @@ class FollowerNode:
         elif isinstance(msg, FollowerState) and msg.index != self.index:
             known = self.peers.get(msg.index)
             if known is None or msg.header.stamp_s > known.r.stamp_s:
-                self.peers[msg.index] = PeerView(
-                    Sample(np.asarray(msg.r_m), np.asarray(msg.dr_m_s), msg.header.stamp_s),
-                    Sample(np.asarray(msg.pos_m), np.asarray(msg.vel_m_s), msg.vehicle_stamp_s),
-                )
+                self.peers[msg.index] = peer_view(msg, self.index)
         elif isinstance(msg, RunControl):
             if msg.command == "start":
                 self.start_s = msg.start_stamp_s
@@ -143,6 +159,7 @@ class FollowerNode:
             vec2(state.vel_enu_m_s[:2]),
             vec2(u),
             state.stamp_s,
+            link_flows(self.memory, self.setup),
         )
         self.out.put(encode(msg))
 

@@ -19,9 +19,11 @@ from numpy.typing import NDArray
 from agents.core.controller import ControlGains, enclosing_control
 from agents.core.estimator import (
     EstimatorParams,
+    consensus_flows,
     consensus_rate,
     edge_fractions,
     finite_difference_velocity,
+    link_balance,
     observation_weights,
 )
 from agents.core.params import control_gains, estimator_params
@@ -45,6 +47,7 @@ class FollowerSetup:
     estimator: EstimatorParams
     control: ControlGains
     period_s: float
+    robust: bool = False  # the link-sum estimator (agents.core.estimator.link_balance)
     stale_after_s: float = 0.5
     target_vel_tau_s: float = 0.1
     max_gap_s: float = 0.25  # longest dt the estimator integrates over one tick
@@ -66,6 +69,7 @@ class FollowerSetup:
             estimator=estimator_params(scenario),
             control=control_gains(scenario),
             period_s=1.0 / scenario.run.rate_hz,
+            robust=scenario.network.estimator == "robust",
         )
 
 
@@ -87,6 +91,7 @@ class PeerView:
 
     r: Sample  # its estimate r_j and dr_j/dt
     pos: Sample  # its position and velocity
+    flow: Sample | None = None  # robust: its running sum and rate on its link to us
 
 
 @dataclass(frozen=True)
@@ -97,6 +102,8 @@ class FollowerMemory:
     phi_rate_m_s: FloatArray = field(default_factory=lambda: np.zeros(2))
     last_tick_s: float | None = None
     targets: dict[int, Sample] = field(default_factory=dict)
+    link_sums_m: FloatArray | None = None  # robust: (d, 2) own running sum per neighbour
+    link_rates_m_s: FloatArray | None = None  # robust: (d, 2) the flows of the last tick
 
 
 @dataclass(frozen=True)
@@ -148,6 +155,65 @@ def _stale(
     return tuple(old)
 
 
+def _reference(
+    memory: FollowerMemory, setup: FollowerSetup, now_s: float
+) -> tuple[FloatArray, FloatArray]:
+    """p~_i and its rate at now_s, from the observed targets' tracks."""
+    w = setup.weights[list(setup.observed)]
+    tracks = [memory.targets[j] for j in setup.observed]
+    p_tilde = sum((wj * s.at(now_s) for wj, s in zip(w, tracks, strict=True)), ZERO2)
+    rate = sum((wj * s.rate for wj, s in zip(w, tracks, strict=True)), ZERO2)
+    return np.asarray(p_tilde), np.asarray(rate)
+
+
+def _their_flows(
+    setup: FollowerSetup, peers: dict[int, PeerView], now_s: float
+) -> tuple[FloatArray, FloatArray]:
+    """(d, 2) each neighbour's running sum on its link to us, carried to now_s, and its rate."""
+    sums, rates = np.zeros((len(setup.neighbours), 2)), np.zeros((len(setup.neighbours), 2))
+    for k, j in enumerate(setup.neighbours):
+        flow = peers[j].flow
+        if flow is not None:
+            sums[k], rates[k] = flow.at(now_s), flow.rate
+    return sums, rates
+
+
+def _estimate(
+    memory: FollowerMemory,
+    setup: FollowerSetup,
+    peers: dict[int, PeerView],
+    now_s: float,
+    dt: float,
+) -> tuple[FollowerMemory, FloatArray, FloatArray]:
+    """New memory, r_i and dr_i/dt at now_s, with the paper's or the robust estimator."""
+    p_tilde, p_tilde_rate = _reference(memory, setup, now_s)
+    r_nbrs = np.array([peers[j].r.at(now_s) for j in setup.neighbours]).reshape(-1, 2)
+    if not setup.robust:
+        args = (setup.nbr_fractions, setup.estimator, setup.period_s)
+        phi = memory.phi_m + dt * memory.phi_rate_m_s
+        phi_rate = consensus_rate(phi + p_tilde, r_nbrs, *args)
+        memory = replace(memory, phi_m=phi, phi_rate_m_s=phi_rate)
+        return memory, phi + p_tilde, phi_rate + p_tilde_rate
+    # A link's flow may remove at most step_fraction of the gap per age of the data it
+    # acts on (not per tick): with late or lost data the consensus then slows down
+    # instead of ringing.
+    ages = np.array([now_s - peers[j].r.stamp_s for j in setup.neighbours])
+    fractions = setup.nbr_fractions * setup.period_s / np.maximum(ages, setup.period_s)
+    args = (fractions, setup.estimator, setup.period_s)
+    d = len(setup.neighbours)
+    sums = np.zeros((d, 2)) if memory.link_sums_m is None else memory.link_sums_m
+    rates = np.zeros((d, 2)) if memory.link_rates_m_s is None else memory.link_rates_m_s
+    sums = sums + dt * rates
+    their_sums, their_rates = _their_flows(setup, peers, now_s)
+    phi = link_balance(sums, their_sums)
+    flows = consensus_flows(phi + p_tilde, r_nbrs, *args)
+    phi_rate = link_balance(flows, their_rates)
+    memory = replace(
+        memory, phi_m=phi, phi_rate_m_s=phi_rate, link_sums_m=sums, link_rates_m_s=flows
+    )
+    return memory, phi + p_tilde, phi_rate + p_tilde_rate
+
+
 def follower_tick(
     memory: FollowerMemory,
     setup: FollowerSetup,
@@ -156,32 +222,35 @@ def follower_tick(
     now_s: float,
 ) -> tuple[FollowerMemory, TickOutput]:
     """One control cycle at `now_s`; call only when `ready`."""
-    dt = (
-        0.0
-        if memory.last_tick_s is None
-        else min(max(now_s - memory.last_tick_s, 0.0), setup.max_gap_s)
-    )
-    phi = memory.phi_m + dt * memory.phi_rate_m_s
-    tracks = [memory.targets[j] for j in setup.observed]
-    w = setup.weights[list(setup.observed)]
-    p_tilde = sum((wj * s.at(now_s) for wj, s in zip(w, tracks, strict=True)), ZERO2)
-    p_tilde_rate = sum((wj * s.rate for wj, s in zip(w, tracks, strict=True)), ZERO2)
-    r = phi + p_tilde
-    r_nbrs = np.array([peers[j].r.at(now_s) for j in setup.neighbours]).reshape(-1, 2)
-    phi_rate = consensus_rate(r, r_nbrs, setup.nbr_fractions, setup.estimator, setup.period_s)
-    dr = phi_rate + p_tilde_rate
+    last = memory.last_tick_s
+    dt = 0.0 if last is None else min(max(now_s - last, 0.0), setup.max_gap_s)
+    new_memory, r, dr = _estimate(memory, setup, peers, now_s, dt)
+    succ = peers[setup.successor].pos
     out = enclosing_control(
         own.at(now_s)[None, :],
-        peers[setup.successor].pos.at(now_s)[None, :],
+        succ.at(now_s)[None, :],
         r[None, :],
         dr[None, :],
         np.array([setup.angle_rad]),
         setup.control,
         setup.period_s,
+        now_s - succ.stamp_s,
     )
-    new_memory = replace(memory, phi_m=phi, phi_rate_m_s=phi_rate, last_tick_s=now_s)
+    new_memory = replace(new_memory, last_tick_s=now_s)
     u = out.u_m_s[0].copy()
     z, delta = float(out.z_m[0]), float(out.delta[0])
     if not (np.all(np.isfinite(u)) and math.isfinite(z)):
         u = np.zeros(2)  # never fly a NaN: hold, and let the caller count it
     return new_memory, TickOutput(u, r, dr, z, delta, _stale(memory, setup, peers, now_s))
+
+
+def link_flows(
+    memory: FollowerMemory, setup: FollowerSetup
+) -> tuple[tuple[int, float, float, float, float], ...]:
+    """What the robust estimator publishes: (j, sum x, y, rate x, y) per neighbour."""
+    if memory.link_sums_m is None or memory.link_rates_m_s is None:
+        return ()
+    return tuple(
+        (j, float(s[0]), float(s[1]), float(f[0]), float(f[1]))
+        for j, s, f in zip(setup.neighbours, memory.link_sums_m, memory.link_rates_m_s, strict=True)
+    )

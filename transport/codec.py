@@ -33,7 +33,7 @@ from transport.messages import (
     TruthSnapshot,
 )
 
-CODEC_VERSION = 1
+CODEC_VERSION = 2  # 2: FollowerState.link_flows (robust estimator)
 MIN_VERSION = 1
 MAX_PAYLOAD_BYTES = 1 << 16
 _MAX_ITEMS = 256  # longest list/map accepted (vehicles in a snapshot, counters)
@@ -43,7 +43,7 @@ _HEADER_LEN = 5
 @dataclass(frozen=True)
 class Field:
     name: str
-    kind: str  # int | float | opt_float | str | state | command | vec2 | vec2s | vec3s | counters
+    kind: str  # int float opt_float str state command vec2 vec2s vec3s counters flows
     since: int = 1
 
 
@@ -52,6 +52,7 @@ SCHEMAS: dict[type, tuple[int, tuple[Field, ...]]] = {
         Field("index", "int"), Field("r_m", "vec2"), Field("dr_m_s", "vec2"),
         Field("phi_m", "vec2"), Field("pos_m", "vec2"), Field("vel_m_s", "vec2"),
         Field("u_m_s", "vec2"), Field("vehicle_stamp_s", "float"),
+        Field("link_flows", "flows", since=2),
     )),
     TargetObservation: (2, (
         Field("observer_index", "int"), Field("target_index", "int"), Field("pos_m", "vec2"),
@@ -111,6 +112,12 @@ def _vec(v: Any, name: str, dim: int) -> tuple[float, ...]:
     return tuple(_float(x, name) for x in _seq(v, name, dim))
 
 
+def _flow(v: Any, name: str) -> tuple[int, float, float, float, float]:
+    """(neighbour index, running sum x, y [m], current rate x, y [m/s])."""
+    j, fx, fy, rx, ry = _seq(v, name, 5)
+    return (_int(j, name), _float(fx, name), _float(fy, name), _float(rx, name), _float(ry, name))
+
+
 def _counters(v: Any, name: str) -> dict[str, int]:
     if not isinstance(v, dict) or len(v) > _MAX_ITEMS:
         raise _fail("type", f"{name} must be a map")
@@ -144,11 +151,13 @@ def _check(kind: str, v: Any, name: str) -> Any:
         return tuple(_vec(x, name, dim) for x in _seq(v, name))
     if kind == "counters":
         return _counters(v, name)
+    if kind == "flows":
+        return tuple(_flow(x, name) for x in _seq(v, name))
     raise AssertionError(f"unknown field kind {kind}")
 
 
 def _wire(kind: str, v: Any) -> Any:
-    if kind in ("vec2", "vec2s", "vec3s"):
+    if kind in ("vec2", "vec2s", "vec3s", "flows"):
         return [list(x) for x in v] if kind != "vec2" else list(v)
     return v
 

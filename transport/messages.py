@@ -24,6 +24,7 @@ from transport.bus import Clock
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
+LinkFlow = tuple[int, float, float, float, float]
 
 PROCESS_STATES = ("starting", "linked", "running", "flying", "stopping", "done", "failed")
 
@@ -82,6 +83,9 @@ class FollowerState:
     vel_m_s: Vec2  # own velocity used this cycle
     u_m_s: Vec2  # velocity command sent this cycle
     vehicle_stamp_s: float  # stamp of the vehicle state used
+    # Robust estimator (codec v2): per neighbour j, (j, running sum of this follower's
+    # flow on link j [m] x, y, its current rate [m/s] x, y).  Empty for the paper's.
+    link_flows: tuple[LinkFlow, ...] = ()
 
 
 @dataclass(frozen=True)

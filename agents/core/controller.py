@@ -48,12 +48,15 @@ def enclosing_control(
     angles_rad: FloatArray,
     gains: ControlGains,
     dt_s: float,
+    succ_age_s: float = 0.0,
 ) -> ControlOutput:
     """Velocity commands for followers at `pos_m` whose successors are at `succ_pos_m`.
 
     All arrays are row-aligned: (k, 2) positions, estimates r and their rates, (k,)
     desired included angles a_i.  `dt_s` is the time until the next command: it
-    sets how much of the error one command may remove (`ControlGains.step_fraction`).
+    sets how much of the error one command may remove (`ControlGains.step_fraction`);
+    `succ_age_s`, the age of the successor's position, stretches that step for the
+    angle: correcting on data older than a step by a step's worth oscillates.
     """
     # Plane vectors as complex numbers (zero-copy views): one call each for the
     # norm, the relative bearing and the 90-degree rotation keeps a 1 kHz loop cheap.
@@ -67,7 +70,7 @@ def enclosing_control(
     cap = rate_cap(gains.step_fraction, dt_s)
     w_z = limited_sig(z, 1.0 / gains.alpha2, gains.k_z, cap)
     # Half the cap for the angle: the successor's own correction moves delta_i too.
-    delta_cap = (0.5 * cap) * rho * angles_rad
+    delta_cap = (0.5 * rate_cap(gains.step_fraction, max(dt_s, succ_age_s))) * rho * angles_rad
     w_delta = limited_sig(delta, 1.0 / gains.alpha3, gains.k_d, delta_cap) + gains.w_d_rad_s * rho
     u = radial * (1j * w_delta - w_z) + as_complex(r_rate_m_s)
     return ControlOutput(u_m_s=as_plane(u), z_m=z, delta=delta)

@@ -49,6 +49,18 @@ def edge_fractions(adjacency: FloatArray, tails: IntArray, heads: IntArray) -> F
     return 1.0 / np.maximum(degree[tails], degree[heads])
 
 
+def consensus_flows(
+    r_self_m: FloatArray,
+    r_nbrs_m: FloatArray,
+    nbr_fractions: FloatArray,
+    params: EstimatorParams,
+    dt_s: float,
+) -> FloatArray:
+    """(d, 2) flows of one follower's links: k_e sig(r_j - r_i)^(1/alpha1), step-limited."""
+    cap = rate_cap(params.step_fraction, dt_s) * nbr_fractions[:, None]
+    return limited_sig(r_nbrs_m - r_self_m, 1.0 / params.alpha1, params.k_e, cap)
+
+
 def consensus_rate(
     r_self_m: FloatArray,
     r_nbrs_m: FloatArray,
@@ -57,9 +69,20 @@ def consensus_rate(
     dt_s: float,
 ) -> FloatArray:
     """dPhi/dt of one follower from its r (2,), its neighbours' r (d, 2) and edge fractions (d,)."""
-    cap = rate_cap(params.step_fraction, dt_s) * nbr_fractions[:, None]
-    flow = limited_sig(r_nbrs_m - r_self_m, 1.0 / params.alpha1, params.k_e, cap)
-    return np.asarray(flow.sum(axis=0))
+    flows = consensus_flows(r_self_m, r_nbrs_m, nbr_fractions, params, dt_s)
+    return np.asarray(flows.sum(axis=0))
+
+
+def link_balance(own_sums_m: FloatArray, their_sums_m: FloatArray) -> FloatArray:
+    """Phi of the robust estimator: half the difference of each link's two running sums.
+
+    Follower i integrates its own flow on link j into S_ij; j does the same into
+    S_ji and publishes it.  Phi_i = sum_j (S_ij - S_ji) / 2 makes every link's
+    contributions to Phi_i and Phi_j exact opposites, whatever was lost or late,
+    so sum(Phi) = 0 (mean r = LAP) holds up to the sums still in flight; with the
+    paper's increments a lost or late message shifts the mean for good.
+    """
+    return np.asarray(0.5 * (own_sums_m - their_sums_m).sum(axis=0))
 
 
 @dataclass(frozen=True)

@@ -6,8 +6,6 @@ import numpy as np
 import pytest
 
 from agents.core.metrics import compute_metrics, error_series
-from agents.core.profiles import TargetMotion
-from agents.core.timeseries import RunSeries
 from agents.follower_logic import (
     FollowerMemory,
     FollowerSetup,
@@ -18,54 +16,13 @@ from agents.follower_logic import (
     ready,
 )
 from agents.scenario_file import load_scenario
-
-
-def run_swarm(duration_s: float, rate_hz: float, delay_ticks: int = 1) -> RunSeries:
-    """Every follower ticks on the peer states published `delay_ticks` ticks earlier."""
-    s = load_scenario()
-    dt = 1.0 / rate_hz
-    setups = [FollowerSetup.from_scenario(s, i) for i in range(s.n)]
-    memories = [FollowerMemory() for _ in range(s.n)]
-    pos = np.asarray(s.follower_pos_m, float)
-    vel = np.zeros_like(pos)
-    motion = TargetMotion(s)
-    history: list[dict[int, PeerView]] = []
-    t_all, p_all, r_all, u_all, tg_all = [], [], [], [], []
-    for k in range(int(duration_s * rate_hz) + 1):
-        t = k * dt
-        targets, _ = motion.state(t)
-        published: dict[int, PeerView] = {}
-        peers = history[-delay_ticks] if len(history) >= delay_ticks else {}
-        r_now, dr_now, u_now = np.zeros_like(pos), np.zeros_like(pos), np.zeros_like(pos)
-        for i, setup in enumerate(setups):
-            for j in setup.observed:
-                memories[i] = observe_target(memories[i], setup, j, targets[j], t)
-            own = Sample(pos[i].copy(), vel[i].copy(), t)
-            if ready(memories[i], setup, peers):
-                memories[i], out = follower_tick(memories[i], setup, own, peers, t)
-                r_now[i], dr_now[i], u_now[i] = out.r_m, out.dr_m_s, out.u_m_s
-            else:
-                r_now[i] = setup.weights @ targets
-            published[i] = PeerView(
-                Sample(r_now[i], dr_now[i], t), Sample(pos[i].copy(), vel[i], t)
-            )
-        history.append(published)
-        t_all.append(t)
-        p_all.append(pos.copy())
-        r_all.append(r_now)
-        u_all.append(u_now)
-        tg_all.append(targets)
-        vel = u_now
-        pos = pos + dt * u_now
-    return RunSeries(
-        np.array(t_all), np.array(p_all), np.array(r_all), np.array(u_all), np.array(tg_all)
-    )
+from tests.swarm_harness import run_swarm
 
 
 @pytest.mark.timeout(60)
 def test_networked_tick_forms_the_pattern_with_one_tick_of_delay() -> None:
     s = load_scenario()
-    series = run_swarm(40.0, 50.0)
+    series = run_swarm(s, 40.0, 50.0)
     errors = error_series(series, s.successor, np.asarray(s.pattern.angles_rad), 8.0)
     m = compute_metrics(series, errors, 20.0, 0.0999, 0.0199)
     # A full tick of delay on every link costs the paper's estimator ~5 cm of drift of

@@ -31,18 +31,32 @@ H = Header("follower-1", 7, 1700000000.123456)
 
 def follower_state(**over: object) -> FollowerState:
     base = FollowerState(
-        header=H, index=1, r_m=(1.0, 2.0), dr_m_s=(0.1, -0.2), phi_m=(0.0, 0.5),
-        pos_m=(10.0, -20.0), vel_m_s=(0.3, 0.4), u_m_s=(0.5, 0.6), vehicle_stamp_s=1699999999.9,
+        header=H,
+        index=1,
+        r_m=(1.0, 2.0),
+        dr_m_s=(0.1, -0.2),
+        phi_m=(0.0, 0.5),
+        pos_m=(10.0, -20.0),
+        vel_m_s=(0.3, 0.4),
+        u_m_s=(0.5, 0.6),
+        vehicle_stamp_s=1699999999.9,
     )
     return dataclasses.replace(base, **over)  # type: ignore[arg-type]
 
 
 ALL_MESSAGES: list[Message] = [
     follower_state(),
+    follower_state(link_flows=((0, 0.5, -0.25, 0.01, 0.0), (2, -1.0, 2.0, 0.0, -0.02))),
     TargetObservation(H, 1, 0, (3.0, 4.0), 1700000000.1, 0.05),
     TargetObservation(H, 2, 1, (3.0, 4.0), 1700000000.1),
-    TruthSnapshot(H, 12.5, ((0.0, 1.0, 10.0), (2.0, 3.0, 10.0)), ((0.1, 0.0, 0.0),) * 2,
-                  ((1.0, 1.0),), ((1.0, 0.5),)),
+    TruthSnapshot(
+        H,
+        12.5,
+        ((0.0, 1.0, 10.0), (2.0, 3.0, 10.0)),
+        ((0.1, 0.0, 0.0),) * 2,
+        ((1.0, 1.0),),
+        ((1.0, 0.5),),
+    ),
     ProcessStatus(H, "follower", 1, "linked", {"drop_msgpack": 3, "overruns": 0}, "ok"),
     RunControl(H, "start", 1700000001.0, 120.0),
 ]
@@ -91,24 +105,28 @@ def test_version_mismatch_rejected(version: object) -> None:
     assert err.value.reason == "version"
 
 
-@pytest.mark.parametrize("payload", [b"", b"\xc1", b"\x92\x01", b"\xff" * 3,
-                                     encode(follower_state()) + b"\x00"])
+@pytest.mark.parametrize(
+    "payload", [b"", b"\xc1", b"\x92\x01", b"\xff" * 3, encode(follower_state()) + b"\x00"]
+)
 def test_malformed_msgpack_rejected(payload: bytes) -> None:
     with pytest.raises(CodecError) as err:
         decode(payload)
     assert err.value.reason == "msgpack"
 
 
-@pytest.mark.parametrize(("position", "value", "reason"), [
-    (1, 99, "unknown_type"),
-    (2, 5, "type"),          # sender_id not a string
-    (3, -1, "type"),         # negative seq
-    (3, True, "type"),       # bool is not an int here
-    (5, "one", "type"),      # index not an int
-    (6, [1.0], "schema"),    # r_m of length 1
-    (6, [1.0, "x"], "type"),
-    (6, {"x": 1.0}, "type"),
-])
+@pytest.mark.parametrize(
+    ("position", "value", "reason"),
+    [
+        (1, 99, "unknown_type"),
+        (2, 5, "type"),  # sender_id not a string
+        (3, -1, "type"),  # negative seq
+        (3, True, "type"),  # bool is not an int here
+        (5, "one", "type"),  # index not an int
+        (6, [1.0], "schema"),  # r_m of length 1
+        (6, [1.0, "x"], "type"),
+        (6, {"x": 1.0}, "type"),
+    ],
+)
 def test_wrong_types_rejected(position: int, value: object, reason: str) -> None:
     obj = msgpack.unpackb(encode(follower_state()))
     obj[position] = value
@@ -146,6 +164,22 @@ def test_unknown_process_state_rejected() -> None:
         encode(ProcessStatus(H, "follower", 0, "sleeping"))
 
 
+def test_version_1_follower_state_decodes_without_link_flows() -> None:
+    v1 = msgpack.unpackb(encode(follower_state()))[:-1]
+    v1[0] = 1
+    assert decode(bytes(msgpack.packb(v1))) == follower_state()
+
+
+@pytest.mark.parametrize(
+    "flow", [(0, 1.0, 2.0), (-1, 0.0, 0.0, 0.0, 0.0), (0, 1.0, float("nan"), 0, 0)]
+)
+def test_malformed_link_flows_rejected(flow: tuple[float, ...]) -> None:
+    payload = msgpack.unpackb(encode(follower_state()))
+    payload[-1] = [list(flow)]
+    with pytest.raises(CodecError):
+        decode(bytes(msgpack.packb(payload)))
+
+
 def test_unknown_run_command_rejected() -> None:
     with pytest.raises(CodecError):
         encode(RunControl(H, "pause", 0.0, 1.0))
@@ -163,8 +197,9 @@ def test_decoder_drops_and_counts_per_reason() -> None:
     obj[6] = [math.nan, 0.0]
     nan_payload = bytes(msgpack.packb(obj))
     decoder = Decoder()
-    out = decoder.decode_all([rec(b"\xc1"), rec(good), rec(nan_payload), rec(nan_payload),
-                              rec(raw(99, 1, "x", 0, 0.0))])
+    out = decoder.decode_all(
+        [rec(b"\xc1"), rec(good), rec(nan_payload), rec(nan_payload), rec(raw(99, 1, "x", 0, 0.0))]
+    )
     assert [i.message for i in out] == [follower_state()]
     assert decoder.dropped == {"msgpack": 1, "non_finite": 2, "version": 1}
     assert decoder.counters()["drop_non_finite"] == 2 and decoder.accepted == 1
