@@ -32,7 +32,9 @@ from agents.vehicle_loop import fly
 from transport.bus import Bus
 from transport.codec import encode
 from transport.decoder import Decoder
+from transport.impairment import ImpairedBus
 from transport.keys import SwarmKeys
+from transport.link_stats import LinkDecoder
 from transport.messages import FollowerState, RunControl, Stamper, TargetObservation, vec2
 
 log = logging.getLogger("enclose.follower")
@@ -76,7 +78,7 @@ class FollowerNode:
         self.subs += [bus.subscribe(self.keys.follower_state(j)) for j in peers]
         self.out = bus.declare_publisher(self.keys.follower_state(index))
         self.stamper = Stamper(f"follower-{index}", bus.now_s)
-        self.decoder = Decoder()
+        self.decoder: Decoder = LinkDecoder()  # + per-link rx and age (transport.link_stats)
         self.status = StatusReporter(bus, self.keys, "follower", index)
         self.memory = FollowerMemory()
         self.peers: dict[int, PeerView] = {}
@@ -164,12 +166,18 @@ class FollowerNode:
         self.out.put(encode(msg))
 
     def counters(self) -> dict[str, int]:
-        """Decoder drops and gaps, and the age of neighbour states at use (p50, p99)."""
+        """Decoder drops and gaps, and the age of neighbour states at use (p50, p99).
+
+        Per link L (`f<j>`: follower j, 0-based; `sensor`): rx_L, rx_dup_L, seq_first_L,
+        seq_last_L, age_p50_us_L, age_p99_us_L (transport.link_stats) and imp_<count>_L
+        (transport.impairment); states_sent: FollowerStates this follower published.
+        """
         ages = {}
         if self.ages_s:
             p50, p99 = np.percentile(np.asarray(self.ages_s), [50, 99]) * 1e6
             ages = {"nbr_age_p50_us": round(float(p50)), "nbr_age_p99_us": round(float(p99))}
-        return {**self.decoder.counters(), **ages}
+        links = self.bus.counters() if isinstance(self.bus, ImpairedBus) else {}
+        return {**self.decoder.counters(), **ages, **links, "states_sent": self.stamper.next_seq}
 
     def close(self) -> None:
         for sub in self.subs:
@@ -183,7 +191,8 @@ def run(args: argparse.Namespace) -> int:
         raise EncloseError(f"--index must be within 0..{scenario.n - 1}")
 
     def make(bus: Bus, mav: MavlinkAdapter) -> FollowerNode:
-        return FollowerNode(scenario, args.index, bus, mav, args.swarm)
+        impaired = ImpairedBus(bus, scenario.network, receiver=args.index)  # [network] links
+        return FollowerNode(scenario, args.index, impaired, mav, args.swarm)
 
     return fly(args, scenario, "follower", args.index, args.index, make)
 
