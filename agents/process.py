@@ -48,8 +48,11 @@ def load_run_scenario(args: argparse.Namespace) -> Scenario:
 
 
 def open_bus(args: argparse.Namespace) -> Bus:
+    """The process's bus; with no --listen it listens on an OS-chosen port of the run's
+    link protocol (`[network] link`, or --link), so that every link of the mesh uses it."""
     cfg = ZenohConfig(listen=tuple(args.listen), connect=tuple(args.connect),
-                      user_config_path=args.zenoh_config)
+                      user_config_path=args.zenoh_config,
+                      link=load_run_scenario(args).network.link)
     return ZenohBus(cfg)
 
 

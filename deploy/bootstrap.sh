@@ -16,3 +16,9 @@ if [ ! -f "$stamp" ] || [ "$repo/pyproject.toml" -nt "$stamp" ]; then
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$repo[dev]" >&2
   touch "$stamp"
 fi
+# `enclose run --netns` needs `ip` and `nft`; install them once if we may (tests skip without).
+if [ "$(id -u)" -eq 0 ] && ! { command -v ip && command -v nft; } >/dev/null 2>&1; then
+  echo "bootstrap: installing iproute2 and nftables for --netns" >&2
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -q iproute2 nftables >/dev/null 2>&1 \
+    || echo "bootstrap: could not install iproute2/nftables; --netns tests will skip" >&2
+fi

@@ -16,7 +16,8 @@ from agents.errors import DeployError
 from agents.network_args import add_network_arguments, apply_network_arguments, network_overrides
 from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
-from deploy.ports import HOST, free_tcp_port, mavlink_bases
+from deploy.netns import add_netns_arguments, netns_requested, run_in_namespace
+from deploy.ports import mavlink_bases, rendezvous_endpoint
 from deploy.supervisor import Child, Supervisor
 from transport.bus import Bus, Subscription
 from transport.codec import encode
@@ -56,6 +57,7 @@ def register(sub: Any) -> None:
         "--link-timeout", type=float, default=120.0, help="seconds to wait for all to link"
     )
     add_network_arguments(p)
+    add_netns_arguments(p)
     p.set_defaults(func=_main)
 
 
@@ -69,6 +71,8 @@ def _main(args: argparse.Namespace) -> int:
     swarm = args.swarm or f"{scenario.name}-{stamp}".replace("_", "-")
     previous = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as cleanly as Ctrl-C
     try:
+        if netns_requested(args):  # the same run, launched again inside a lossy namespace
+            return run_in_namespace(args, out, swarm, duration)
         return Launch(scenario, args, out, swarm, duration).execute()
     finally:
         signal.signal(signal.SIGTERM, previous)
@@ -87,8 +91,10 @@ class Launch:
         self.scenario, self.args, self.out, self.duration_s = scenario, args, out, duration_s
         self.keys = SwarmKeys(swarm)
         self.sup = Supervisor(out / "logs")
-        self.endpoint = f"tcp/{HOST}:{free_tcp_port()}"
         self.vehicle_base, self.adapter_base = mavlink_bases(scenario.n + scenario.m)
+        blocks = [range(b, b + scenario.n + scenario.m) for b in (self.vehicle_base,
+                                                                  self.adapter_base)]
+        self.endpoint = rendezvous_endpoint(scenario.network.link, avoid=blocks)
         self.timings: dict[str, float] = {}
         self.statuses: Subscription | None = None
         self.last_status: dict[str, ProcessStatus] = {}
@@ -181,7 +187,8 @@ class Launch:
         try:
             self.start_all()
             with ZenohBus(
-                ZenohConfig(connect=(self.endpoint,), user_config_path=self.args.zenoh_config)
+                ZenohConfig(connect=(self.endpoint,), user_config_path=self.args.zenoh_config,
+                            link=self.scenario.network.link)
             ) as bus:
                 self.statuses = bus.subscribe(self.keys.all_status())
                 self.wait_linked(bus, t0)

@@ -1,18 +1,39 @@
-"""Free loopback ports for a run: one TCP port for Zenoh, blocks of UDP ports for MAVLink."""
+"""Free loopback ports for a run: one port for Zenoh (TCP or UDP), blocks of UDP for MAVLink."""
 
 from __future__ import annotations
 
 import socket
+from collections.abc import Sequence
 
 from agents.errors import DeployError
+from transport.zenoh_config import loopback_endpoint
 
 HOST = "127.0.0.1"
+PX4_SITL_BASES = (14580, 14540)  # (vehicle, adapter): taken whenever free, e.g. in a fresh netns
 
 
 def free_tcp_port(host: str = HOST) -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind((host, 0))
         return int(sock.getsockname()[1])
+
+
+def free_udp_port(host: str = HOST) -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind((host, 0))
+        return int(sock.getsockname()[1])
+
+
+def rendezvous_endpoint(link: str, avoid: Sequence[range] = ()) -> str:
+    """The endpoint the simulator listens on and everyone connects to, in the run's protocol.
+
+    A UDP port must not fall in the MAVLink blocks (`avoid`), bound only later by the sim.
+    """
+    for _ in range(50):
+        port = free_udp_port() if link == "udp" else free_tcp_port()
+        if link != "udp" or not any(port in r for r in avoid):
+            return loopback_endpoint(port, link)
+    raise DeployError(f"no free {link} port on {HOST} outside the MAVLink blocks")
 
 
 def udp_block_free(base: int, count: int, host: str = HOST) -> bool:
@@ -30,7 +51,7 @@ def udp_block_free(base: int, count: int, host: str = HOST) -> bool:
             sock.close()
 
 
-def mavlink_bases(count: int, preferred: tuple[int, int] = (14580, 14540)) -> tuple[int, int]:
+def mavlink_bases(count: int, preferred: tuple[int, int] = PX4_SITL_BASES) -> tuple[int, int]:
     """(vehicle listen base, adapter base): PX4 SITL's when free, else the first free pair."""
     candidates = [preferred] + [(b, b + 500) for b in range(20000, 60000, 1000)]
     for vehicle_base, adapter_base in candidates:

@@ -21,6 +21,7 @@ import zenoh
 from agents.errors import ConfigError
 
 LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
+LINK_PROTOCOLS = ("tcp", "udp")
 _MODES = ("peer", "client", "router")
 
 
@@ -33,10 +34,13 @@ class ZenohConfig:
     connect: tuple[str, ...] = ()
     user_config_path: str | None = None
     lowlatency: bool = False  # `transport/unicast/lowlatency`; also turns QoS off
+    link: str = "tcp"  # protocol of the default listen endpoint (scenario `[network] link`)
 
     def __post_init__(self) -> None:
         if self.mode not in _MODES:
             raise ConfigError("zenoh.mode", f"{self.mode!r} not in {_MODES}")
+        if self.link not in LINK_PROTOCOLS:
+            raise ConfigError("zenoh.link", f"{self.link!r} not in {LINK_PROTOCOLS}")
         for field, endpoints in (("zenoh.listen", self.listen), ("zenoh.connect", self.connect)):
             if isinstance(endpoints, str) or not all(isinstance(e, str) for e in endpoints):
                 raise ConfigError(field, "must be a tuple of endpoint strings")
@@ -71,7 +75,7 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
     if not (user and _is_set(config, default, "mode")):
         _put(config, "mode", cfg.mode)
     if cfg.listen or not (user and _is_set(config, default, "listen/endpoints")):
-        _put(config, "listen/endpoints", list(cfg.listen or LOOPBACK_LISTEN))
+        _put(config, "listen/endpoints", list(cfg.listen or (loopback_endpoint(0, cfg.link),)))
     if cfg.connect:
         _put(config, "connect/endpoints", list(cfg.connect))
     if not (user and _is_set(config, default, "scouting/multicast/enabled")):
@@ -84,7 +88,13 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
 
 
 def loopback_endpoint(port: int, proto: str = "tcp") -> str:
-    """`tcp/127.0.0.1:<port>`: the only kind of endpoint the project uses by default."""
+    """`<proto>/127.0.0.1:<port>`, proto tcp or udp: the only kind of endpoint used by default.
+
+    Port 0 lets the OS choose, for udp as for tcp (Zenoh 1.10 binds `udp/127.0.0.1:0` and
+    gossips the port it got, so peers listening that way still mesh).
+    """
     if not 0 <= port <= 65535:
         raise ConfigError("zenoh.port", f"{port} out of range")
+    if proto not in LINK_PROTOCOLS:
+        raise ConfigError("zenoh.link", f"{proto!r} not in {LINK_PROTOCOLS}")
     return f"{proto}/127.0.0.1:{port}"

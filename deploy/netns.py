@@ -1,0 +1,277 @@
+"""`enclose run --netns`: the whole run in its own network namespace, with real packet loss.
+
+This kernel has no netem, but nftables works inside a namespace: a rule on the *input*
+hook of the namespace's `lo` drops a random share of every packet crossing loopback
+(on the output hook UDP senders would get EPERM instead of a silent loss).  Zenoh's own
+TCP or UDP links then see real loss, retransmits and all.  Only the network is
+namespaced (`ip netns exec`), so the run directory is the caller's, as usual.
+
+MAVLink between each
+follower and its simulated autopilot is exempt: on a real drone that link is on board.
+The namespace is named `enclose-<pid of the launcher>`; it is removed (and its nft
+table with it) whatever happens, and one left by a crashed launcher whose PID is gone
+is removed at the next start.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import logging
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import FrameType
+
+from agents.errors import DeployError
+from agents.network_args import network_overrides
+from deploy.ports import PX4_SITL_BASES
+
+log = logging.getLogger("enclose.netns")
+PREFIX = "enclose-"
+TABLE = "enclose_loss"
+_OURS = re.compile(r"^enclose-(\d+)(?:-[a-z0-9]+)?$")
+_TOOL_S = 15.0
+STOP_GRACE_S = 5.0
+# The autopilot link (MAVLink) is each drone's own, not the swarm's network: left lossless.
+# In a fresh namespace every port is free, so the inner launcher takes PX4 SITL's blocks.
+MAVLINK_PORTS = range(min(PX4_SITL_BASES), max(PX4_SITL_BASES) + 100)
+
+
+def add_netns_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("OS-level network (root, Linux network namespace + nftables)")
+    g.add_argument("--netns", action="store_true",
+                   help="run everything in a fresh network namespace, removed afterwards")
+    g.add_argument("--os-loss", type=float, default=None, metavar="P",
+                   help="fraction of loopback packets the kernel drops (needs --netns)")
+
+
+def netns_requested(args: argparse.Namespace) -> bool:
+    if getattr(args, "os_loss", None) is not None and not getattr(args, "netns", False):
+        raise DeployError("--os-loss needs --netns (it drops packets inside the namespace)")
+    return bool(getattr(args, "netns", False))
+
+
+def unavailable() -> str | None:
+    """Why a namespace cannot be made here, or None (cheap: no namespace is created)."""
+    if os.geteuid() != 0:
+        return "needs root (network namespaces and nftables)"
+    for tool, package in (("ip", "iproute2"), ("nft", "nftables")):
+        if shutil.which(tool) is None:
+            return f"`{tool}` not found (apt-get install {package})"
+    return None
+
+
+def probe() -> str | None:
+    """Like `unavailable`, but also creates and removes a namespace with the table."""
+    reason = unavailable()
+    if reason is None:
+        try:
+            with lossy_namespace(0.0, name=f"{PREFIX}{os.getpid()}-probe"):
+                pass
+        except DeployError as exc:
+            return str(exc)
+    return reason
+
+
+def _tool(argv: Sequence[str], stdin: str | None = None) -> str:
+    try:
+        done = subprocess.run(list(argv), input=stdin, capture_output=True, text=True,
+                              timeout=_TOOL_S, check=False)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise DeployError(f"{' '.join(argv)}: {exc}") from exc
+    if done.returncode != 0:
+        raise DeployError(f"{' '.join(argv)} failed: {done.stderr.strip() or done.returncode}")
+    return done.stdout
+
+
+def namespaces() -> list[str]:
+    """Names of the existing network namespaces (`ip netns list`)."""
+    return [line.split()[0] for line in _tool(["ip", "netns", "list"]).splitlines() if line]
+
+
+def nft_ruleset(loss: float, exempt_udp: range | None = MAVLINK_PORTS) -> str:
+    """An inet table whose input chain counts loopback packets and drops `loss` of them,
+    except UDP to or from `exempt_udp`."""
+    if not 0.0 <= loss < 1.0:
+        raise DeployError(f"--os-loss must be in [0, 1), got {loss}")
+    per_10k = round(loss * 10000)
+    rules = [f"udp {d} {exempt_udp.start}-{exempt_udp.stop - 1} accept"
+             for d in ("dport", "sport") if exempt_udp is not None]
+    rules.append('iifname "lo" counter')
+    if per_10k:
+        rules.append(f'iifname "lo" numgen random mod 10000 < {per_10k} counter drop')
+    body = "".join(f"    {r}\n" for r in rules)
+    return (f"table inet {TABLE} {{\n  chain input {{\n"
+            f"    type filter hook input priority 0; policy accept;\n{body}  }}\n}}\n")
+
+
+@dataclass(frozen=True)
+class Namespace:
+    name: str
+    loss: float
+
+    def exec_argv(self, argv: Sequence[str]) -> list[str]:
+        return ["ip", "netns", "exec", self.name, *argv]
+
+    def pids(self) -> list[int]:
+        return [int(p) for p in _tool(["ip", "netns", "pids", self.name]).split()]
+
+    def counters(self) -> dict[str, int]:
+        """Packets seen on `lo` and dropped by the table so far."""
+        table = json.loads(_tool(self.exec_argv(["nft", "-j", "list", "table", "inet", TABLE])))
+        counts = [e["counter"]["packets"] for item in table["nftables"] if "rule" in item
+                  for e in item["rule"]["expr"] if isinstance(e, dict) and "counter" in e]
+        return {"packets_seen": counts[0], "packets_dropped": sum(counts[1:])}
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _stop_inside(ns: Namespace) -> None:
+    """Whatever still runs in the namespace was started by this run: SIGTERM, then SIGKILL."""
+    pids = ns.pids()
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, sig)
+        deadline = time.monotonic() + STOP_GRACE_S
+        while pids and time.monotonic() < deadline:
+            time.sleep(0.05)
+            pids = [p for p in pids if _pid_alive(p)]
+        if not pids:
+            return
+        log.warning("namespace %s: %d processes ignored SIGTERM; killing them", ns.name, len(pids))
+
+
+def destroy(name: str) -> None:
+    """Stop what runs in namespace `name`, drop its table, remove it; tolerant of each step."""
+    ns = Namespace(name, 0.0)
+    for step in (lambda: _stop_inside(ns),
+                 lambda: _tool(ns.exec_argv(["nft", "delete", "table", "inet", TABLE]))):
+        with contextlib.suppress(DeployError):
+            step()
+    _tool(["ip", "netns", "delete", name])
+
+
+def clean_stale() -> list[str]:
+    """Remove the namespaces of earlier launchers whose PID is gone; their names."""
+    stale = [n for n in namespaces()
+             if (m := _OURS.match(n)) is not None and not _pid_alive(int(m.group(1)))]
+    for name in stale:
+        log.warning("removing namespace %s left by a launcher that is gone", name)
+        with contextlib.suppress(DeployError):
+            destroy(name)
+    return stale
+
+
+def _fresh_name() -> str:
+    taken, base = set(namespaces()), f"{PREFIX}{os.getpid()}"
+    return next(n for n in (base, *(f"{base}-{k}" for k in range(1, 1000))) if n not in taken)
+
+
+@contextlib.contextmanager
+def lossy_namespace(loss: float, name: str | None = None) -> Iterator[Namespace]:
+    """A fresh namespace with `lo` up and `loss` of its loopback packets dropped;
+    removed on exit, also when the body raises or is interrupted."""
+    reason = unavailable()
+    if reason is not None:
+        raise DeployError(f"--netns {reason}")
+    ruleset = nft_ruleset(loss)
+    clean_stale()
+    ns = Namespace(name or _fresh_name(), loss)
+    _tool(["ip", "netns", "add", ns.name])  # fails on a taken name: never remove another's
+    try:
+        _tool(["ip", "-n", ns.name, "link", "set", "lo", "up"])
+        _tool(ns.exec_argv(["nft", "-f", "-"]), stdin=ruleset)
+        log.info("network namespace %s: loopback drops %.1f %% of packets", ns.name, 100 * loss)
+        yield ns
+    finally:
+        destroy(ns.name)
+
+
+def inner_argv(args: argparse.Namespace, out: Path, swarm: str, duration_s: float) -> list[str]:
+    """`enclose run` as given, without --netns, for the launcher inside the namespace."""
+    scen = args.scenario
+    if scen and scen.endswith(".toml"):
+        scen = str(Path(scen).resolve())
+    argv = ["-v"] * int(getattr(args, "verbose", 0)) + ["run", *([scen] if scen else [])]
+    argv += ["--duration", repr(duration_s), "--out", str(out), "--swarm", swarm,
+             "--noise-std-m", repr(args.noise_std_m), "--link-timeout", repr(args.link_timeout)]
+    if args.zenoh_config:
+        argv += ["--zenoh-config", str(Path(args.zenoh_config).resolve())]
+    return argv + network_overrides(args)
+
+
+def run_forwarding_signals(argv: Sequence[str]) -> int:
+    """Run `argv` in its own session (a terminal's Ctrl-C reaches only us, once) and pass
+    SIGINT/SIGTERM on to it; its exit code, 128+N when killed by signal N."""
+    proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, start_new_session=True)
+
+    def forward(signum: int, frame: FrameType | None) -> None:
+        with contextlib.suppress(ProcessLookupError):
+            proc.send_signal(signum)
+
+    previous = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        code = proc.wait()
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(60.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+    return code if code >= 0 else 128 - code
+
+
+def _mavlink_exempt(out: Path) -> bool | None:
+    """Whether the run's MAVLink ports were the lossless ones (None: run never started)."""
+    try:
+        launch = json.loads((out / "launch.json").read_text())
+        bases = (int(launch["vehicle_base_port"]), int(launch["adapter_base_port"]))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    exempt = all(b in MAVLINK_PORTS for b in bases)
+    if not exempt:
+        log.warning("MAVLink used ports %s, outside the lossless %s", bases, MAVLINK_PORTS)
+    return exempt
+
+
+def run_in_namespace(args: argparse.Namespace, out: Path, swarm: str, duration_s: float) -> int:
+    """The whole `enclose run` inside a lossy namespace; writes RUN_DIR/netns.json."""
+    loss = args.os_loss or 0.0
+    out.mkdir(parents=True, exist_ok=True)
+    with lossy_namespace(loss) as ns:
+        argv = ns.exec_argv([sys.executable, "-m", "deploy.cli",
+                             *inner_argv(args, out, swarm, duration_s)])
+        code = run_forwarding_signals(argv)
+        report: dict[str, object] = {"namespace": ns.name, "os_loss": loss, "exit_code": code}
+        with contextlib.suppress(DeployError, ValueError, KeyError, IndexError):
+            report.update(ns.counters())
+    report["mavlink_lossless"] = _mavlink_exempt(out)
+    seen, dropped = report.get("packets_seen"), report.get("packets_dropped")
+    if isinstance(seen, int) and isinstance(dropped, int) and seen:
+        report["measured_loss"] = dropped / seen
+        log.info("namespace %s removed; the kernel dropped %d of %d loopback packets (%.1f %%)",
+                 ns.name, dropped, seen, 100.0 * dropped / seen)
+    (out / "netns.json").write_text(json.dumps(report, indent=2) + "\n")
+    return code
