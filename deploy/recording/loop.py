@@ -16,6 +16,7 @@ from typing import Any
 from agents.errors import CodecError, TransportError
 from agents.scenario import Scenario
 from deploy.recording.assembler import RunAssembler
+from deploy.recording.links import FINAL_STATES, link_report
 from deploy.recording.mcap_log import McapLog
 from deploy.recording.outputs import write_final_outputs
 from deploy.recording.progress import PROGRESS_FILE, live_errors, write_json_atomic
@@ -32,17 +33,21 @@ ROLE = "recorder"
 MCAP_FILE = "recording.mcap"
 QUEUE_CAPACITY = 16384  # ~10 s of a 16-follower swarm: survives the pauses of chunk writes
 OVERDUE_GRACE_S = 30.0  # stop on our own this long after the planned end if no "stop" came
+FINAL_STATUS_WAIT_S = 2.0  # after the stop, for the followers' "done" counters (links)
 
 
 class Recorder:
     """Owns the subscription, decoder, assembler and MCAP file of one recording."""
 
     def __init__(self, bus: Bus, swarm: str, scenario: Scenario, run_dir: Path,
-                 index: int = 0, period_s: float = 1.0) -> None:
+                 index: int = 0, period_s: float = 1.0,
+                 final_status_wait_s: float = FINAL_STATUS_WAIT_S) -> None:
         self.bus, self.scenario, self.run_dir = bus, scenario, run_dir
         self.keys = SwarmKeys(swarm)
         self.index = index
         self.period_s = period_s
+        self.final_status_wait_s = final_status_wait_s
+        self.follower_status: dict[int, ProcessStatus] = {}  # latest, per follower index
         run_dir.mkdir(parents=True, exist_ok=True)
         self.mcap = McapLog(run_dir / MCAP_FILE,
                             metadata={"swarm": swarm, "scenario": scenario.name})
@@ -66,6 +71,9 @@ class Recorder:
         for item in inbound:
             self.mcap.write(item.received.key, item.message, item.received.recv_stamp_s)
             self.asm.add(item.message)
+            msg = item.message
+            if isinstance(msg, ProcessStatus) and msg.role == "follower":
+                self.follower_status[msg.index] = msg
         if self.asm.start is not None and self.state == "linked":
             self._info = RunInfo.from_scenario(self.scenario, "networked",
                                                self.asm.start.duration_s)
@@ -104,7 +112,31 @@ class Recorder:
             time.sleep(poll_s)
         self.step()  # whatever arrived with the stop word
         log.info("recording stops: %s", self.stop_reason)
+        self.await_final_statuses(poll_s)
         return self.stop_reason
+
+    def await_final_statuses(self, poll_s: float) -> bool:
+        """Keep draining until every follower heard from has said "done" (bounded wait).
+
+        Their final counters say what each link delivered.  Nothing is awaited when no
+        follower status was ever heard (no followers on this bus).  True if all came.
+        """
+        deadline = time.monotonic() + self.final_status_wait_s
+        while not self._final_statuses_in():
+            if time.monotonic() > deadline:
+                log.warning("no final status from followers %s: links use their last",
+                            self._followers_pending())
+                return False
+            time.sleep(max(poll_s, 0.001))
+            self.step()
+        return True
+
+    def _followers_pending(self) -> list[int]:
+        return [i for i in range(self.scenario.n)
+                if getattr(self.follower_status.get(i), "state", "") not in FINAL_STATES]
+
+    def _final_statuses_in(self) -> bool:
+        return not self.follower_status or not self._followers_pending()
 
     # ---- the end -------------------------------------------------------------------------
     def finish(self) -> bool:
@@ -135,7 +167,8 @@ class Recorder:
                 "stop_reason": self.stop_reason,
                 "wall_s": self.bus.now_s() - self._started_wall_s,
                 "mcap_file": MCAP_FILE,
-            }
+            },
+            "links": link_report(self.follower_status, self.asm.state_counts()),
         }
 
     def progress(self) -> dict[str, Any]:
