@@ -13,7 +13,10 @@ that reach the agent.  Its `counters()` add, for each link L seen:
 - `seq_first_L`, `seq_last_L`: lowest and highest sequence number received, so that the
   messages offered while listening were `seq_last_L - seq_first_L + 1`;
 - `age_p50_us_L`, `age_p99_us_L`: age at delivery of the unique messages, receive stamp
-  minus the sender's header stamp, in microseconds (100 µs resolution, whole run).
+  minus the sender's header stamp, in microseconds (100 µs resolution).  Once a RunControl
+  "start" passes through the decoder, only messages stamped from the experiment's start on
+  count: the backlog a process drains after its start-up (seconds old) says nothing of
+  the link.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import numpy as np
 from transport.bus import Received
 from transport.decoder import Decoder, Inbound
 from transport.keys import parse_key
+from transport.messages import RunControl
 
 SENSOR = "sensor"
 AGE_BIN_S = 1e-4
@@ -108,7 +112,8 @@ class LinkTally:
     _seen: set[int] = field(default_factory=set)
     _floor: int = -1
 
-    def observe(self, seq: int, age_s: float) -> None:
+    def observe(self, seq: int, age_s: float | None) -> None:
+        """One delivery; `age_s` None: counted, but its age is not of interest."""
         # Sequence numbers below the floor were pruned from `_seen`; one arriving that
         # late (thousands of messages) can only be a copy.
         if seq < self._floor or seq in self._seen:
@@ -121,7 +126,8 @@ class LinkTally:
         self.rx += 1
         self.seq_first = seq if self.seq_first is None else min(self.seq_first, seq)
         self.seq_last = seq if self.seq_last is None else max(self.seq_last, seq)
-        self.ages.add(age_s)
+        if age_s is not None:
+            self.ages.add(age_s)
 
 
 def _us(value_s: float | None) -> int | None:
@@ -134,18 +140,25 @@ class LinkDecoder(Decoder):
     def __init__(self, expect: tuple[type, ...] | None = None) -> None:
         super().__init__(expect)
         self.tallies: dict[str, LinkTally] = {}  # per key
+        self.ages_from_s = -float("inf")
 
     def decode(self, rec: Received) -> Inbound | None:
         inbound = super().decode(rec)
         if inbound is not None:
+            msg = inbound.message
+            if isinstance(msg, RunControl) and msg.command == "start":
+                self.ages_from_s = msg.start_stamp_s
+                for t in self.tallies.values():
+                    t.ages = AgeHistogram()
             tally = self.tallies.get(rec.key)
             if tally is None:
                 link = link_of(rec.key)
                 if link is not None:
                     tally = self.tallies[rec.key] = LinkTally(link.name)
             if tally is not None:
-                head = inbound.message.header
-                tally.observe(head.seq, rec.recv_stamp_s - head.stamp_s)
+                head = msg.header
+                age_s = rec.recv_stamp_s - head.stamp_s
+                tally.observe(head.seq, age_s if head.stamp_s >= self.ages_from_s else None)
         return inbound
 
     def link_counters(self) -> dict[str, int]:

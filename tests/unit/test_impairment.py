@@ -14,7 +14,7 @@ from transport.impairment import ImpairedBus, ImpairedSubscription
 from transport.keys import SwarmKeys
 from transport.link_stats import LinkDecoder, link_of
 from transport.memory_bus import MemoryBus, MemoryHub
-from transport.messages import FollowerState, Header
+from transport.messages import FollowerState, Header, RunControl
 
 K = SwarmKeys("imp")
 PERIOD_S = 0.02
@@ -277,3 +277,25 @@ def test_link_decoder_counts_unique_messages_and_their_age() -> None:
     assert 50_000 <= c["age_p50_us_f0"] <= 51_100
     assert 50_000 <= c["age_p99_us_f0"] <= 51_100
     assert c["accepted"] == 1000 + c["rx_dup_f0"]
+
+
+@pytest.mark.timeout(30)
+def test_link_decoder_ages_leave_out_the_start_up_backlog() -> None:
+    rig = Rig(NetworkConfig())
+    subs = [rig.bus.subscribe(K.follower_state(0)), rig.bus.subscribe(K.control())]
+    decoder = LinkDecoder()
+    start_s = rig.clock.t + 1.0
+    for k in range(100):  # queued while the process was taking off: 5 s old when drained
+        rig.tx.publish(K.follower_state(0), state(0, k, rig.clock.t - 5.0))
+    rig.tx.publish(K.control(), encode(RunControl(Header("l", 0, rig.clock.t), "start",
+                                                  start_s, 10.0)))
+    for sub in subs:
+        decoder.drain(sub)
+    rig.clock.t = start_s + 0.01
+    for k in range(100, 200):
+        rig.tx.publish(K.follower_state(0), state(0, k, rig.clock.t - 0.002))
+        decoder.drain(subs[0])
+    rig.close()
+    c = decoder.counters()
+    assert c["rx_f0"] == 200 and c["seq_first_f0"] == 0
+    assert 2000 <= c["age_p50_us_f0"] <= c["age_p99_us_f0"] <= 2100
