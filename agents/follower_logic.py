@@ -188,18 +188,18 @@ def _estimate(
     """New memory, r_i and dr_i/dt at now_s, with the paper's or the robust estimator."""
     p_tilde, p_tilde_rate = _reference(memory, setup, now_s)
     r_nbrs = np.array([peers[j].r.at(now_s) for j in setup.neighbours]).reshape(-1, 2)
+    # Both estimators: a link's flow may remove at most step_fraction of the gap per age
+    # of the data it acts on (not per tick), so that late or lost data slow the
+    # consensus down instead of making it ring.  Neither law changes; the discretisation
+    # stays consistent (fresh data: the lock-step limit).
+    ages = np.array([now_s - peers[j].r.stamp_s for j in setup.neighbours])
+    fractions = setup.nbr_fractions * setup.period_s / np.maximum(ages, setup.period_s)
+    args = (fractions, setup.estimator, setup.period_s)
     if not setup.robust:
-        args = (setup.nbr_fractions, setup.estimator, setup.period_s)
         phi = memory.phi_m + dt * memory.phi_rate_m_s
         phi_rate = consensus_rate(phi + p_tilde, r_nbrs, *args)
         memory = replace(memory, phi_m=phi, phi_rate_m_s=phi_rate)
         return memory, phi + p_tilde, phi_rate + p_tilde_rate
-    # A link's flow may remove at most step_fraction of the gap per age of the data it
-    # acts on (not per tick): with late or lost data the consensus then slows down
-    # instead of ringing.
-    ages = np.array([now_s - peers[j].r.stamp_s for j in setup.neighbours])
-    fractions = setup.nbr_fractions * setup.period_s / np.maximum(ages, setup.period_s)
-    args = (fractions, setup.estimator, setup.period_s)
     d = len(setup.neighbours)
     sums = np.zeros((d, 2)) if memory.link_sums_m is None else memory.link_sums_m
     rates = np.zeros((d, 2)) if memory.link_rates_m_s is None else memory.link_rates_m_s

