@@ -74,6 +74,7 @@ def run_sweep(
     runner: CellRunner | None = None,
     timeout_s: float | None = None,
     tty: bool | None = None,
+    figures: bool = True,
 ) -> int:
     """Run every cell not done yet; 0 if all are done, 1 if some failed, 130 if interrupted."""
     cells = spec.cells()
@@ -102,10 +103,10 @@ def run_sweep(
     except KeyboardInterrupt:
         progress.close()
         log.warning("sweep interrupted: finished cells are kept; run the same command to resume")
-        report(spec)
+        report(spec, figures)
         return 130
     progress.close()
-    report(spec)
+    report(spec, figures)
     if failed:
         log.warning("%d of %d cells failed: %s", len(failed), len(todo), ", ".join(failed))
     return 1 if failed else 0
@@ -147,12 +148,12 @@ def _write_record(cell_dir: Path, record: dict[str, Any]) -> None:
     tmp.replace(cell_dir / RECORD)
 
 
-def report(spec: SweepSpec) -> None:
+def report(spec: SweepSpec, figures: bool = True) -> None:
     """Table and figures from the cell directories as they are now."""
     rows = collect(spec)
     csv_path, md_path = write_tables(spec, rows)
     done = sum(r.state.done for r in rows)
     log.info("%d/%d cells done; table %s and %s", done, len(rows), csv_path, md_path.name)
-    figures = write_figures(spec, [r for r in rows if r.state.done])
     if figures:
-        log.info("figures: %s", ", ".join(p.name for p in figures))
+        paths = write_figures(spec, [r for r in rows if r.state.done])
+        log.info("figures: %s", ", ".join(p.name for p in paths) or "none")

@@ -6,6 +6,7 @@ import logging
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -13,8 +14,8 @@ matplotlib.use("Agg")  # files only: runs on headless machines and in CI
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.ticker import FuncFormatter
 from matplotlib.colors import LogNorm, Normalize
+from matplotlib.ticker import FuncFormatter
 
 from deploy.sweep_spec import SweepSpec, Value, format_value
 from deploy.sweep_table import DELIVERED, METRICS, Row
@@ -31,6 +32,10 @@ STYLE: dict[str, tuple[str, bool, str | None]] = {
     DELIVERED: ("delivered ratio", False, None),
 }
 PLAIN = FuncFormatter(lambda v, _: f"{v:g}")  # 0.06, not 6 x 10^-2, on log axes
+# minor ticks of a log axis: only 2 and 5 of each decade, so that labels do not collide
+SPARSE = FuncFormatter(
+    lambda v, _: f"{v:g}" if v > 0 and round(v / 10 ** math.floor(math.log10(v))) in (2, 5) else ""
+)
 LINES = (("loss", "error_vs_loss.png"), ("delay_ms", "error_vs_delay.png"))
 
 
@@ -92,9 +97,10 @@ def heatmap(
     rest = [keys for keys, pts in spec.grid if keys not in (xkeys, ykeys) and len(pts) > 1]
     panel_keys = tuple(k for keys in rest for k in keys)
     panels = list(dict.fromkeys(point_of(r, panel_keys) for r in rows))
-    grids = []
+    grids, ran = [], []
     for panel in panels:
         grid = np.full((len(ys), len(xs)), np.nan)
+        present = np.zeros(grid.shape, dtype=bool)
         for i, y in enumerate(ys):
             for j, x in enumerate(xs):
                 match = [
@@ -103,7 +109,9 @@ def heatmap(
                     and point_of(r, xkeys) == x and point_of(r, ykeys) == y
                 ]
                 grid[i, j] = mean_of(match, metric) if match else np.nan
+                present[i, j] = bool(match)
         grids.append(grid)
+        ran.append(present)
     label, log_scale, _ = STYLE[metric]
     bound = bound_of(spec, metric)
     finite = np.concatenate([g[np.isfinite(g)] for g in grids])
@@ -116,13 +124,14 @@ def heatmap(
     nrows = math.ceil(len(panels) / ncols)
     cell_w = max(1.2, 0.9 + 0.35 * max(len(point_text(x)) for x in xs) / 2)
     fig, axs = plt.subplots(
-        nrows, ncols, squeeze=False,
-        figsize=(ncols * (cell_w * len(xs) + 2.2) + 1.5, nrows * (0.7 * len(ys) + 2.0) + 0.8),
+        nrows, ncols, squeeze=False, layout="constrained",
+        figsize=(ncols * (cell_w * len(xs) + 1.6) + 1.5, nrows * (0.6 * len(ys) + 1.6) + 1.0),
     )
     image = None
-    for ax, panel, grid in zip(axs.flat, panels, grids, strict=False):
+    missing = "never" if metric == "settle_time_s" else "none"
+    for ax, panel, grid, present in zip(axs.flat, panels, grids, ran, strict=False):
         image = ax.imshow(grid, norm=norm, cmap="viridis", origin="lower", aspect="auto")
-        annotate(ax, grid, norm, bound, image.cmap)
+        annotate(ax, grid, np.where(present, missing, "no run"), (norm, image.cmap), bound)
         ax.set_xticks(range(len(xs)), [point_text(x) for x in xs])
         ax.set_yticks(range(len(ys)), [point_text(y) for y in ys])
         ax.set_xlabel("/".join(xkeys))
@@ -134,24 +143,30 @@ def heatmap(
     if image is not None:
         cbar = fig.colorbar(image, ax=axs, shrink=0.9)
         cbar.set_label(label)
+        if use_log:
+            cbar.ax.yaxis.set_major_formatter(PLAIN)
+            cbar.ax.yaxis.set_minor_formatter(SPARSE)
         if bound is not None:
             cbar.ax.axhline(bound, color="r", lw=2)
     note = f"; bold red: above the paper's bound {bound:g} (red line)" if bound else ""
     fig.suptitle(f"{metric}: mean over {spec.repeats} seed(s){note}\n{held_text(spec)}",
                  fontsize=10)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
 def annotate(
-    ax: Axes, grid: np.ndarray, norm: Normalize, bound: float | None, cmap: object
+    ax: Axes, grid: np.ndarray, blank: np.ndarray, colours: tuple[Normalize, Any],
+    bound: float | None,
 ) -> None:
+    """Each value in its cell (bold red above the bound); `blank` says why a cell has none."""
+    norm, cmap = colours
     for (i, j), v in np.ndenumerate(grid):
         if not np.isfinite(v):
-            ax.text(j, i, "n/a", ha="center", va="center", fontsize=9, color="0.4")
+            ax.text(j, i, str(blank[i, j]), ha="center", va="center", fontsize=9, color="0.3")
             continue
         over = bound is not None and v > bound
-        r, g, b, _ = cmap(norm(v))  # type: ignore[operator]
+        r, g, b, _ = cmap(norm(v))
         ink = "k" if 0.299 * r + 0.587 * g + 0.114 * b > 0.5 else "w"
         ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=9,
                 color="r" if over else ink, fontweight="bold" if over else "normal",
@@ -176,20 +191,22 @@ def error_against(spec: SweepSpec, rows: Sequence[Row], key: str, path: Path) ->
     x = [float(dict(zip(xkeys, pt, strict=True))[key]) for pt in xs]
     fig, axs = plt.subplots(1, 2, figsize=(12, 4.8))
     for ax, metric in zip(axs, ("estimator_error_m", "radius_error_m"), strict=True):
-        for est in estimators:
+        for k, est in enumerate(estimators):
             ys = [
                 mean_of([r for r in kept if point_of(r, xkeys) == pt
                          and point_of(r, ekeys) == est], metric)
                 for pt in xs
             ]
             name = point_text(est) if est else dict(spec.fixed).get("estimator", "of the scenario")
-            ax.plot(x, ys, "o-", lw=1.5, label=f"estimator: {name}")
+            # distinct markers and dashes: equal results must not hide a line
+            ax.plot(x, ys, marker="os^v"[k % 4], ls=("-", "--", ":")[k % 3], lw=1.5,
+                    ms=8 - 2 * (k % 3), label=f"estimator: {name}")
         bound = bound_of(spec, metric)
         if bound is not None:
             ax.axhline(bound, color="k", ls="--", lw=1, label=f"paper's bound {bound:g}")
         ax.set_yscale("log")
         ax.yaxis.set_major_formatter(PLAIN)
-        ax.yaxis.set_minor_formatter(PLAIN)
+        ax.yaxis.set_minor_formatter(SPARSE)
         ax.set_xticks(x, [point_text(pt) for pt in xs])
         ax.set_xlabel("/".join(xkeys))
         ax.set_ylabel(STYLE[metric][0])
