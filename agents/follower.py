@@ -26,9 +26,9 @@ from agents.follower_logic import (
     ready,
 )
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
-from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, setup_logging
+from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, process_main
 from agents.scenario import Scenario
-from agents.vehicle_loop import fly
+from agents.vehicle_loop import add_vehicle_arguments, fly
 from transport.bus import Bus
 from transport.codec import encode
 from transport.decoder import Decoder
@@ -201,25 +201,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="enclose-follower", description=__doc__)
     add_bus_arguments(parser)
     parser.add_argument("--index", type=int, required=True, help="follower number, 0-based")
-    parser.add_argument(
-        "--mav-local-base",
-        type=int,
-        default=14540,
-        help="adapter of vehicle i binds BASE+i (PX4 SITL: 14540)",
-    )
-    parser.add_argument(
-        "--mav-vehicle-base",
-        type=int,
-        default=14580,
-        help="vehicle i listens on BASE+i (PX4 SITL: 14580)",
-    )
-    args = parser.parse_args(argv)
-    setup_logging(args.log_level, f"follower-{args.index}")
-    try:
-        return run(args)
-    except EncloseError as exc:
-        log.error("%s: %s", type(exc).__name__, exc)
-        return 2
+    add_vehicle_arguments(parser)
+    return process_main(parser, argv, run, lambda a: f"follower-{a.index}")
 
 
 if __name__ == "__main__":

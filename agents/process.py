@@ -11,11 +11,12 @@ import math
 import signal
 import time
 from collections import Counter
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from types import FrameType
 
+from agents.errors import EncloseError
 from agents.network_args import add_network_arguments, apply_network_arguments
 from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
@@ -33,12 +34,26 @@ Clock = Callable[[], float]
 def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", default=None, help="scenario TOML or shipped name")
     parser.add_argument("--swarm", default="enclose", help="swarm name (key prefix)")
-    parser.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
-                        help="Zenoh listen endpoint, e.g. tcp/127.0.0.1:7447 (repeatable)")
-    parser.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
-                        help="Zenoh endpoint to connect to (repeatable)")
-    parser.add_argument("--zenoh-config", default=None, metavar="JSON5",
-                        help="your own Zenoh config file, used as the base")
+    parser.add_argument(
+        "--listen",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="Zenoh listen endpoint, e.g. tcp/127.0.0.1:7447 (repeatable)",
+    )
+    parser.add_argument(
+        "--connect",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="Zenoh endpoint to connect to (repeatable)",
+    )
+    parser.add_argument(
+        "--zenoh-config",
+        default=None,
+        metavar="JSON5",
+        help="your own Zenoh config file, used as the base",
+    )
     parser.add_argument("--log-level", default="INFO")
     add_network_arguments(parser)
 
@@ -51,15 +66,35 @@ def load_run_scenario(args: argparse.Namespace) -> Scenario:
 def open_bus(args: argparse.Namespace) -> Bus:
     """The process's bus; with no --listen it listens on an OS-chosen port of the run's
     link protocol (`[network] link`, or --link), so that every link of the mesh uses it."""
-    cfg = ZenohConfig(listen=tuple(args.listen), connect=tuple(args.connect),
-                      user_config_path=args.zenoh_config,
-                      link=load_run_scenario(args).network.link)
+    cfg = ZenohConfig(
+        listen=tuple(args.listen),
+        connect=tuple(args.connect),
+        user_config_path=args.zenoh_config,
+        link=load_run_scenario(args).network.link,
+    )
     return ZenohBus(cfg)
 
 
+def process_main(
+    parser: argparse.ArgumentParser,
+    argv: Sequence[str] | None,
+    run: Callable[[argparse.Namespace], int],
+    name: Callable[[argparse.Namespace], str],
+) -> int:
+    """Parse, set up logging, run; a named error becomes a logged line and exit code 2."""
+    args = parser.parse_args(argv)
+    setup_logging(args.log_level, name(args))
+    try:
+        return run(args)
+    except EncloseError as exc:
+        logging.getLogger(f"enclose.{name(args)}").error("%s: %s", type(exc).__name__, exc)
+        return 2
+
+
 def setup_logging(level: str, name: str) -> None:
-    logging.basicConfig(level=level.upper(),
-                        format=f"%(asctime)s %(levelname)s {name} %(name)s: %(message)s")
+    logging.basicConfig(
+        level=level.upper(), format=f"%(asctime)s %(levelname)s {name} %(name)s: %(message)s"
+    )
 
 
 @dataclass
@@ -146,8 +181,9 @@ class StatusReporter:
         self.state = state
         self.publish(detail, extra, force=changed)
 
-    def publish(self, detail: str = "", extra: Mapping[str, int] | None = None,
-                force: bool = False) -> None:
+    def publish(
+        self, detail: str = "", extra: Mapping[str, int] | None = None, force: bool = False
+    ) -> None:
         now = self.bus.now_s()
         if not force and now - self._last_s < self.period_s:
             return
@@ -155,6 +191,12 @@ class StatusReporter:
         if self._stamper is None:
             self._stamper = Stamper(f"{self.role}-{self.index}", self.bus.now_s)
         counters = {**self.counters, **(extra or {})}
-        msg = ProcessStatus(self._stamper.header(), self.role, self.index, self.state,
-                            {k: int(v) for k, v in counters.items()}, detail)
+        msg = ProcessStatus(
+            self._stamper.header(),
+            self.role,
+            self.index,
+            self.state,
+            {k: int(v) for k, v in counters.items()},
+            detail,
+        )
         self.bus.publish(self.keys.status(self.role, self.index), encode(msg))

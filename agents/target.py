@@ -19,7 +19,7 @@ import numpy as np
 from agents.core.profiles import TargetMotion
 from agents.errors import EncloseError
 from agents.mavlink.adapter import MavlinkAdapter
-from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, setup_logging
+from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, process_main
 from agents.scenario import Scenario
 from agents.vehicle_loop import add_vehicle_arguments, fly
 from transport.bus import Bus
@@ -32,8 +32,9 @@ POSITION_GAIN_PER_S = 1.0
 ALTITUDE_GAIN_PER_S = 1.0
 
 
-def tracking_command(ref_pos_m: np.ndarray, ref_vel_m_s: np.ndarray, pos_m: np.ndarray,
-                     speed_max_m_s: float) -> np.ndarray:
+def tracking_command(
+    ref_pos_m: np.ndarray, ref_vel_m_s: np.ndarray, pos_m: np.ndarray, speed_max_m_s: float
+) -> np.ndarray:
     """Feed-forward plus proportional correction, bounded by the vehicle's speed."""
     u = ref_vel_m_s + POSITION_GAIN_PER_S * (ref_pos_m - pos_m)
     speed = float(np.hypot(*u))
@@ -41,8 +42,9 @@ def tracking_command(ref_pos_m: np.ndarray, ref_vel_m_s: np.ndarray, pos_m: np.n
 
 
 class TargetNode:
-    def __init__(self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter,
-                 swarm: str) -> None:
+    def __init__(
+        self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter, swarm: str
+    ) -> None:
         self.index, self.bus, self.vehicle = index, bus, vehicle
         self.motion = TargetMotion(scenario, horizon_s=scenario.run.duration_s + 60.0)
         self.altitude_m = scenario.vehicle.altitude_m
@@ -96,13 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_bus_arguments(parser)
     parser.add_argument("--index", type=int, required=True, help="target number, 0-based")
     add_vehicle_arguments(parser)
-    args = parser.parse_args(argv)
-    setup_logging(args.log_level, f"target-{args.index}")
-    try:
-        return run(args)
-    except EncloseError as exc:
-        log.error("%s: %s", type(exc).__name__, exc)
-        return 2
+    return process_main(parser, argv, run, lambda a: f"target-{a.index}")
 
 
 if __name__ == "__main__":

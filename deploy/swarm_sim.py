@@ -16,14 +16,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from agents.errors import EncloseError
 from agents.frames import ned_to_enu
 from agents.process import (
     StatusReporter,
     add_bus_arguments,
     load_run_scenario,
     open_bus,
-    setup_logging,
+    process_main,
     stop_on_signals,
 )
 from agents.scenario import Scenario
@@ -153,13 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the observation noise")
     parser.add_argument("--base-port", type=int, default=14580)
     parser.add_argument("--send-base-port", type=int, default=14540)
-    args = parser.parse_args(argv)
-    setup_logging(args.log_level, "sim")
-    try:
-        return run(args)
-    except EncloseError as exc:
-        log.error("%s: %s", type(exc).__name__, exc)
-        return 2
+    return process_main(parser, argv, run, lambda _a: "sim")
 
 
 if __name__ == "__main__":
