@@ -16,9 +16,11 @@ subscriptions drain the real ones and then, per link (sender, i) -- see
 Follower links use `network.impairment(j, i)`; the sensor link (from the simulator) uses
 `network.default`.  Control, status, truth and liveliness are never impaired.
 
-Arrival time is the publisher's Zenoh HLC stamp when it is on the receiver's clock (one
-host: it is within ~0.1 ms of the true arrival), else the drain stamp -- which lags the
-arrival by up to a loop period and would add that much delay.  The clock is the wrapped
+Arrival time is the publisher's Zenoh HLC stamp, capped at the drain stamp: on one host it
+is within ~0.1 ms of the true arrival, whereas the drain stamp lags the arrival by up to a
+loop period (and by the whole start-up for samples queued meanwhile, which are then
+released at once, in order).  Across hosts the clocks' offset adds to or (down to the
+drain stamp) takes from the delay.  The clock is the wrapped
 bus's `now_s()`, so unit tests run it on a MemoryBus with a fake clock.
 
 Reproducible: each link draws from its own `numpy.random.Generator` seeded with
@@ -52,7 +54,6 @@ from transport.bus import (
 )
 from transport.link_stats import Link, link_of
 
-MAX_HLC_LEAD_S = 1.0  # an HLC stamp older than this before the drain is not trusted
 MAX_WAITING = 16  # held-back messages per link; beyond, a message goes normally
 _DRAW_BLOCK = 256
 _SEED_MOD = 2**63
@@ -201,9 +202,7 @@ class ImpairedSubscription:
 def arrival_s(rec: Received) -> float:
     """When the sample reached this process, as well as the bus tells (module docstring)."""
     hlc = rec.hlc_stamp_s
-    if hlc is not None and rec.recv_stamp_s - MAX_HLC_LEAD_S <= hlc <= rec.recv_stamp_s:
-        return hlc
-    return rec.recv_stamp_s
+    return rec.recv_stamp_s if hlc is None else min(hlc, rec.recv_stamp_s)
 
 
 class ImpairedBus:

@@ -299,3 +299,17 @@ def test_link_decoder_ages_leave_out_the_start_up_backlog() -> None:
     c = decoder.counters()
     assert c["rx_f0"] == 200 and c["seq_first_f0"] == 0
     assert 1900 <= c["age_p50_us_f0"] <= c["age_p99_us_f0"] <= 2100  # 100 µs bins
+
+
+@pytest.mark.timeout(30)
+def test_a_backlog_drained_late_comes_out_at_once_and_in_order() -> None:
+    rig = Rig(net(delay_ms=50.0))
+    sub = rig.bus.subscribe(K.follower_state(0))
+    for k in range(150):  # 3 s of traffic while the loop is busy elsewhere
+        rig.tx.publish(K.follower_state(0), str(k).encode())
+        rig.clock.t += PERIOD_S
+    first = seqs(sub.drain())
+    assert first == list(range(148))  # the last 2 arrived less than 50 ms ago
+    rig.clock.t += 0.05
+    assert seqs(sub.drain()) == [148, 149]
+    rig.close()
