@@ -68,7 +68,9 @@ def cell_state(cell_dir: Path, argv: list[str]) -> CellState:
     ok_metrics = metrics_doc is not None and "error" not in metrics_doc
     metrics = pick_metrics(metrics_doc) if ok_metrics and metrics_doc else {}
     code, wall = record.get("exit_code"), record.get("wall_s")
-    if ok_metrics and launch_ok(read_json(cell_dir / "launch.json")):
+    # A run stopped by Ctrl-C also ends with clean exit codes: its own exit code tells.
+    finished = code in (0, None) and not (metrics_doc or {}).get("stopped_early")
+    if ok_metrics and finished and launch_ok(read_json(cell_dir / "launch.json")):
         status = "done"
     elif code == INTERRUPTED_EXIT:
         status = "interrupted"
@@ -96,9 +98,12 @@ def number(raw: Any) -> float | None:
 
 
 def mean_delivered(links: Any) -> float | None:
-    """Mean of the per-link `delivered_ratio` in metrics.json's "links" (a mapping or list)."""
-    items = links.values() if isinstance(links, dict) else links if isinstance(links, list) else []
-    ratios = [number(x.get(DELIVERED)) for x in items if isinstance(x, dict)]
+    """Mean `delivered_ratio` over the follower-to-follower links of metrics.json's "links"
+    (`"f0->f2"`; the simulator's `"sensor->f2"` links are not the impaired peer links)."""
+    if not isinstance(links, dict):
+        return None
+    peers = [v for k, v in links.items() if not str(k).startswith("sensor")]
+    ratios = [number(x.get(DELIVERED)) for x in peers if isinstance(x, dict)]
     valid = [r for r in ratios if r is not None]
     return sum(valid) / len(valid) if valid else None
 

@@ -56,10 +56,14 @@ class FakeRunner:
         assert timeout_s > 8 and argv[0] == "run" and argv[argv.index("--out") + 1] == str(out_dir)
         self.calls.append(out_dir)
         if self.interrupt_at == len(self.calls):
-            (out_dir / "metrics.json").write_text(json.dumps({"samples": 3}))
+            self.write(argv, out_dir)  # an orderly stop leaves clean outputs
             raise KeyboardInterrupt
         if out_dir.name in self.fail:
             return 1
+        self.write(argv, out_dir)
+        return 0
+
+    def write(self, argv: Sequence[str], out_dir: Path) -> None:
         loss = float(argv[argv.index("--loss") + 1]) if "--loss" in argv else 0.0
         robust = "robust" in argv
         metrics: dict[str, Any] = {
@@ -70,12 +74,11 @@ class FakeRunner:
             "command_jump_m_s": 0.2,
         }
         if self.links:
-            ratios = {"0->1": 1 - loss, "1->2": 1.0}
+            ratios = {"f0->f1": 1 - loss, "f1->f2": 1.0, "sensor->f1": 0.5}
             metrics["links"] = {k: {"delivered_ratio": v} for k, v in ratios.items()}
         (out_dir / "metrics.json").write_text(json.dumps(metrics))
         launch = {"processes": {"sim": {"pid": 1, "exit_code": 0}, "f": {"pid": 2, "exit_code": 0}}}
         (out_dir / "launch.json").write_text(json.dumps(launch))
-        return 0
 
 
 def rows(spec: SweepSpec) -> list[dict[str, str]]:

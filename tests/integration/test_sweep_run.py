@@ -1,0 +1,159 @@
+"""`enclose sweep` end to end: real `enclose run` swarms, one after the other, and Ctrl-C."""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from deploy.sweep_runner import TIMEOUT_EXIT, SubprocessRunner
+
+pytestmark = pytest.mark.integration
+
+SWEEP = """
+scenario = "paper"
+duration_s = 8
+out = "out"
+[grid]
+loss = [0.0, 0.1]
+"""
+
+# A stand-in launcher: counts the SIGINTs it gets, takes a moment to stop, exits 130.
+FAKE_LAUNCHER = """
+import pathlib, signal, sys, time
+out = pathlib.Path(sys.argv[1])
+got = []
+signal.signal(signal.SIGINT, lambda *a: got.append(1))
+(out / "ready").write_text("")
+while not got:
+    time.sleep(0.02)
+time.sleep(0.5)
+(out / "sigints").write_text(str(len(got)))
+sys.exit(130)
+"""
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def cell_pids(out: Path) -> list[int]:
+    pids: list[int] = []
+    for path in out.glob("*/logs/pids.json"):
+        with contextlib.suppress(OSError, ValueError):
+            pids += list(json.loads(path.read_text()).values())
+    return pids
+
+
+@contextlib.contextmanager
+def sweeping(sweep_file: Path, *extra: str) -> Iterator[subprocess.Popen[str]]:
+    """The sweep as a subprocess; whatever happens, it and every process of its cells are gone
+    after."""
+    argv = [sys.executable, "-m", "deploy.cli", "sweep", str(sweep_file), *extra]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+        out = sweep_file.parent / "out"
+        for pid in cell_pids(out):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def flying_for(progress: Path, t_s: float) -> bool:
+    try:
+        p = json.loads(progress.read_text())
+    except (OSError, ValueError):
+        return False
+    return bool(p.get("state") == "running" and (p.get("t_s") or 0.0) > t_s)
+
+
+def results(out: Path) -> list[dict[str, str]]:
+    with open(out / "results.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.mark.timeout(300)
+def test_a_two_cell_sweep_runs_real_swarms_and_resumes_without_rerunning(tmp_path: Path) -> None:
+    sweep_file = tmp_path / "s.toml"
+    sweep_file.write_text(SWEEP)
+    out = tmp_path / "out"
+    with sweeping(sweep_file) as proc:
+        output, _ = proc.communicate(timeout=240)
+    assert proc.returncode == 0, output
+    table = results(out)
+    assert [(r["loss"], r["status"], r["exit_code"]) for r in table] == [
+        ("0", "done", "0"), ("0.1", "done", "0")]
+    assert all(float(r["estimator_error_m"]) > 0 for r in table)
+    assert float(table[0]["delivered_ratio"]) > 0.9  # no loss on the first cell
+    assert (out / "error_vs_loss.png").stat().st_size > 10_000
+    assert all(not pid_alive(pid) for pid in cell_pids(out))
+    t0 = time.monotonic()
+    with sweeping(sweep_file) as again:
+        output, _ = again.communicate(timeout=60)
+    assert again.returncode == 0, output
+    assert time.monotonic() - t0 < 30.0  # no swarm started
+    assert "2 done already, 0 to run" in output
+    assert results(out) == table
+
+
+@pytest.mark.timeout(300)
+def test_ctrl_c_stops_the_current_cell_in_order_and_marks_it_interrupted(tmp_path: Path) -> None:
+    sweep_file = tmp_path / "s.toml"
+    sweep_file.write_text(SWEEP.replace("duration_s = 8", "duration_s = 600"))
+    out = tmp_path / "out"
+    with sweeping(sweep_file) as proc:
+        progress = out / "loss=0__seed=1" / "progress.json"
+        deadline = time.monotonic() + 120
+        while not flying_for(progress, 3.0):
+            assert time.monotonic() < deadline and proc.poll() is None, "the cell did not start"
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGINT)
+        output, _ = proc.communicate(timeout=200)
+    assert proc.returncode == 130, output
+    assert [r["status"] for r in results(out)] == ["interrupted", "pending"]
+    launch = json.loads((out / "loss=0__seed=1" / "launch.json").read_text())
+    assert launch["processes"]["recorder"]["exit_code"] == 0  # stopped in order, not killed
+    assert all(not pid_alive(pid) for pid in cell_pids(out))
+
+
+@pytest.mark.timeout(60)
+def test_the_runner_forwards_one_sigint_and_waits_for_the_child(tmp_path: Path) -> None:
+    script = tmp_path / "launcher.py"
+    script.write_text(FAKE_LAUNCHER)
+    out = tmp_path / "cell"
+
+    def interrupt_when_ready() -> None:
+        if (out / "ready").exists():
+            raise KeyboardInterrupt
+
+    runner = SubprocessRunner(command=[sys.executable, str(script)], tick=interrupt_when_ready)
+    with pytest.raises(KeyboardInterrupt):
+        runner.run_cell([str(out)], out, timeout_s=30)
+    assert (out / "sigints").read_text() == "1"  # it finished its own stop
+
+
+@pytest.mark.timeout(60)
+def test_a_cell_over_its_time_is_stopped_and_reported(tmp_path: Path) -> None:
+    script = tmp_path / "launcher.py"
+    script.write_text(FAKE_LAUNCHER)
+    out = tmp_path / "cell"
+    runner = SubprocessRunner(command=[sys.executable, str(script)])
+    assert runner.run_cell([str(out)], out, timeout_s=2) == TIMEOUT_EXIT
+    assert (out / "sigints").read_text() == "1"
