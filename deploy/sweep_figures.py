@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -89,9 +91,21 @@ def bound_of(spec: SweepSpec, metric: str) -> float | None:
     return spec.eps_rho_m if kind == "rho" else spec.eps_delta if kind == "delta" else None
 
 
-def heatmap(
-    spec: SweepSpec, rows: Sequence[Row], metric: str, axes: tuple[str, str], path: Path
-) -> None:
+@dataclass(frozen=True)
+class Panels:
+    """A metric on an (y, x) grid, one grid per combination of the other varying axes."""
+
+    xkeys: tuple[str, ...]
+    ykeys: tuple[str, ...]
+    xs: list[Point]
+    ys: list[Point]
+    panel_keys: tuple[str, ...]
+    panels: list[Point]
+    grids: list[np.ndarray]  # mean over the repeats; NaN where none
+    ran: list[np.ndarray]  # True where a finished cell exists
+
+
+def panel_grids(spec: SweepSpec, rows: Sequence[Row], metric: str, axes: tuple[str, str]) -> Panels:
     xkeys, ykeys = spec.partners(axes[0]), spec.partners(axes[1])
     xs, ys = points(spec, axes[0]), points(spec, axes[1])
     rest = [keys for keys, pts in spec.grid if keys not in (xkeys, ykeys) and len(pts) > 1]
@@ -101,25 +115,40 @@ def heatmap(
     for panel in panels:
         grid = np.full((len(ys), len(xs)), np.nan)
         present = np.zeros(grid.shape, dtype=bool)
-        for i, y in enumerate(ys):
-            for j, x in enumerate(xs):
-                match = [
-                    r for r in rows
-                    if point_of(r, panel_keys) == panel
-                    and point_of(r, xkeys) == x and point_of(r, ykeys) == y
-                ]
-                grid[i, j] = mean_of(match, metric) if match else np.nan
-                present[i, j] = bool(match)
+        for (i, y), (j, x) in itertools.product(enumerate(ys), enumerate(xs)):
+            match = [
+                r for r in rows
+                if point_of(r, panel_keys) == panel
+                and point_of(r, xkeys) == x and point_of(r, ykeys) == y
+            ]
+            grid[i, j] = mean_of(match, metric) if match else np.nan
+            present[i, j] = bool(match)
         grids.append(grid)
         ran.append(present)
-    label, log_scale, _ = STYLE[metric]
-    bound = bound_of(spec, metric)
+    return Panels(xkeys, ykeys, xs, ys, panel_keys, panels, grids, ran)
+
+
+def colour_norm(grids: list[np.ndarray], log_scale: bool, bound: float | None) -> Normalize:
     finite = np.concatenate([g[np.isfinite(g)] for g in grids])
     lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
-    use_log = log_scale and lo > 0
-    if use_log and bound is not None:
-        lo, hi = min(lo, bound / 2), max(hi, bound * 2)  # the bound sits inside the colour range
-    norm: Normalize = LogNorm(lo, hi) if use_log else Normalize(lo, hi if hi > lo else lo + 1)
+    if log_scale and lo > 0:
+        if bound is not None:  # the bound sits inside the colour range
+            lo, hi = min(lo, bound / 2), max(hi, bound * 2)
+        return LogNorm(lo, hi)
+    return Normalize(lo, hi if hi > lo else lo + 1)
+
+
+def heatmap(
+    spec: SweepSpec, rows: Sequence[Row], metric: str, axes: tuple[str, str], path: Path
+) -> None:
+    p = panel_grids(spec, rows, metric, axes)
+    xkeys, ykeys, xs, ys, panel_keys, panels = (
+        p.xkeys, p.ykeys, p.xs, p.ys, p.panel_keys, p.panels)
+    grids, ran = p.grids, p.ran
+    label, log_scale, _ = STYLE[metric]
+    bound = bound_of(spec, metric)
+    norm = colour_norm(grids, log_scale, bound)
+    use_log = isinstance(norm, LogNorm)
     ncols = min(len(panels), 3)
     nrows = math.ceil(len(panels) / ncols)
     cell_w = max(1.2, 0.9 + 0.35 * max(len(point_text(x)) for x in xs) / 2)
