@@ -33,15 +33,31 @@ def with_estimator(scenario: Scenario, estimator: str) -> Scenario:
     return dataclasses.replace(scenario, network=NetworkConfig(estimator=estimator))
 
 
-def _publish(i: int, memory: FollowerMemory, setup: FollowerSetup, r: np.ndarray,
-             dr: np.ndarray, pos: np.ndarray, vel: np.ndarray, t: float) -> Published:
-    flows = {j: Sample(np.array([sx, sy]), np.array([fx, fy]), t)
-             for j, sx, sy, fx, fy in link_flows(memory, setup)}
+def _publish(
+    i: int,
+    memory: FollowerMemory,
+    setup: FollowerSetup,
+    r: np.ndarray,
+    dr: np.ndarray,
+    pos: np.ndarray,
+    vel: np.ndarray,
+    t: float,
+) -> Published:
+    flows = {
+        j: Sample(np.array([sx, sy]), np.array([fx, fy]), t)
+        for j, sx, sy, fx, fy in link_flows(memory, setup)
+    }
     return Sample(r.copy(), dr.copy(), t), Sample(pos.copy(), vel.copy(), t), flows
 
 
-def run_swarm(scenario: Scenario, duration_s: float, rate_hz: float = 50.0,
-              delay_ticks: int = 1, loss: float = 0.0, seed: int = 0) -> RunSeries:
+def run_swarm(
+    scenario: Scenario,
+    duration_s: float,
+    rate_hz: float = 50.0,
+    delay_ticks: int = 1,
+    loss: float = 0.0,
+    seed: int = 0,
+) -> RunSeries:
     dt, n = 1.0 / rate_hz, scenario.n
     rng = np.random.default_rng(seed)
     setups = [FollowerSetup.from_scenario(scenario, i) for i in range(n)]
@@ -52,7 +68,7 @@ def run_swarm(scenario: Scenario, duration_s: float, rate_hz: float = 50.0,
     motion = TargetMotion(scenario)
     outbox: list[dict[int, Published]] = []
     rows: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-    for k in range(int(round(duration_s * rate_hz)) + 1):
+    for k in range(round(duration_s * rate_hz) + 1):
         t = k * dt
         targets, _ = motion.state(t)
         if len(outbox) >= delay_ticks:
@@ -77,8 +93,13 @@ def run_swarm(scenario: Scenario, duration_s: float, rate_hz: float = 50.0,
     return RunSeries(t_s, p, r, u, tg)
 
 
-def _deliver(sent: dict[int, Published], views: list[dict[int, PeerView]],
-             setups: list[FollowerSetup], loss: float, rng: np.random.Generator) -> None:
+def _deliver(
+    sent: dict[int, Published],
+    views: list[dict[int, PeerView]],
+    setups: list[FollowerSetup],
+    loss: float,
+    rng: np.random.Generator,
+) -> None:
     for i, setup in enumerate(setups):
         for j in sorted(set(setup.neighbours) | {setup.successor}):
             if loss > 0.0 and rng.random() < loss:
