@@ -6,7 +6,8 @@ Runs `enclose run` as a real multi-process swarm for each case and prints:
   RSS per follower (max over the run), and the time from the command to all
   processes linked.
 
-Run: python bench/bench_swarm.py [--duration 120] [--cases paper ring16] [--out runs/bench]
+Run: python bench/bench_swarm.py [--duration 120] [--cases paper ring16]
+     [--estimators paper robust] [--out runs/bench-swarm]
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ def rss_mb(pid: int) -> float | None:
     return None
 
 
-def run_case(scenario: str, duration_s: float, out: Path) -> dict[str, Any]:
+def run_case(scenario: str, duration_s: float, out: Path, estimator: str) -> dict[str, Any]:
     argv = [
         sys.executable,
         "-m",
@@ -41,6 +42,8 @@ def run_case(scenario: str, duration_s: float, out: Path) -> dict[str, Any]:
         str(duration_s),
         "--out",
         str(out),
+        "--estimator",
+        estimator,
     ]
     t_command = time.time()
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -91,12 +94,14 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=120.0)
     parser.add_argument("--cases", nargs="+", default=["paper", "ring16"])
     parser.add_argument("--out", type=Path, default=Path("runs/bench-swarm"))
+    parser.add_argument("--estimators", nargs="+", default=["paper", "robust"])
     args = parser.parse_args()
     for case in args.cases:
-        out = (args.out / case).resolve()
-        result = run_case(case, args.duration, out)
-        print(f"== {case} ({args.duration:g} s, 50 Hz, loopback): {out}")
-        print(json.dumps(result, indent=2), flush=True)
+        for estimator in args.estimators:
+            out = (args.out / f"{case}-{estimator}").resolve()
+            result = run_case(case, args.duration, out, estimator)
+            print(f"== {case}, {estimator} estimator ({args.duration:g} s, 50 Hz, loopback): {out}")
+            print(json.dumps(result, indent=2), flush=True)
 
 
 if __name__ == "__main__":
