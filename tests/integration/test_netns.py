@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from deploy.netns import TABLE, destroy, lossy_namespace, namespaces, probe
+from tests.integration.runs import pid_alive, spawned
 
 pytestmark = pytest.mark.integration
 
@@ -53,14 +54,6 @@ def netns_available() -> None:
     reason = probe()
     if reason is not None:
         pytest.skip(f"no network namespace here: {reason}")
-
-
-def pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return True
 
 
 def in_ns(name: str, *argv: str) -> subprocess.CompletedProcess[str]:
@@ -125,21 +118,13 @@ def test_twenty_percent_of_udp_datagrams_on_loopback_are_really_lost() -> None:
 def launched(out: Path, *extra: str) -> Iterator[subprocess.Popen[str]]:
     argv = [sys.executable, "-m", "deploy.cli", "run", "--netns", "--out", str(out),
             "--link-timeout", "60", *extra]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        yield proc
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
-        pids_file = out / "logs" / "pids.json"
-        if pids_file.exists():
-            for pid in json.loads(pids_file.read_text()).values():
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, signal.SIGKILL)
-        for name in namespaces():
-            if name == f"enclose-{proc.pid}":
-                destroy(name)
+    with spawned(argv, out) as proc:
+        try:
+            yield proc
+        finally:
+            for name in namespaces():
+                if name == f"enclose-{proc.pid}":
+                    destroy(name)
 
 
 def assert_nothing_left(out: Path, launcher_pid: int) -> None:

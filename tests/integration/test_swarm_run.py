@@ -8,21 +8,14 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from tests.integration.runs import pid_alive, spawned, wait_for
+
 pytestmark = pytest.mark.integration
-
-
-def pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return True
 
 
 @contextlib.contextmanager
@@ -30,26 +23,8 @@ def launched(out: Path, *extra: str) -> Iterator[subprocess.Popen[str]]:
     """The launcher as a subprocess; whatever happens, it and every child are gone after."""
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--link-timeout", "60",
             *extra]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
+    with spawned(argv, out) as proc:
         yield proc
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
-        pids_file = out / "logs" / "pids.json"
-        if pids_file.exists():
-            for pid in json.loads(pids_file.read_text()).values():
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, signal.SIGKILL)
-
-
-def wait_for(condition, timeout_s: float, what: str) -> None:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.1)
 
 
 def assert_all_exited(out: Path) -> dict[str, int]:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -16,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from deploy.sweep_runner import TIMEOUT_EXIT, SubprocessRunner
+from tests.integration.runs import pid_alive, run_pids, spawned
 
 pytestmark = pytest.mark.integration
 
@@ -42,38 +42,13 @@ sys.exit(130)
 """
 
 
-def pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return True
-
-
-def cell_pids(out: Path) -> list[int]:
-    pids: list[int] = []
-    for path in out.glob("*/logs/pids.json"):
-        with contextlib.suppress(OSError, ValueError):
-            pids += list(json.loads(path.read_text()).values())
-    return pids
-
-
 @contextlib.contextmanager
 def sweeping(sweep_file: Path, *extra: str) -> Iterator[subprocess.Popen[str]]:
     """The sweep as a subprocess; whatever happens, it and every process of its cells are gone
     after."""
     argv = [sys.executable, "-m", "deploy.cli", "sweep", str(sweep_file), *extra]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
+    with spawned(argv, sweep_file.parent / "out") as proc:
         yield proc
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
-        out = sweep_file.parent / "out"
-        for pid in cell_pids(out):
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
 
 
 def flying_for(progress: Path, t_s: float) -> bool:
@@ -103,7 +78,7 @@ def test_a_two_cell_sweep_runs_real_swarms_and_resumes_without_rerunning(tmp_pat
     assert all(float(r["estimator_error_m"]) > 0 for r in table)
     assert float(table[0]["delivered_ratio"]) > 0.9  # no loss on the first cell
     assert (out / "error_vs_loss.png").stat().st_size > 10_000
-    assert all(not pid_alive(pid) for pid in cell_pids(out))
+    assert all(not pid_alive(pid) for pid in run_pids(out))
     t0 = time.monotonic()
     with sweeping(sweep_file) as again:
         output, _ = again.communicate(timeout=60)
@@ -130,7 +105,7 @@ def test_ctrl_c_stops_the_current_cell_in_order_and_marks_it_interrupted(tmp_pat
     assert [r["status"] for r in results(out)] == ["interrupted", "pending"]
     launch = json.loads((out / "loss=0__seed=1" / "launch.json").read_text())
     assert launch["processes"]["recorder"]["exit_code"] == 0  # stopped in order, not killed
-    assert all(not pid_alive(pid) for pid in cell_pids(out))
+    assert all(not pid_alive(pid) for pid in run_pids(out))
 
 
 @pytest.mark.timeout(60)

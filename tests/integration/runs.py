@@ -1,0 +1,55 @@
+"""Starting and cleaning up real runs in integration tests: by PID, whatever happens."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import time
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def run_pids(root: Path) -> list[int]:
+    """PIDs of every `logs/pids.json` at or below `root` (a run, or a sweep's cells)."""
+    pids: list[int] = []
+    for path in [root / "logs" / "pids.json", *root.glob("*/logs/pids.json")]:
+        with contextlib.suppress(OSError, ValueError):
+            pids += list(json.loads(path.read_text()).values())
+    return pids
+
+
+@contextlib.contextmanager
+def spawned(argv: Sequence[str], root: Path) -> Iterator[subprocess.Popen[str]]:
+    """`argv` as a subprocess; afterwards it and every process its runs wrote under `root`
+    are gone, even if the test failed half-way."""
+    proc = subprocess.Popen(list(argv), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+        for pid in run_pids(root):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def wait_for(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    """Poll `condition` until it holds; fail naming `what` after `timeout_s`."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(0.1)
