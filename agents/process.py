@@ -181,6 +181,10 @@ class StatusReporter:
         self.state = state
         self.publish(detail, extra, force=changed)
 
+    def due(self) -> bool:
+        """True when the next periodic status is due: build costly counters only then."""
+        return self.bus.now_s() - self._last_s >= self.period_s
+
     def publish(
         self, detail: str = "", extra: Mapping[str, int] | None = None, force: bool = False
     ) -> None:

@@ -66,7 +66,8 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
             while not stop.raised and bus.now_s() < node.stop_s:
                 node.tick(ticker.wait())
                 node.status.state = "running" if node.start_s is not None else "linked"
-                node.status.publish(extra={"overruns": ticker.overruns, **node.counters()})
+                if node.status.due():
+                    node.status.publish(extra={"overruns": ticker.overruns, **node.counters()})
             node.status.set("done", extra={"overruns": ticker.overruns, **node.counters()})
             log.info("%s %d done: ticks=%d overruns=%d %s", role, index, ticker.ticks,
                      ticker.overruns, node.counters())

@@ -108,11 +108,12 @@ def run(args: argparse.Namespace) -> int:
         )
         status = StatusReporter(bus, keys, "sim", 0)
         sim.on_tick.append(sensor)
-        sim.on_tick.append(
-            lambda _t, _s: status.publish(
-                extra={"overruns": sim.stats.overruns, **dict(sim.counters)}
-            )
-        )
+
+        def report(_t: float, _s: FleetState) -> None:
+            if status.due():
+                status.publish(extra={"overruns": sim.stats.overruns, **dict(sim.counters)})
+
+        sim.on_tick.append(report)
         token = bus.declare_token(keys.alive("sim", 0))
         status.set("running")
         try:
@@ -135,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="enclose-swarm-sim", description=__doc__)
     add_bus_arguments(parser)
-    parser.add_argument("--rate-hz", type=float, default=100.0, help="simulation tick rate")
+    parser.add_argument("--rate-hz", type=float, default=50.0, help="simulation tick rate")
     parser.add_argument("--telemetry-hz", type=float, default=50.0)
     parser.add_argument(
         "--sensor-hz",
