@@ -171,6 +171,23 @@ class Scenario:
             sorted({b for a, b in self.edges if a == i} | {a for a, b in self.edges if b == i})
         )
 
+    def tick_group(self, i: int) -> int:
+        """0 or 1 from a breadth-first 2-colouring of the follower graph.
+
+        Followers of group 1 tick half a period after group 0: on a bipartite graph (a
+        ring of even length) every link then carries data exactly half a period old both
+        ways, which keeps each link's two flows alike.  Odd cycles keep the first colour.
+        """
+        colour = {0: 0}
+        frontier = [0]
+        while frontier:
+            a = frontier.pop(0)
+            for b in self.neighbours(a):
+                if b not in colour:
+                    colour[b] = 1 - colour[a]
+                    frontier.append(b)
+        return colour.get(i, 0)
+
     def steady_from_s(self) -> float:
         start = self.run.steady_from_s
         return self.run.duration_s / 2.0 if start is None else start

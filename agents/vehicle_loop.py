@@ -58,9 +58,9 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         token = bus.declare_token(keys.alive(role, index))
         node.status.set("linked")
         period = 1.0 / scenario.run.rate_hz
-        # Followers spread over the period: on average a neighbour's state is half a
-        # period old when used, not a whole one.
-        phase = period * index / max(1, scenario.n) if role == "follower" else 0.0
+        # Neighbouring followers tick half a period apart (Scenario.tick_group).
+        group = scenario.tick_group(index) if role == "follower" else 0
+        phase = 0.5 * period * group
         ticker = Ticker(period, bus.now_s, phase_s=phase)
         try:
             while not stop.raised and bus.now_s() < node.stop_s:

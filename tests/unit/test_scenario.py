@@ -135,3 +135,12 @@ def test_paper_v2_matches_the_paper() -> None:
     pos, vel = motion.state(10.0)
     np.testing.assert_allclose(vel[1], [1.0, 0.5 * math.sin(1.0 + math.pi / 4)])
     np.testing.assert_allclose(pos[0], [10.0, 0.0])
+
+
+def test_tick_groups_two_colour_the_ring() -> None:
+    s = load_scenario()
+    assert [s.tick_group(i) for i in range(s.n)] == [0, 1, 0, 1]
+    for a, b in s.edges:
+        assert s.tick_group(a) != s.tick_group(b)
+    ring16 = load_scenario("ring16")
+    assert all(ring16.tick_group(a) != ring16.tick_group(b) for a, b in ring16.edges)
