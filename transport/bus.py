@@ -164,7 +164,25 @@ def drain_all(subscriptions: list[Subscription]) -> list[Received]:
     return out
 
 
-class BusBase:
+class ClosingContext:
+    """`with bus:` closes the bus on the way out (buses and wrappers alike)."""
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+class BusBase(ClosingContext):
     """Shared plumbing of bus implementations: publisher cache and context manager."""
 
     def __init__(self) -> None:
@@ -183,14 +201,3 @@ class BusBase:
         if pub is None:
             pub = self._publishers[key] = self.declare_publisher(key)
         pub.put(payload)
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

@@ -36,8 +36,6 @@ import heapq
 import itertools
 from collections import deque
 from dataclasses import dataclass
-from types import TracebackType
-from typing import Self
 
 import numpy as np
 
@@ -46,6 +44,7 @@ from transport.bus import (
     DEFAULT_CAPACITY,
     AliveWatch,
     Bus,
+    ClosingContext,
     Congestion,
     Publisher,
     Received,
@@ -205,7 +204,7 @@ def arrival_s(rec: Received) -> float:
     return rec.recv_stamp_s if hlc is None else min(hlc, rec.recv_stamp_s)
 
 
-class ImpairedBus:
+class ImpairedBus(ClosingContext):
     """The `Bus` of receiver `receiver` (0-based follower) with its incoming links impaired."""
 
     def __init__(self, bus: Bus, network: NetworkConfig, receiver: int) -> None:
@@ -274,14 +273,3 @@ class ImpairedBus:
 
     def close(self) -> None:
         self.inner.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
