@@ -51,6 +51,7 @@ class FollowerSetup:
     stale_after_s: float = 0.5
     target_vel_tau_s: float = 0.1
     max_gap_s: float = 0.25  # longest dt the estimator integrates over one tick
+    age_tau_s: float = 0.5  # time constant of the low-passed data ages
 
     @staticmethod
     def from_scenario(scenario: Scenario, index: int) -> FollowerSetup:
@@ -101,6 +102,9 @@ class FollowerMemory:
     phi_m: FloatArray = field(default_factory=lambda: np.zeros(2))
     phi_rate_m_s: FloatArray = field(default_factory=lambda: np.zeros(2))
     last_tick_s: float | None = None
+    # Per peer, the age of its data at use, low-passed: the step limits follow the typical
+    # age, not each jittered sample (which would make the commands jump).
+    peer_age_s: dict[int, float] = field(default_factory=dict)
     targets: dict[int, Sample] = field(default_factory=dict)
     link_sums_m: FloatArray | None = None  # robust: (d, 2) own running sum per neighbour
     link_rates_m_s: FloatArray | None = None  # robust: (d, 2) the flows of the last tick
@@ -192,7 +196,7 @@ def _estimate(
     # of the data it acts on (not per tick), so that late or lost data slow the
     # consensus down instead of making it ring.  Neither law changes; the discretisation
     # stays consistent (fresh data: the lock-step limit).
-    ages = np.array([now_s - peers[j].r.stamp_s for j in setup.neighbours])
+    ages = np.array([memory.peer_age_s[j] for j in setup.neighbours])
     fractions = setup.nbr_fractions * setup.period_s / np.maximum(ages, setup.period_s)
     args = (fractions, setup.estimator, setup.period_s)
     if not setup.robust:
@@ -214,6 +218,21 @@ def _estimate(
     return memory, phi + p_tilde, phi_rate + p_tilde_rate
 
 
+def _smoothed_ages(
+    memory: FollowerMemory,
+    setup: FollowerSetup,
+    peers: dict[int, PeerView],
+    now_s: float,
+    dt: float,
+) -> dict[int, float]:
+    gain = 1.0 - math.exp(-dt / setup.age_tau_s)
+    ages = dict(memory.peer_age_s)
+    for j in set(setup.neighbours) | {setup.successor}:
+        age = now_s - peers[j].r.stamp_s
+        ages[j] = age if j not in ages else ages[j] + gain * (age - ages[j])
+    return ages
+
+
 def follower_tick(
     memory: FollowerMemory,
     setup: FollowerSetup,
@@ -224,6 +243,7 @@ def follower_tick(
     """One control cycle at `now_s`; call only when `ready`."""
     last = memory.last_tick_s
     dt = 0.0 if last is None else min(max(now_s - last, 0.0), setup.max_gap_s)
+    memory = replace(memory, peer_age_s=_smoothed_ages(memory, setup, peers, now_s, dt))
     new_memory, r, dr = _estimate(memory, setup, peers, now_s, dt)
     succ = peers[setup.successor].pos
     out = enclosing_control(
@@ -234,7 +254,7 @@ def follower_tick(
         np.array([setup.angle_rad]),
         setup.control,
         setup.period_s,
-        now_s - succ.stamp_s,
+        memory.peer_age_s[setup.successor],
     )
     new_memory = replace(new_memory, last_tick_s=now_s)
     u = out.u_m_s[0].copy()

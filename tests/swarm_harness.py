@@ -50,6 +50,9 @@ def _publish(
     return Sample(r.copy(), dr.copy(), t), Sample(pos.copy(), vel.copy(), t), flows
 
 
+Mail = dict[int, list[tuple[int, int, Published]]]  # tick -> (receiver, sender, message)
+
+
 def run_swarm(
     scenario: Scenario,
     duration_s: float,
@@ -57,7 +60,9 @@ def run_swarm(
     delay_ticks: int = 1,
     loss: float = 0.0,
     seed: int = 0,
+    jitter_ticks: int = 0,
 ) -> RunSeries:
+    """`jitter_ticks`: each message is late by a further 0..jitter_ticks ticks, at random."""
     dt, n = 1.0 / rate_hz, scenario.n
     rng = np.random.default_rng(seed)
     setups = [FollowerSetup.from_scenario(scenario, i) for i in range(n)]
@@ -66,15 +71,13 @@ def run_swarm(
     pos = np.asarray(scenario.follower_pos_m, float)
     vel = np.zeros_like(pos)
     motion = TargetMotion(scenario)
-    outbox: list[dict[int, Published]] = []
+    mail: Mail = {}
     rows: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
     for k in range(round(duration_s * rate_hz) + 1):
         t = k * dt
         targets, _ = motion.state(t)
-        if len(outbox) >= delay_ticks:
-            _deliver(outbox[-delay_ticks], views, setups, loss, rng)
+        _deliver(mail.pop(k, []), views)
         r_now, dr_now, u_now = np.zeros_like(pos), np.zeros_like(pos), np.zeros_like(pos)
-        sent: dict[int, Published] = {}
         for i, setup in enumerate(setups):
             for j in setup.observed:
                 memories[i] = observe_target(memories[i], setup, j, targets[j], t)
@@ -84,8 +87,8 @@ def run_swarm(
                 r_now[i], dr_now[i], u_now[i] = out.r_m, out.dr_m_s, out.u_m_s
             else:
                 r_now[i] = setup.weights @ targets
-            sent[i] = _publish(i, memories[i], setup, r_now[i], dr_now[i], pos[i], vel[i], t)
-        outbox.append(sent)
+            msg = _publish(i, memories[i], setup, r_now[i], dr_now[i], pos[i], vel[i], t)
+            _post(mail, k, i, msg, setups, (delay_ticks, jitter_ticks, loss), rng)
         rows.append((t, pos.copy(), r_now, u_now, targets))
         vel = u_now
         pos = pos + dt * u_now
@@ -93,16 +96,28 @@ def run_swarm(
     return RunSeries(t_s, p, r, u, tg)
 
 
-def _deliver(
-    sent: dict[int, Published],
-    views: list[dict[int, PeerView]],
+def _post(
+    mail: Mail,
+    k: int,
+    sender: int,
+    msg: Published,
     setups: list[FollowerSetup],
-    loss: float,
+    link: tuple[int, int, float],
     rng: np.random.Generator,
 ) -> None:
+    """Queue `msg` to everyone who listens to `sender`, each copy lost or late at random."""
+    delay, jitter, loss = link
     for i, setup in enumerate(setups):
-        for j in sorted(set(setup.neighbours) | {setup.successor}):
-            if loss > 0.0 and rng.random() < loss:
-                continue
-            r, pos, flows = sent[j]
-            views[i][j] = PeerView(r, pos, flows.get(i))
+        if sender not in set(setup.neighbours) | {setup.successor}:
+            continue
+        late = int(rng.integers(0, jitter + 1)) if jitter else 0
+        if loss > 0.0 and rng.random() < loss:
+            continue
+        mail.setdefault(k + delay + late, []).append((i, sender, msg))
+
+
+def _deliver(arrivals: list[tuple[int, int, Published]], views: list[dict[int, PeerView]]) -> None:
+    for receiver, sender, (r, pos, flows) in arrivals:
+        known = views[receiver].get(sender)
+        if known is None or r.stamp_s > known.r.stamp_s:  # a late old message loses
+            views[receiver][sender] = PeerView(r, pos, flows.get(receiver))

@@ -32,9 +32,11 @@ def test_link_balance_error_is_only_what_is_in_flight() -> None:
     np.testing.assert_allclose(total, [0.05, -0.1])  # half the unheard part, not accumulated
 
 
-def drift_and_metrics(estimator: str, delay_ticks: int, loss: float) -> tuple[float, float, float]:
+def drift_and_metrics(
+    estimator: str, delay_ticks: int, loss: float, jitter_ticks: int = 0
+) -> tuple[float, float, float]:
     s = with_estimator(load_scenario(), estimator)
-    series = run_swarm(s, 30.0, 50.0, delay_ticks, loss, seed=3)
+    series = run_swarm(s, 30.0, 50.0, delay_ticks, loss, seed=3, jitter_ticks=jitter_ticks)
     drift = np.linalg.norm(series.estimate_m.mean(axis=1) - series.lap_m, axis=1)
     err = np.linalg.norm(series.estimate_m - series.lap_m[:, None], axis=2)
     steady = len(series.t_s) // 2
@@ -66,3 +68,13 @@ def test_without_impairment_robust_matches_the_lock_step_accuracy() -> None:
     drift, err, jump = drift_and_metrics("robust", 1, 0.0)
     assert drift < 1e-3  # the paper's mean-r identity, kept to rounding on a lossless link
     assert err < 0.02 and jump < 0.05
+
+
+@pytest.mark.timeout(120)
+def test_jittered_late_and_lost_data_do_not_make_the_commands_jump() -> None:
+    # 40-100 ms late at 50 Hz and 20 % lost: the step limits follow the low-passed data age.
+    robust_drift, robust_err, robust_jump = drift_and_metrics("robust", 2, 0.2, jitter_ticks=3)
+    paper_drift, _, _ = drift_and_metrics("paper", 2, 0.2, jitter_ticks=3)
+    assert robust_err < 0.0999
+    assert robust_jump < 0.5
+    assert paper_drift > robust_drift
