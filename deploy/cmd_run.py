@@ -6,7 +6,6 @@ import argparse
 import json
 import logging
 import signal
-import sys
 import time
 from pathlib import Path
 from types import FrameType
@@ -18,23 +17,18 @@ from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
 from deploy.netns import add_netns_arguments, netns_requested, run_in_namespace
 from deploy.ports import mavlink_bases, rendezvous_endpoint
+from deploy.run_monitor import StatusBoard, show_progress
 from deploy.supervisor import Child, Supervisor
-from transport.bus import Bus, Subscription
+from transport.bus import Bus
 from transport.codec import encode
-from transport.decoder import Decoder
 from transport.keys import SwarmKeys
-from transport.messages import ProcessStatus, RunControl, Stamper
+from transport.messages import RunControl, Stamper
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
 log = logging.getLogger("enclose.run")
 START_DELAY_S = 1.0
 PROGRESS_PERIOD_S = 2.0
-PROGRESS_FIELDS = (
-    ("max_estimator_error_m", "|r-LAP| m"),
-    ("max_abs_e_rho_m", "|e_rho| m"),
-    ("max_abs_e_delta", "|e_delta|"),
-)
 
 
 def register(sub: Any) -> None:
@@ -92,13 +86,12 @@ class Launch:
         self.keys = SwarmKeys(swarm)
         self.sup = Supervisor(out / "logs")
         self.vehicle_base, self.adapter_base = mavlink_bases(scenario.n + scenario.m)
-        blocks = [range(b, b + scenario.n + scenario.m) for b in (self.vehicle_base,
-                                                                  self.adapter_base)]
+        blocks = [
+            range(b, b + scenario.n + scenario.m) for b in (self.vehicle_base, self.adapter_base)
+        ]
         self.endpoint = rendezvous_endpoint(scenario.network.link, avoid=blocks)
         self.timings: dict[str, float] = {}
-        self.statuses: Subscription | None = None
-        self.last_status: dict[str, ProcessStatus] = {}
-        self.decoder = Decoder(expect=(ProcessStatus,))
+        self.board = StatusBoard()
 
     def common(self) -> list[str]:
         scen = self.args.scenario
@@ -187,10 +180,13 @@ class Launch:
         try:
             self.start_all()
             with ZenohBus(
-                ZenohConfig(connect=(self.endpoint,), user_config_path=self.args.zenoh_config,
-                            link=self.scenario.network.link)
+                ZenohConfig(
+                    connect=(self.endpoint,),
+                    user_config_path=self.args.zenoh_config,
+                    link=self.scenario.network.link,
+                )
             ) as bus:
-                self.statuses = bus.subscribe(self.keys.all_status())
+                self.board.subscription = bus.subscribe(self.keys.all_status())
                 self.wait_linked(bus, t0)
                 self.timings["link_s"] = time.monotonic() - t0
                 self.timings["linked_wall_s"] = time.time()
@@ -234,28 +230,11 @@ class Launch:
         next_report = start
         while bus.now_s() < start + self.duration_s:
             self._check_children()
-            self.collect_status()
+            self.board.collect()
             if bus.now_s() >= next_report:
                 next_report += PROGRESS_PERIOD_S
-                self.show_progress(bus.now_s() - start)
+                show_progress(self.out, bus.now_s() - start, self.duration_s)
             time.sleep(0.05)
-
-    def show_progress(self, t_s: float) -> None:
-        try:
-            p = json.loads((self.out / "progress.json").read_text())
-        except (OSError, ValueError):
-            p = {}
-        errs = "  ".join(
-            f"{label} {p[key]:.3g}"
-            for key, label in PROGRESS_FIELDS
-            if isinstance(p.get(key), float)
-        )
-        line = f"t = {max(0.0, t_s):6.1f} / {self.duration_s:.0f} s  {errs}"
-        if sys.stderr.isatty():
-            sys.stderr.write("\r" + line.ljust(100))
-            sys.stderr.flush()
-        else:
-            log.info("%s", line)
 
     def finish(self) -> None:
         """Movers end on the stop word; the recorder then writes its outputs; the sim last."""
@@ -264,24 +243,15 @@ class Launch:
             self.sup.terminate(movers)
         deadline = time.monotonic() + 1.0  # their final status may still be on the wire
         while time.monotonic() < deadline and not all(
-            getattr(self.last_status.get(c.name), "state", "") == "done" for c in movers
+            self.board.state_of(c.name) == "done" for c in movers
         ):
-            self.collect_status()
+            self.board.collect()
             time.sleep(0.02)
         recorder = [c for c in self.sup.children if c.name == "recorder"]
         if not self.sup.wait(recorder, 120.0):
             log.error("recorder did not finish writing in 120 s; stopping it")
             self.sup.terminate(recorder)
         self.sup.terminate([c for c in self.sup.children if c.name == "sim"])
-
-    def collect_status(self) -> None:
-        """Keep each process's latest ProcessStatus (its final counters go to launch.json)."""
-        if self.statuses is None:
-            return
-        for inbound in self.decoder.drain(self.statuses):
-            msg = inbound.message
-            if isinstance(msg, ProcessStatus):
-                self.last_status[f"{msg.role}-{msg.index}"] = msg
 
     def report(self) -> dict[str, Any]:
         return {
@@ -292,9 +262,7 @@ class Launch:
             "duration_s": self.duration_s,
             **self.timings,
             "processes": {c.name: {"pid": c.pid, "exit_code": c.poll()} for c in self.sup.children},
-            "status": {
-                name: {"state": s.state, **s.counters} for name, s in self.last_status.items()
-            },
+            "status": self.board.as_dict(),
         }
 
     def exit_code(self, interrupted: bool) -> int:
