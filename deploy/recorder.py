@@ -16,30 +16,15 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from types import FrameType
 
 from agents.errors import EncloseError
-from agents.process import add_bus_arguments, load_run_scenario, open_bus
+from agents.process import add_bus_arguments, load_run_scenario, open_bus, stop_on_signals
 from deploy.recording.loop import Recorder
 
 log = logging.getLogger("deploy.recorder")
-
-
-class StopFlag:
-    """Set by SIGTERM/SIGINT; read by the loop (the handler does nothing else)."""
-
-    def __init__(self) -> None:
-        self.set = False
-
-    def __call__(self) -> bool:
-        return self.set
-
-    def handle(self, _sig: int, _frame: FrameType | None) -> None:
-        self.set = True
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -56,15 +41,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s recorder: %(message)s")
-    stop = StopFlag()
-    signal.signal(signal.SIGTERM, stop.handle)
-    signal.signal(signal.SIGINT, stop.handle)
     try:
         scenario = load_run_scenario(args)
-        with open_bus(args) as bus:
+        with stop_on_signals() as stop, open_bus(args) as bus:
             recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index)
             try:
-                recorder.run(stop)
+                recorder.run(lambda: stop.raised)
             except Exception:  # a bug in the loop must still leave a finished MCAP behind
                 log.exception("recorder loop failed")
                 recorder.stop_reason = "loop_error"
