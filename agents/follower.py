@@ -24,6 +24,7 @@ from agents.follower_logic import (
     link_flows,
     observe_target,
     ready,
+    reference,
 )
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, process_main
@@ -117,8 +118,7 @@ class FollowerNode:
         own = Sample(
             np.asarray(state.pos_enu_m[:2]), np.asarray(state.vel_enu_m_s[:2]), state.stamp_s
         )
-        r, dr = self.setup.weights @ self._target_positions(now_s), np.zeros(2)
-        u = np.zeros(2)
+        r, dr, u = None, np.zeros(2), np.zeros(2)
         running = self.start_s is not None and now_s >= self.start_s
         if not state.link_ok:
             self.status.counters["ticks_without_vehicle"] += 1
@@ -129,14 +129,10 @@ class FollowerNode:
             self.ages_s.extend(now_s - self.peers[j].r.stamp_s for j in self.setup.neighbours)
         elif running:
             self.status.counters["ticks_not_ready"] += 1
+        if r is None:  # not flying the law yet: publish r = p~ so that neighbours get ready
+            r = reference(self.memory, self.setup, now_s)[0]
         self._command(state, u)
         self._publish(now_s, state, r, dr, u)
-
-    def _target_positions(self, now_s: float) -> np.ndarray:
-        pos = np.zeros((len(self.setup.weights), 2))
-        for j, track in self.memory.targets.items():
-            pos[j] = track.at(now_s)
-        return pos
 
     def _command(self, state: VehicleState, u: np.ndarray) -> None:
         climb = ALTITUDE_GAIN_PER_S * (self.altitude_m - state.pos_enu_m[2])

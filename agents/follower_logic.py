@@ -159,12 +159,14 @@ def _stale(
     return tuple(old)
 
 
-def _reference(
+def reference(
     memory: FollowerMemory, setup: FollowerSetup, now_s: float
 ) -> tuple[FloatArray, FloatArray]:
-    """p~_i and its rate at now_s, from the observed targets' tracks."""
-    w = setup.weights[list(setup.observed)]
-    tracks = [memory.targets[j] for j in setup.observed]
+    """p~_i and its rate at now_s, from the observed targets' tracks (targets not heard
+    yet count as zero: the estimate a follower publishes before it is `ready`)."""
+    heard = [j for j in setup.observed if j in memory.targets]
+    w = setup.weights[heard]
+    tracks = [memory.targets[j] for j in heard]
     p_tilde = sum((wj * s.at(now_s) for wj, s in zip(w, tracks, strict=True)), ZERO2)
     rate = sum((wj * s.rate for wj, s in zip(w, tracks, strict=True)), ZERO2)
     return np.asarray(p_tilde), np.asarray(rate)
@@ -190,7 +192,7 @@ def _estimate(
     dt: float,
 ) -> tuple[FollowerMemory, FloatArray, FloatArray]:
     """New memory, r_i and dr_i/dt at now_s, with the paper's or the robust estimator."""
-    p_tilde, p_tilde_rate = _reference(memory, setup, now_s)
+    p_tilde, p_tilde_rate = reference(memory, setup, now_s)
     r_nbrs = np.array([peers[j].r.at(now_s) for j in setup.neighbours]).reshape(-1, 2)
     # Both estimators: a link's flow may remove at most step_fraction of the gap per age
     # of the data it acts on (not per tick), so that late or lost data slow the
