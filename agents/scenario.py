@@ -201,6 +201,11 @@ def ccw_order(points_m: FloatArray, center_m: FloatArray) -> tuple[int, ...]:
     """Successor map i -> i+ of points sorted counter-clockwise around `center_m`."""
     d = np.asarray(points_m) - np.asarray(center_m)
     order = [int(k) for k in np.argsort(np.arctan2(d[:, 1], d[:, 0]), kind="stable")]
+    return successor_from_order(order)
+
+
+def successor_from_order(order: list[int] | tuple[int, ...]) -> tuple[int, ...]:
+    """Successor map i -> i+ of followers listed in circular order."""
     succ = [0] * len(order)
     for k, i in enumerate(order):
         succ[i] = order[(k + 1) % len(order)]

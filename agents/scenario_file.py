@@ -23,7 +23,7 @@ from agents.scenario import (
     VehicleConfig,
     ccw_order,
     full_turn_ok,
-    successor_is_cycle,
+    successor_from_order,
 )
 from agents.scenario_checks import check_admissible
 from agents.scenario_network import network
@@ -225,11 +225,7 @@ def _successor(t: Table, f_pos: np.ndarray, center: np.ndarray, n: int) -> tuple
     order = follower_numbers(raw, "pattern.order", n)
     if sorted(order) != list(range(n)):
         raise InadmissibleError("pattern.order", "must list every follower exactly once")
-    succ = [0] * n
-    for k, i in enumerate(order):
-        succ[i] = order[(k + 1) % n]
-    assert successor_is_cycle(tuple(succ))
-    return tuple(succ)
+    return successor_from_order(order)
 
 
 def _gains(t: Table) -> Gains:
