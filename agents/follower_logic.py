@@ -11,6 +11,7 @@ clock and does no I/O; time is an argument.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -27,6 +28,7 @@ from agents.core.estimator import (
     observation_weights,
 )
 from agents.core.params import control_gains, estimator_params
+from agents.membership import membership
 from agents.scenario import Scenario
 
 FloatArray = NDArray[np.float64]
@@ -54,10 +56,14 @@ class FollowerSetup:
     age_tau_s: float = 0.5  # time constant of the low-passed data ages
 
     @staticmethod
-    def from_scenario(scenario: Scenario, index: int) -> FollowerSetup:
-        weights = observation_weights(scenario.observation())[index]
-        adjacency = scenario.adjacency()
-        nbrs = scenario.neighbours(index)
+    def from_scenario(
+        scenario: Scenario, index: int, members: Iterable[int] | None = None
+    ) -> FollowerSetup:
+        """Follower `index`'s share of the swarm formed by `members` (default: everyone)."""
+        form = membership(scenario, range(scenario.n) if members is None else members)
+        weights = form.weights()[index]
+        adjacency = form.adjacency()
+        nbrs = form.neighbours(index)
         fractions = edge_fractions(adjacency, np.full(len(nbrs), index), np.asarray(nbrs, int))
         return FollowerSetup(
             index=index,
@@ -65,8 +71,8 @@ class FollowerSetup:
             observed=tuple(int(j) for j in np.nonzero(weights)[0]),
             neighbours=nbrs,
             nbr_fractions=fractions,
-            successor=scenario.successor[index],
-            angle_rad=scenario.pattern.angles_rad[index],
+            successor=form.successor[index],
+            angle_rad=form.angles_rad[index],
             estimator=estimator_params(scenario),
             control=control_gains(scenario),
             period_s=1.0 / scenario.run.rate_hz,
@@ -276,3 +282,26 @@ def link_flows(
         (j, float(s[0]), float(s[1]), float(f[0]), float(f[1]))
         for j, s, f in zip(setup.neighbours, memory.link_sums_m, memory.link_rates_m_s, strict=True)
     )
+
+
+def regroup(memory: FollowerMemory, old: FollowerSetup, new: FollowerSetup) -> FollowerMemory:
+    """The memory carried across a membership change from `old` to `new` links.
+
+    A kept link keeps its running sum; a dropped link's sum is dropped (its other end
+    drops its own, or is gone), a new link starts at zero: every link still counts
+    0.5 (S_ij - S_ji) at one end and the opposite at the other, so sum(Phi) stays 0
+    (robust estimator).  The paper's Phi has no per-link parts and is kept whole.
+    Tracks of targets no longer observed and ages of departed peers are dropped.
+    """
+    peers = set(new.neighbours) | {new.successor}
+    ages = {j: a for j, a in memory.peer_age_s.items() if j in peers}
+    targets = {j: s for j, s in memory.targets.items() if j in new.observed}
+    memory = replace(memory, peer_age_s=ages, targets=targets)
+    if memory.link_sums_m is None or memory.link_rates_m_s is None:
+        return memory
+    sums, rates = np.zeros((len(new.neighbours), 2)), np.zeros((len(new.neighbours), 2))
+    for k, j in enumerate(new.neighbours):
+        if j in old.neighbours:
+            sums[k] = memory.link_sums_m[old.neighbours.index(j)]
+            rates[k] = memory.link_rates_m_s[old.neighbours.index(j)]
+    return replace(memory, link_sums_m=sums, link_rates_m_s=rates)

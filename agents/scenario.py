@@ -20,6 +20,7 @@ PROFILE_KINDS = ("paper_v1", "paper_v2", "constant", "circle", "random_walk")
 ESTIMATORS = ("paper", "robust")
 LINK_PROTOCOLS = ("tcp", "udp")
 LOSS_MODELS = ("independent", "gilbert_elliott")
+REBALANCE = ("scale", "keep")
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,7 @@ class Pattern:
     rho_d_m: float
     w_d_rad_s: float
     angles_rad: tuple[float, ...]
+    rebalance: str = "scale"  # when followers leave: "scale" | "keep" (agents.membership)
 
 
 @dataclass(frozen=True)

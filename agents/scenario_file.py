@@ -14,6 +14,7 @@ import numpy as np
 from agents.errors import InadmissibleError, ScenarioError
 from agents.scenario import (
     PROFILE_KINDS,
+    REBALANCE,
     Gains,
     HomeConfig,
     Pattern,
@@ -215,7 +216,15 @@ def _pattern(t: Table, n: int) -> Pattern:
     w_d = number(t, "w_d_rad_s", "pattern", 0.2)
     if w_d <= 0.0:
         raise InadmissibleError("pattern.w_d_rad_s", f"must be > 0, got {w_d}")
-    return Pattern(rho_d_m=positive(t, "rho_d_m", "pattern"), w_d_rad_s=w_d, angles_rad=angles)
+    rebalance = t.get("rebalance", "scale")
+    if rebalance not in REBALANCE:
+        raise InadmissibleError("pattern.rebalance", f"must be one of {REBALANCE}: {rebalance!r}")
+    return Pattern(
+        rho_d_m=positive(t, "rho_d_m", "pattern"),
+        w_d_rad_s=w_d,
+        angles_rad=angles,
+        rebalance=rebalance,
+    )
 
 
 def _successor(t: Table, f_pos: np.ndarray, center: np.ndarray, n: int) -> tuple[int, ...]:
