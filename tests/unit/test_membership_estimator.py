@@ -122,10 +122,10 @@ def test_paper_estimator_loses_the_leavers_phi_for_good() -> None:
     leaver takes its share with it, so mean(r) of the rest is off by Phi_leaver / n' forever."""
     swarm = Swarm("paper")
     swarm.run(10.0)
-    assert swarm.mean_r_error_m() < 0.01
+    before = swarm.mean_r_error_m()  # one-tick delays alone already bias it (0.34 m)
     swarm.regroup({1, 2, 3})
     swarm.run(10.0)
     bias = swarm.mean_r_error_m()
-    assert bias > 0.5
+    assert bias > before + 0.5  # Phi_0 (3.3 m) / 3 more
     swarm.run(10.0)
     assert swarm.mean_r_error_m() == pytest.approx(bias, rel=0.2)  # it does not heal
