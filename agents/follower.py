@@ -25,12 +25,14 @@ from agents.follower_logic import (
     observe_target,
     ready,
     reference,
+    regroup,
 )
+from agents.liveness import MembershipWatch
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, process_main
 from agents.scenario import Scenario
 from agents.vehicle_loop import add_vehicle_arguments, fly
-from transport.bus import Bus
+from transport.bus import Bus, Subscription
 from transport.codec import encode
 from transport.decoder import Decoder
 from transport.impairment import ImpairedBus
@@ -67,16 +69,19 @@ class FollowerNode:
     def __init__(
         self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter, swarm: str
     ) -> None:
+        self.scenario = scenario
         self.setup = FollowerSetup.from_scenario(scenario, index)
+        self.members = frozenset(range(scenario.n))
         self.index, self.bus, self.vehicle = index, bus, vehicle
         self.altitude_m = scenario.vehicle.altitude_m
         self.keys = SwarmKeys(swarm)
-        peers = sorted(set(self.setup.neighbours) | {self.setup.successor})
+        self.liveness = MembershipWatch(bus, self.keys)
         self.subs = [
             bus.subscribe(self.keys.sensor_targets(index)),
             bus.subscribe(self.keys.control()),
         ]
-        self.subs += [bus.subscribe(self.keys.follower_state(j)) for j in peers]
+        self.peer_subs: dict[int, Subscription] = {}
+        self._follow(set(self.setup.neighbours) | {self.setup.successor})
         self.out = bus.declare_publisher(self.keys.follower_state(index))
         self.stamper = Stamper(f"follower-{index}", bus.now_s)
         self.decoder: Decoder = LinkDecoder()  # + per-link rx and age (transport.link_stats)
@@ -87,8 +92,34 @@ class FollowerNode:
         self.stop_s = math.inf
         self.ages_s: deque[float] = deque(maxlen=AGE_WINDOW)
 
+    def _follow(self, peers: set[int]) -> None:
+        """Subscribe to exactly the states of `peers` (neighbours and successor)."""
+        for j in set(self.peer_subs) - peers:
+            self.peer_subs.pop(j).close()
+        for j in sorted(peers - set(self.peer_subs)):
+            self.peer_subs[j] = self.bus.subscribe(self.keys.follower_state(j))
+
+    def regroup(self, now_s: float) -> None:
+        """Re-form around the followers alive now (agents.liveness, agents.membership)."""
+        members = self.liveness.members(now_s) | {self.index}
+        if members == self.members:
+            return
+        new = FollowerSetup.from_scenario(self.scenario, self.index, members)
+        self.memory = regroup(self.memory, self.setup, new)
+        # A departed peer's last state (and robust link sums) must not outlive it: if it
+        # comes back, it is a new process whose links start from zero.
+        self.peers = {j: v for j, v in self.peers.items() if j in members}
+        log.info(
+            "members %s -> %s: neighbours %s, successor %d, angle %.1f deg",
+            sorted(self.members), sorted(members), list(new.neighbours), new.successor,
+            math.degrees(new.angle_rad),
+        )
+        self.setup, self.members = new, members
+        self._follow(set(new.neighbours) | {new.successor})
+        self.status.counters["membership_changes"] += 1
+
     def ingest(self) -> None:
-        for sub in self.subs:
+        for sub in [*self.subs, *self.peer_subs.values()]:
             for inbound in self.decoder.drain(sub):
                 self._apply(inbound.message)
 
@@ -101,7 +132,7 @@ class FollowerNode:
                 np.asarray(msg.pos_m),
                 msg.observed_stamp_s,
             )
-        elif isinstance(msg, FollowerState) and msg.index != self.index:
+        elif isinstance(msg, FollowerState) and msg.index in self.peer_subs:
             known = self.peers.get(msg.index)
             if known is None or msg.header.stamp_s > known.r.stamp_s:
                 self.peers[msg.index] = peer_view(msg, self.index)
@@ -113,6 +144,7 @@ class FollowerNode:
                 self.stop_s = min(self.stop_s, self.bus.now_s())
 
     def tick(self, now_s: float) -> None:
+        self.regroup(now_s)
         self.ingest()
         state = self.vehicle.poll()
         own = Sample(
@@ -176,8 +208,9 @@ class FollowerNode:
         return {**self.decoder.counters(), **ages, **links, "states_sent": self.stamper.next_seq}
 
     def close(self) -> None:
-        for sub in self.subs:
+        for sub in [*self.subs, *self.peer_subs.values()]:
             sub.close()
+        self.liveness.close()
         self.out.close()
 
 

@@ -25,7 +25,6 @@ from agents.core.estimator import (
     edge_fractions,
     finite_difference_velocity,
     link_balance,
-    observation_weights,
 )
 from agents.core.params import control_gains, estimator_params
 from agents.membership import membership

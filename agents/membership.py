@@ -22,6 +22,7 @@ Rules, all from the scenario and the member set only:
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -138,7 +139,7 @@ def bridged_edges(
         # linked directly whatever their indices.
         first = min(rank[i] for i in group)
         path = sorted(boundary, key=lambda i: (rank[i] - first) % n)
-        out |= {(min(a, b), max(a, b)) for a, b in zip(path, path[1:], strict=False)}
+        out |= {(min(a, b), max(a, b)) for a, b in itertools.pairwise(path)}
     return tuple(sorted(out))
 
 

@@ -17,6 +17,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from agents.frames import ned_to_enu
+from agents.liveness import MembershipWatch
+from agents.membership import membership
 from agents.process import (
     StatusReporter,
     add_bus_arguments,
@@ -50,7 +52,12 @@ class SensorPublisher:
     ) -> None:
         self.n, self.m = scenario.n, scenario.m
         self.bus, self.keys, self.every = bus, keys, max(1, every_ticks)
+        self.scenario = scenario
         self.observers = [t.observed_by for t in scenario.targets]
+        # The sensor model follows the membership: a target whose observers all left is
+        # seen by the follower agents.membership re-assigns it to, as the followers expect.
+        self.liveness = MembershipWatch(bus, keys)
+        self.members: frozenset[int] = frozenset(range(self.n))
         self.noise_std_m = noise_std_m
         self.rng = np.random.default_rng(seed)
         self.truth_stamper = Stamper("sim-0", bus.now_s)
@@ -75,6 +82,7 @@ class SensorPublisher:
             tuple(vec2(v[:2]) for v in vel[self.n :]),
         )
         self.truth_out.put(encode(truth))
+        self._follow_membership(now)
         noise_std = self.noise_std_m if self.noise_std_m > 0.0 else None
         for j, observers in enumerate(self.observers):
             for i in observers:
@@ -86,7 +94,15 @@ class SensorPublisher:
                 )
                 self.sensor_out[i].put(encode(msg))
 
+    def _follow_membership(self, now_s: float) -> None:
+        members = self.liveness.members(now_s)
+        if members and members != self.members:
+            self.members = members
+            self.observers = list(membership(self.scenario, members).observers)
+            log.info("members %s: observers %s", sorted(members), self.observers)
+
     def close(self) -> None:
+        self.liveness.close()
         for pub in [self.truth_out, *self.sensor_out]:
             pub.close()
 

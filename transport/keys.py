@@ -88,6 +88,13 @@ class SwarmKeys:
     def all_alive(self) -> str:
         return f"{self.prefix}/alive/**"
 
+    def alive_of(self, role: str) -> str:
+        """Liveliness tokens of every process of `role` (e.g. the followers)."""
+        return f"{self.prefix}/alive/{validate_name(role, 'role')}/*"
+
+    def status_of(self, role: str) -> str:
+        return f"{self.prefix}/status/{validate_name(role, 'role')}/*"
+
     def everything(self) -> str:
         return f"{self.prefix}/**"
 

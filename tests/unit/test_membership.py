@@ -86,7 +86,7 @@ def test_rebalance_is_validated_naming_the_field() -> None:
         "[[followers]]\npos_m = [10.0, 0.0]\n[[followers]]\npos_m = [-10.0, 0.0]\n"
         '[[targets]]\npos_m = [0.0, 0.0]\nprofile = "constant"\nobserved_by = [1]\n'
     )
-    with pytest.raises(InadmissibleError, match="pattern.rebalance"):
+    with pytest.raises(InadmissibleError, match=r"pattern\.rebalance"):
         parse_scenario(text)
 
 

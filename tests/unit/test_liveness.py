@@ -1,0 +1,95 @@
+"""Liveness: tokens and heartbeats make the member set; a follower node re-forms on a change."""
+
+from __future__ import annotations
+
+from typing import Any, cast
+
+import numpy as np
+
+from agents.follower import FollowerNode
+from agents.liveness import SILENCE_S, LivenessTracker, MembershipWatch
+from agents.mavlink.adapter import MavlinkAdapter, VehicleState
+from agents.scenario_file import load_scenario
+from transport.codec import encode
+from transport.keys import SwarmKeys
+from transport.memory_bus import MemoryBus, MemoryHub
+from transport.messages import ProcessStatus, Stamper
+
+KEYS = SwarmKeys("t")
+
+
+def test_token_makes_a_member_and_its_loss_removes_it() -> None:
+    tr = LivenessTracker()
+    tr.token(1, True, 0.0)
+    tr.token(2, True, 0.0)
+    assert tr.members(0.1) == {1, 2}
+    tr.token(2, False, 0.2)
+    assert tr.members(0.2) == {1}
+
+
+def test_silence_longer_than_the_timeout_removes_and_a_heartbeat_readds() -> None:
+    tr = LivenessTracker()
+    tr.token(1, True, 0.0)
+    tr.token(2, True, 0.0)
+    for k in range(1, 100):  # the observer ticks at 10 Hz; 2 is silent, 1 is heard at 1 Hz
+        t = 0.1 * k
+        if k % 10 == 0:
+            tr.heard(1, t)
+        members = tr.members(t)
+        assert members == ({1, 2} if t <= SILENCE_S else {1}), t
+    tr.heard(2, 10.0)
+    assert tr.members(10.0) == {1, 2}
+
+
+def test_a_two_second_pause_of_a_member_is_ridden_through() -> None:
+    tr = LivenessTracker()
+    tr.token(1, True, 0.0)
+    tr.heard(1, 0.99)  # its last status just before a 2 s stall, then 1 s until the next
+    assert all(tr.members(t) == {1} for t in np.arange(1.0, 4.0, 0.02))
+
+
+def test_the_observers_own_pause_does_not_make_the_others_silent() -> None:
+    tr = LivenessTracker()
+    tr.token(1, True, 0.0)
+    assert tr.members(0.0) == {1}
+    assert tr.members(8.0) == {1}  # we were stopped 8 s: nobody could be heard meanwhile
+
+
+class FakeVehicle:
+    def poll(self) -> VehicleState:
+        return cast(Any, type("S", (), {
+            "pos_enu_m": np.array([1.0, 2.0, 10.0]), "vel_enu_m_s": np.zeros(3),
+            "stamp_s": 0.0, "link_ok": True}))()
+
+    def send_velocity_enu(self, v: tuple[float, float, float]) -> bool:
+        return True
+
+
+def status(bus: MemoryBus, i: int) -> None:
+    msg = ProcessStatus(Stamper(f"follower-{i}").header(), "follower", i, "running", {}, "")
+    bus.publish(KEYS.status("follower", i), encode(msg))
+
+
+def test_watch_and_follower_node_reform_when_a_follower_leaves_and_returns() -> None:
+    hub = MemoryHub()
+    others = {i: MemoryBus(hub, f"f{i}") for i in (1, 2, 3)}
+    tokens = {i: b.declare_token(KEYS.alive("follower", i)) for i, b in others.items()}
+    bus = MemoryBus(hub, "f0")
+    bus.declare_token(KEYS.alive("follower", 0))
+    node = FollowerNode(load_scenario("paper"), 0, bus, cast(MavlinkAdapter, FakeVehicle()), "t")
+    node.tick(bus.now_s())
+    assert node.members == {0, 1, 2, 3} and node.setup.neighbours == (1, 3)
+    tokens[3].close()  # index 3 is killed: 0's ring neighbours are now 1 and 2
+    node.tick(bus.now_s())
+    assert node.members == {0, 1, 2}
+    assert node.setup.neighbours == (1, 2) and node.setup.successor == 1
+    assert set(node.peer_subs) == {1, 2}
+    tokens[3] = others[3].declare_token(KEYS.alive("follower", 3))
+    for i in (1, 2, 3):
+        status(others[i], i)
+    node.tick(bus.now_s())
+    assert node.members == {0, 1, 2, 3} and node.setup.neighbours == (1, 3)
+    assert node.status.counters["membership_changes"] == 2
+    watch = MembershipWatch(MemoryBus(hub, "sim"), KEYS)
+    assert watch.members(bus.now_s()) == {0, 1, 2, 3}
+    node.close()
