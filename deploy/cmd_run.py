@@ -17,6 +17,7 @@ from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
 from deploy.netns import add_netns_arguments, netns_requested, run_in_namespace
 from deploy.ports import mavlink_bases, rendezvous_endpoint
+from deploy.restarts import EXIT_SOMETHING_DIED, RESTART_POLICIES, RestartPolicy, Watchdog
 from deploy.run_monitor import StatusBoard, show_progress
 from deploy.supervisor import Child, Supervisor
 from transport.bus import Bus
@@ -29,6 +30,7 @@ from transport.zenoh_config import ZenohConfig
 log = logging.getLogger("enclose.run")
 START_DELAY_S = 1.0
 PROGRESS_PERIOD_S = 2.0
+START_REPEAT_S = 1.0  # the start word again, for processes (re)started after it
 
 
 def register(sub: Any) -> None:
@@ -50,6 +52,13 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--link-timeout", type=float, default=120.0, help="seconds to wait for all to link"
     )
+    p.add_argument(
+        "--restart",
+        choices=RESTART_POLICIES,
+        default="on-failure",
+        help="a follower, target or recorder that dies: start it again (default) or not",
+    )
+    p.add_argument("--max-restarts", type=int, default=5, help="restarts per process at most")
     add_network_arguments(p)
     add_netns_arguments(p)
     p.set_defaults(func=_main)
@@ -92,6 +101,8 @@ class Launch:
         self.endpoint = rendezvous_endpoint(scenario.network.link, avoid=blocks)
         self.timings: dict[str, float] = {}
         self.board = StatusBoard()
+        self.policy = RestartPolicy(args.restart, args.max_restarts)
+        self.watchdog: Watchdog | None = None
 
     def common(self) -> list[str]:
         scen = self.args.scenario
@@ -219,22 +230,29 @@ class Launch:
 
     def fly(self, bus: Bus) -> None:
         start = bus.now_s() + START_DELAY_S
-        bus.publish(
-            self.keys.control(),
-            encode(
-                RunControl(
-                    Stamper("launcher-0", bus.now_s).header(), "start", start, self.duration_s
-                )
-            ),
+        header = Stamper("launcher-0", bus.now_s).header()
+        word = RunControl(header, "start", start, self.duration_s)
+        self.watchdog = Watchdog(
+            self.sup, self.policy, time.monotonic() + START_DELAY_S, self._before_restart
         )
-        next_report = start
+        next_report = next_word = start
+        bus.publish(self.keys.control(), encode(word))
         while bus.now_s() < start + self.duration_s:
-            self._check_children()
+            self.watchdog.check()
             self.board.collect()
+            if bus.now_s() >= next_word:  # same start stamp: a repeat changes nothing
+                next_word += START_REPEAT_S
+                bus.publish(self.keys.control(), encode(word))
             if bus.now_s() >= next_report:
                 next_report += PROGRESS_PERIOD_S
                 show_progress(self.out, bus.now_s() - start, self.duration_s)
             time.sleep(0.05)
+
+    def _before_restart(self, child: Child) -> None:
+        """A restarted recorder starts a new MCAP: keep the dead one's beside it."""
+        mcap = self.out / "recording.mcap"
+        if child.name == "recorder" and mcap.exists():
+            mcap.rename(self.out / f"recording-part{child.restarts + 1}.mcap")
 
     def finish(self) -> None:
         """Movers end on the stop word; the recorder then writes its outputs; the sim last."""
@@ -261,12 +279,20 @@ class Launch:
             "adapter_base_port": self.adapter_base,
             "duration_s": self.duration_s,
             **self.timings,
-            "processes": {c.name: {"pid": c.pid, "exit_code": c.poll()} for c in self.sup.children},
+            "processes": {
+                c.name: {"pid": c.pid, "exit_code": c.poll(), "restarts": c.restarts}
+                for c in self.sup.children
+            },
+            "restart_policy": self.policy.as_dict(),
+            "events": [] if self.watchdog is None else self.watchdog.events,
             "status": self.board.as_dict(),
         }
 
     def exit_code(self, interrupted: bool) -> int:
-        failed: list[Child] = [c for c in self.sup.children if c.poll() not in (0, None)]
+        """130 interrupted; 1 a process failed at the end; EXIT_SOMETHING_DIED (3) a process
+        died during the run (launch.json "events") but the run went to its end; else 0."""
+        dog = self.watchdog
+        failed = [c for c in self.sup.dead() if dog is None or not dog.handled(c)]
         for c in failed:
             log.error("%s exited with code %s (log: %s)", c.name, c.exit_code, c.log_path)
         metrics = self.out / "metrics.json"
@@ -274,4 +300,6 @@ class Launch:
             print(metrics.read_text())
         if interrupted:
             return 130
-        return 1 if failed else 0
+        if failed:
+            return 1
+        return EXIT_SOMETHING_DIED if dog is not None and dog.deaths else 0

@@ -25,6 +25,7 @@ class Child:
     log_path: Path
     proc: subprocess.Popen[bytes] | None = None
     exit_code: int | None = None
+    restarts: int = 0
 
     @property
     def pid(self) -> int | None:
@@ -54,7 +55,24 @@ class Supervisor:
     def start(self, name: str, module: str, args: Sequence[str]) -> Child:
         self.log_dir.mkdir(parents=True, exist_ok=True)
         child = Child(name, [sys.executable, "-m", module, *args], self.log_dir / f"{name}.log")
-        with open(child.log_path, "wb") as out:
+        self._spawn(child, "wb")
+        self.children.append(child)
+        self._write_pids()
+        log.debug("started %s pid %d: %s", name, child.pid, " ".join(child.argv))
+        return child
+
+    def restart(self, child: Child) -> None:
+        """Start an exited child again with the same command; its log goes on."""
+        if child.poll() is None:
+            raise ValueError(f"{child.name} is still running")
+        self._spawn(child, "ab")
+        child.exit_code = None
+        child.restarts += 1
+        self._write_pids()
+        log.info("restarted %s (restart %d) pid %d", child.name, child.restarts, child.pid)
+
+    def _spawn(self, child: Child, mode: str) -> None:
+        with open(child.log_path, mode) as out:
             child.proc = subprocess.Popen(
                 child.argv,
                 stdout=out,
@@ -63,10 +81,6 @@ class Supervisor:
                 start_new_session=True,
                 env={**os.environ, "PYTHONUNBUFFERED": "1"},
             )
-        self.children.append(child)
-        self._write_pids()
-        log.debug("started %s pid %d: %s", name, child.pid, " ".join(child.argv))
-        return child
 
     def _write_pids(self) -> None:
         """PIDs on disk as soon as they exist, so that an outside cleanup can find them

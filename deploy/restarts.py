@@ -1,0 +1,127 @@
+"""What the launcher does when a process dies mid-run: restart policies as in systemd / Docker.
+
+`on-failure` (the default, Docker's `on-failure:N`, systemd's `Restart=on-failure`): a
+follower, target or recorder that exits with a non-zero code or a signal is started again
+after a back-off (1 s, doubling per restart of that process, at most 8 s), at most
+`max_restarts` times.  `never`: it stays dead.  A clean exit (code 0) is a leave, never
+restarted.  Either way the run goes on to its end; it is aborted (DeployError) only when
+it cannot: the simulator died, or fewer than two followers are alive or coming back.
+Every death and restart is an event in launch.json, and the launcher exits with
+EXIT_SOMETHING_DIED.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from agents.errors import DeployError
+from deploy.supervisor import Child, Supervisor
+
+log = logging.getLogger("enclose.run")
+RESTART_POLICIES = ("on-failure", "never")
+RESTARTABLE = ("follower-", "target-", "recorder")
+EXIT_SOMETHING_DIED = 3  # the run went to its end, but a process died during it
+
+
+@dataclass(frozen=True)
+class RestartPolicy:
+    mode: str = "on-failure"
+    max_restarts: int = 5  # per process
+    backoff_s: float = 1.0  # before the first restart; doubles for each further one
+    max_backoff_s: float = 8.0
+
+    def __post_init__(self) -> None:
+        if self.mode not in RESTART_POLICIES:
+            raise DeployError(f"--restart must be one of {RESTART_POLICIES}, got {self.mode!r}")
+        if self.max_restarts < 0:
+            raise DeployError(f"--max-restarts must be >= 0, got {self.max_restarts}")
+
+    def delay_s(self, restarts_so_far: int) -> float:
+        return float(min(self.max_backoff_s, self.backoff_s * 2.0**restarts_so_far))
+
+    def as_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+def how_it_ended(code: int) -> dict[str, Any]:
+    """Popen's return code as launch.json says it: a code, or the signal that killed it."""
+    if code < 0:
+        try:
+            return {"exit_code": None, "signal": signal.Signals(-code).name}
+        except ValueError:
+            return {"exit_code": None, "signal": -code}
+    return {"exit_code": code}
+
+
+@dataclass
+class Watchdog:
+    """Called from the launcher's loop: records deaths, schedules and performs restarts."""
+
+    sup: Supervisor
+    policy: RestartPolicy
+    t0_s: float  # monotonic time of the experiment's start: events are stamped from it
+    before_restart: Callable[[Child], None] = lambda _c: None
+    clock: Callable[[], float] = time.monotonic
+    events: list[dict[str, Any]] = field(default_factory=list)
+    pending: dict[str, float] = field(default_factory=dict)  # name -> restart due (monotonic)
+    _seen: dict[str, int | None] = field(default_factory=dict)  # name -> pid already handled
+
+    @property
+    def deaths(self) -> int:
+        return sum(1 for e in self.events if e["event"] == "died")
+
+    def handled(self, child: Child) -> bool:
+        """True if this process's current death is one the watchdog recorded."""
+        return self._seen.get(child.name) == child.pid and child.poll() not in (None, 0)
+
+    def check(self) -> None:
+        now = self.clock()
+        for child in self.sup.children:
+            code = child.poll()
+            if code is None or code == 0 or self._seen.get(child.name) == child.pid:
+                continue
+            self._seen[child.name] = child.pid
+            self._died(child, code, now)
+        for name, due in list(self.pending.items()):
+            if now >= due:
+                self._restart(name, now)
+        self._can_go_on()
+
+    def _event(self, now: float, child: Child, event: str, **extra: Any) -> None:
+        row = {"t_s": round(now - self.t0_s, 3), "process": child.name, "event": event, **extra}
+        self.events.append(row)
+        log.warning("%s", " ".join(f"{k}={v}" for k, v in row.items()))
+
+    def _died(self, child: Child, code: int, now: float) -> None:
+        ended = how_it_ended(code)
+        if child.name == "sim":
+            self._event(now, child, "died", **ended)
+            raise DeployError(f"the simulator died ({ended}): the run cannot go on")
+        if not child.name.startswith(RESTARTABLE) or self.policy.mode == "never":
+            self._event(now, child, "died", **ended, restart="never")
+        elif child.restarts >= self.policy.max_restarts:
+            self._event(now, child, "died", **ended, restart="limit reached")
+        else:
+            delay = self.policy.delay_s(child.restarts)
+            self.pending[child.name] = now + delay
+            self._event(now, child, "died", **ended, restart_in_s=delay)
+
+    def _restart(self, name: str, now: float) -> None:
+        del self.pending[name]
+        child = next(c for c in self.sup.children if c.name == name)
+        self.before_restart(child)
+        self.sup.restart(child)
+        self._event(now, child, "restarted", pid=child.pid, restarts=child.restarts)
+
+    def _can_go_on(self) -> None:
+        followers = [c for c in self.sup.children if c.name.startswith("follower-")]
+        live = [c for c in followers if c.poll() is None or c.name in self.pending]
+        if len(followers) >= 2 and len(live) < 2:
+            raise DeployError(
+                f"only {len(live)} follower(s) left alive or restarting: the run cannot go on"
+            )
