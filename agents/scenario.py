@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.scenario_faults import FaultSpec
+
 FloatArray = NDArray[np.float64]
 
 PROFILE_KINDS = ("paper_v1", "paper_v2", "constant", "circle", "random_walk")
@@ -145,6 +147,7 @@ class Scenario:
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     home: HomeConfig = field(default_factory=HomeConfig)
     network: NetworkConfig = field(default_factory=NetworkConfig)
+    faults: tuple[FaultSpec, ...] = ()  # injected by the launcher (agents.scenario_faults)
 
     @property
     def n(self) -> int:

@@ -27,6 +27,7 @@ from agents.scenario import (
     successor_from_order,
 )
 from agents.scenario_checks import check_admissible
+from agents.scenario_faults import parse_faults
 from agents.scenario_network import network
 
 DEFAULT_SCENARIO = "paper"
@@ -139,6 +140,7 @@ def build_scenario(doc: Table, default_name: str = "scenario") -> Scenario:
         vehicle=_vehicle(table_of(doc, "vehicle")),
         home=_home(table_of(doc, "home")),
         network=network(table_of(doc, "network"), n),
+        faults=parse_faults(doc.get("faults"), n, len(targets)),
     )
     check_admissible(scenario)
     return scenario

@@ -14,7 +14,9 @@ from typing import Any
 from agents.errors import DeployError
 from agents.network_args import add_network_arguments, apply_network_arguments, network_overrides
 from agents.scenario import Scenario
+from agents.scenario_faults import parse_fault_flag
 from agents.scenario_file import load_scenario
+from deploy.faults import FaultRunner
 from deploy.netns import add_netns_arguments, netns_requested, run_in_namespace
 from deploy.ports import mavlink_bases, rendezvous_endpoint
 from deploy.restarts import EXIT_SOMETHING_DIED, RESTART_POLICIES, RestartPolicy, Watchdog
@@ -59,6 +61,13 @@ def register(sub: Any) -> None:
         help="a follower, target or recorder that dies: start it again (default) or not",
     )
     p.add_argument("--max-restarts", type=int, default=5, help="restarts per process at most")
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="AT_S:ACTION:TARGET[:DURATION_S]",
+        help="inject a fault, e.g. 30:kill:follower-1 (as [[faults]]; repeatable; none: no fault)",
+    )
     add_network_arguments(p)
     add_netns_arguments(p)
     p.set_defaults(func=_main)
@@ -103,6 +112,9 @@ class Launch:
         self.board = StatusBoard()
         self.policy = RestartPolicy(args.restart, args.max_restarts)
         self.watchdog: Watchdog | None = None
+        flags = [parse_fault_flag(f, scenario.n, scenario.m) for f in args.fault]
+        self.faults = (*scenario.faults, *(f for f in flags if f is not None))
+        self.injector: FaultRunner | None = None
 
     def common(self) -> list[str]:
         scen = self.args.scenario
@@ -224,6 +236,8 @@ class Launch:
             interrupted = True
             log.warning("interrupted before the start")
         finally:
+            if self.injector is not None:
+                self.injector.resume_all()
             self.sup.stop_all()
             (self.out / "launch.json").write_text(json.dumps(self.report(), indent=2) + "\n")
         return self.exit_code(interrupted)
@@ -232,12 +246,15 @@ class Launch:
         start = bus.now_s() + START_DELAY_S
         header = Stamper("launcher-0", bus.now_s).header()
         word = RunControl(header, "start", start, self.duration_s)
-        self.watchdog = Watchdog(
-            self.sup, self.policy, time.monotonic() + START_DELAY_S, self._before_restart
+        t0 = time.monotonic() + START_DELAY_S
+        self.watchdog = Watchdog(self.sup, self.policy, t0, self._before_restart)
+        self.injector = FaultRunner(
+            self.sup, self.faults, t0, self.watchdog.events, self.watchdog.pending
         )
         next_report = next_word = start
         bus.publish(self.keys.control(), encode(word))
         while bus.now_s() < start + self.duration_s:
+            self.injector.check()
             self.watchdog.check()
             self.board.collect()
             if bus.now_s() >= next_word:  # same start stamp: a repeat changes nothing
@@ -284,6 +301,7 @@ class Launch:
                 for c in self.sup.children
             },
             "restart_policy": self.policy.as_dict(),
+            "faults": [f.__dict__ for f in self.faults],
             "events": [] if self.watchdog is None else self.watchdog.events,
             "status": self.board.as_dict(),
         }

@@ -215,6 +215,8 @@ def inner_argv(args: argparse.Namespace, out: Path, swarm: str, duration_s: floa
              "--noise-std-m", repr(args.noise_std_m), "--link-timeout", repr(args.link_timeout)]
     argv += ["--restart", getattr(args, "restart", "on-failure"),
              "--max-restarts", str(getattr(args, "max_restarts", 5))]
+    for fault in getattr(args, "fault", []):
+        argv += ["--fault", fault]
     if args.zenoh_config:
         argv += ["--zenoh-config", str(Path(args.zenoh_config).resolve())]
     return argv + network_overrides(args)

@@ -11,11 +11,14 @@ from typing import Any
 
 from agents.errors import ConfigError, ScenarioError
 from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LinkImpairment
+from agents.scenario_faults import parse_fault_flag
 from agents.scenario_file import load_scenario
 from agents.scenario_network import IMPAIRMENT_KEYS, choice, impairment
+from deploy.restarts import RESTART_POLICIES
 
 # The network flags of `enclose run`, as sweep keys (--impair-seed comes from seed0 + repeat).
-AXIS_KEYS: tuple[str, ...] = ("estimator", "link", *IMPAIRMENT_KEYS)
+# `fault` ("AT_S:ACTION:TARGET[:DURATION_S]" or "none") and `restart` sweep like them.
+AXIS_KEYS: tuple[str, ...] = ("estimator", "link", *IMPAIRMENT_KEYS, "fault", "restart")
 TOP_KEYS = ("scenario", "duration_s", "out", "repeats", "seed0", "grid", "fixed", "heatmap")
 Value = str | float
 
@@ -124,6 +127,7 @@ def parse_sweep(doc: dict[str, Any], path: Path, out_override: Path | None = Non
     twice = sorted({k for k in flat if flat.count(k) > 1} | (set(flat) & set(fixed)))
     if twice:
         raise ConfigError(f"grid.{twice[0]}", "is given more than once (grid or fixed)")
+    _check_faults(axes, fixed, scenario.n, scenario.m)
     spec = SweepSpec(
         path=path,
         scenario=scenario_ref,
@@ -138,6 +142,17 @@ def parse_sweep(doc: dict[str, Any], path: Path, out_override: Path | None = Non
         eps_delta=scenario.run.eps_delta,
     )
     return spec
+
+
+def _check_faults(axes: Any, fixed: dict[str, Any], n: int, m: int) -> None:
+    """Fault targets must exist in the sweep's scenario (follower-5 of 4 is an error now)."""
+    for keys, points in axes:
+        for k, point in enumerate(points):
+            for key, value in zip(keys, point, strict=True):
+                if key == "fault":
+                    parse_fault_flag(str(value), n, m, f"grid.{key}[{k}]")
+    if "fault" in fixed:
+        parse_fault_flag(str(fixed["fault"]), n, m, "fixed.fault")
 
 
 def _scenario(raw: Any, base: Path) -> str:
@@ -213,6 +228,11 @@ def _value(key: str, raw: Any, where: str) -> Value:
             return choice(raw, ESTIMATORS, where)
         if key == "link":
             return choice(raw, LINK_PROTOCOLS, where)
+        if key == "restart":
+            return choice(raw, RESTART_POLICIES, where)
+        if key == "fault":  # the format here; the follower numbers against the scenario below
+            parse_fault_flag(_string(raw, where), 10**6, 10**6, where)
+            return str(raw)
         checked = impairment({key: raw}, "x", LinkImpairment())
     except ScenarioError as exc:
         raise ConfigError(where, exc.reason) from exc

@@ -100,6 +100,15 @@ def test_cells_are_the_product_in_file_order_with_stable_names(tmp_path: Path) -
                     "--delay-ms", "50", "--jitter-ms", "20", "--impair-seed", "1"]
 
 
+def test_faults_and_restart_policies_sweep_like_network_flags(tmp_path: Path) -> None:
+    grid = {"fault": ["none", "30:kill:follower-1"], "restart": ["on-failure", "never"]}
+    spec = parse_sweep(doc(grid=grid), tmp_path / "s.toml")
+    assert len(spec.cells()) == 4
+    argv = spec.run_argv(spec.cells()[3], tmp_path / "c")
+    assert argv[argv.index("--fault") + 1] == "30:kill:follower-1"
+    assert argv[argv.index("--restart") + 1] == "never"
+
+
 def test_repeats_give_one_cell_per_seed_and_paths_are_relative_to_the_file(
     tmp_path: Path,
 ) -> None:
@@ -140,6 +149,9 @@ def test_repeats_give_one_cell_per_seed_and_paths_are_relative_to_the_file(
         ({"fixed": {"loss": 0.2}}, "grid.loss"),
         ({"fixed": {"colour": 1}}, "fixed.colour"),
         ({"fixed": []}, "fixed"),
+        ({"grid": {"fault": ["30:explode:follower-1"]}}, "grid.fault[0]"),
+        ({"grid": {"fault": ["none", "30:kill:follower-9"]}}, "grid.fault[1].target"),
+        ({"grid": {"restart": ["sometimes"]}}, "grid.restart[0]"),
         ({"heatmap": ["loss"]}, "heatmap"),
         ({"heatmap": ["loss", "delay_ms"]}, "heatmap[1]"),
     ],

@@ -1,0 +1,110 @@
+"""The `[[faults]]` of a scenario: failures the launcher injects at set times, validated once.
+
+    [[faults]]
+    at_s = 30.0               # experiment time (after the start word)
+    action = "kill"           # kill | pause | restart | leave
+    target = "follower-1"     # follower-K, target-K (1-based, as everywhere in the file) | recorder
+    duration_s = 2.0          # pause: how long (required); restart, leave: back after (optional)
+
+kill: SIGKILL, then the run's restart policy decides.  pause: SIGSTOP, SIGCONT after
+duration_s.  restart: SIGTERM (a clean stop) and a new process at once, or after
+duration_s.  leave: SIGTERM, and with duration_s it joins again after that long.
+On the command line (`enclose run --fault`, and `fault` in a sweep) a fault is
+"AT_S:ACTION:TARGET[:DURATION_S]", e.g. "30:kill:follower-1"; "none" is no fault.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Any
+
+from agents.errors import ScenarioError
+
+FAULT_ACTIONS = ("kill", "pause", "restart", "leave")
+FAULT_KEYS = ("at_s", "action", "target", "duration_s")
+_TARGET_RE = re.compile(r"^(follower|target)-([0-9]+)$|^recorder$")
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    at_s: float
+    action: str
+    process: str  # the launcher's (0-based) process name: follower-0 is the file's follower-1
+    duration_s: float | None = None
+
+
+def parse_fault_table(raw: Any, where: str, n: int, m: int) -> FaultSpec:
+    if not isinstance(raw, dict):
+        raise ScenarioError(where, "must be a table")
+    unknown = sorted(set(raw) - set(FAULT_KEYS))
+    if unknown:
+        raise ScenarioError(f"{where}.{unknown[0]}", f"unknown (known: {', '.join(FAULT_KEYS)})")
+    at_s = _seconds(raw.get("at_s"), f"{where}.at_s", required=True)
+    assert at_s is not None
+    action = raw.get("action")
+    if action not in FAULT_ACTIONS:
+        raise ScenarioError(f"{where}.action", f"must be one of {FAULT_ACTIONS}, got {action!r}")
+    process = _process(raw.get("target"), f"{where}.target", n, m)
+    duration = _seconds(raw.get("duration_s"), f"{where}.duration_s", required=False)
+    if action == "pause" and duration is None:
+        raise ScenarioError(f"{where}.duration_s", "a pause needs its duration")
+    if action == "kill" and duration is not None:
+        raise ScenarioError(f"{where}.duration_s", "a kill has no duration (see --restart)")
+    return FaultSpec(at_s, action, process, duration)
+
+
+def parse_faults(raw: Any, n: int, m: int) -> tuple[FaultSpec, ...]:
+    if raw is None:
+        return ()
+    if not isinstance(raw, list):
+        raise ScenarioError("faults", "must be an array of tables: [[faults]]")
+    faults = [parse_fault_table(t, f"faults[{k}]", n, m) for k, t in enumerate(raw)]
+    return tuple(sorted(faults, key=lambda f: f.at_s))
+
+
+def parse_fault_flag(text: str, n: int, m: int, where: str = "--fault") -> FaultSpec | None:
+    """"AT_S:ACTION:TARGET[:DURATION_S]" (None for "none")."""
+    if text == "none":
+        return None
+    parts = text.split(":")
+    if len(parts) not in (3, 4):
+        raise ScenarioError(where, f"expected AT_S:ACTION:TARGET[:DURATION_S], got {text!r}")
+    table: dict[str, Any] = {"at_s": _number(parts[0], where), "action": parts[1],
+                             "target": parts[2]}
+    if len(parts) == 4:
+        table["duration_s"] = _number(parts[3], where)
+    return parse_fault_table(table, where, n, m)
+
+
+def _number(text: str, where: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ScenarioError(where, f"{text!r} is not a number") from None
+
+
+def _seconds(raw: Any, where: str, required: bool) -> float | None:
+    if raw is None:
+        if required:
+            raise ScenarioError(where, "is required")
+        return None
+    if isinstance(raw, bool) or not isinstance(raw, int | float) or not math.isfinite(raw):
+        raise ScenarioError(where, f"must be a number of seconds, got {raw!r}")
+    if raw < 0:
+        raise ScenarioError(where, f"must be >= 0, got {raw}")
+    return float(raw)
+
+
+def _process(raw: Any, where: str, n: int, m: int) -> str:
+    match = _TARGET_RE.match(raw) if isinstance(raw, str) else None
+    if match is None:
+        raise ScenarioError(where, f"must be follower-K, target-K or recorder, got {raw!r}")
+    if raw == "recorder":
+        return raw
+    role, number = match.group(1), int(match.group(2))
+    count = n if role == "follower" else m
+    if not 1 <= number <= count:
+        raise ScenarioError(where, f"{role}s are numbered 1..{count}, got {number}")
+    return f"{role}-{number - 1}"
