@@ -29,8 +29,13 @@ def _plot_followers(ax: Axes, t: np.ndarray, values: np.ndarray, label: str) -> 
 
 
 def performance_figure(
-    series: RunSeries, errors: ErrorSeries, eps: tuple[float, float], path: Path
+    series: RunSeries,
+    errors: ErrorSeries,
+    eps: tuple[float, float],
+    path: Path,
+    marks_s: list[float] | None = None,
 ) -> None:
+    """`marks_s`: times the membership changed (a follower left or joined), on every panel."""
     fig, axes = plt.subplots(3, 2, figsize=(12, 10), sharex=True)
     t = series.t_s
     for ax, (field, ylabel, title) in zip(axes.flat, PANELS, strict=False):
@@ -49,6 +54,9 @@ def performance_figure(
     cmd.set_title("control commands")
     cmd.set_ylabel("|u_i| [m/s]")
     cmd.grid(alpha=0.3)
+    for ax in axes.flat:
+        for t_mark in marks_s or []:
+            ax.axvline(t_mark, color="tab:red", ls=":", lw=1.0)
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
     axes.flat[0].legend(loc="upper right", fontsize=8)

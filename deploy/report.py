@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,15 @@ from agents.core.metrics import Metrics, compute_metrics, error_series
 from agents.core.timeseries import RunSeries
 from agents.errors import EncloseError
 from deploy.figures import performance_figure, trajectory_figure
-from deploy.rundir import SERIES_FILE, RunInfo, read_info, read_series, write_metrics, write_series
+from deploy.rundir import (
+    METRICS_FILE,
+    SERIES_FILE,
+    RunInfo,
+    read_info,
+    read_series,
+    write_metrics,
+    write_series,
+)
 
 log = logging.getLogger(__name__)
 MAX_CSV_RATE_HZ = 100.0
@@ -22,7 +31,11 @@ TRAJECTORY_PNG = "trajectory.png"
 
 
 def write_run_outputs(
-    run_dir: Path, series: RunSeries, info: RunInfo, extra: dict[str, Any] | None = None
+    run_dir: Path,
+    series: RunSeries,
+    info: RunInfo,
+    extra: dict[str, Any] | None = None,
+    marks_s: list[float] | None = None,
 ) -> Metrics:
     """Metrics from the full-rate series; CSV and figures from at most 100 Hz of it."""
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -33,7 +46,7 @@ def write_run_outputs(
     thin = series.decimate(_decimation(series.t_s))
     thin_errors = error_series(thin, info.successor, angles, info.rho_d_m)
     write_series(run_dir / SERIES_FILE, thin, thin_errors)
-    _figures(run_dir, thin, info)
+    _figures(run_dir, thin, info, marks_s or [])
     return metrics
 
 
@@ -44,11 +57,22 @@ def _decimation(t_s: np.ndarray) -> int:
     return max(1, round(1.0 / (MAX_CSV_RATE_HZ * dt))) if dt > 0 else 1
 
 
-def _figures(run_dir: Path, series: RunSeries, info: RunInfo) -> None:
+def _figures(run_dir: Path, series: RunSeries, info: RunInfo, marks_s: list[float]) -> None:
+    """`marks_s`: membership changes, a vertical line on every panel."""
     angles = np.asarray(info.angles_rad)
     errors = error_series(series, info.successor, angles, info.rho_d_m)
-    performance_figure(series, errors, (info.eps_rho_m, info.eps_delta), run_dir / PERFORMANCE_PNG)
+    eps = (info.eps_rho_m, info.eps_delta)
+    performance_figure(series, errors, eps, run_dir / PERFORMANCE_PNG, marks_s)
     trajectory_figure(series, info.rho_d_m, run_dir / TRAJECTORY_PNG)
+
+
+def _marks(run_dir: Path) -> list[float]:
+    """The membership changes recorded in metrics.json, if any."""
+    try:
+        metrics = json.loads((run_dir / METRICS_FILE).read_text())
+        return [float(t) for t in metrics.get("membership", {}).get("changes_s", [])]
+    except (OSError, ValueError, TypeError, AttributeError):
+        return []
 
 
 def regenerate_figures(run_dir: Path) -> list[Path]:
@@ -57,7 +81,7 @@ def regenerate_figures(run_dir: Path) -> list[Path]:
         raise EncloseError(f"{run_dir} is not a run directory")
     info = read_info(run_dir)
     series = read_series(run_dir / SERIES_FILE, info.n, info.m)
-    _figures(run_dir, series, info)
+    _figures(run_dir, series, info, _marks(run_dir))
     return [run_dir / PERFORMANCE_PNG, run_dir / TRAJECTORY_PNG]
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.errors import CodecError, TransportError
+from agents.liveness import MembershipWatch
 from agents.scenario import Scenario
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.links import FINAL_STATES, link_report
@@ -60,6 +61,10 @@ class Recorder:
         self._status = bus.declare_publisher(self.keys.status(ROLE, index), Congestion.DROP)
         self._sub = bus.subscribe(self.keys.everything(), QUEUE_CAPACITY)
         self._token = bus.declare_token(self.keys.alive(ROLE, index))
+        # Followers in and out, as they see it themselves (agents.liveness): the phases
+        # of the run's metrics and the marks on its figures.
+        self.liveness = MembershipWatch(bus, self.keys)
+        self.membership: list[tuple[float, frozenset[int]]] = []
         self._started_wall_s = bus.now_s()
         self._next_tick_s = 0.0
         self._set_state("linked")
@@ -74,6 +79,9 @@ class Recorder:
             msg = item.message
             if isinstance(msg, ProcessStatus) and msg.role == "follower":
                 self.follower_status[msg.index] = msg
+        members = self.liveness.members(self.bus.now_s())
+        if members and (not self.membership or members != self.membership[-1][1]):
+            self.membership.append((self.bus.now_s(), members))
         if self.asm.start is not None and self.state == "linked":
             self._info = RunInfo.from_scenario(self.scenario, "networked",
                                                self.asm.start.duration_s)
@@ -144,7 +152,8 @@ class Recorder:
         self._set_state("stopping")
         self.mcap.close()
         try:
-            metrics = write_final_outputs(self.run_dir, self.scenario, self.asm, self.counters())
+            metrics = write_final_outputs(self.run_dir, self.scenario, self.asm, self.counters(),
+                                          self.membership)
         except Exception:
             log.exception("writing the run outputs failed")
             metrics = None

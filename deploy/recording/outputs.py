@@ -9,6 +9,7 @@ from typing import Any
 
 from agents.core.metrics import Metrics
 from agents.errors import DeployError
+from agents.membership_metrics import membership_phases, phase_report
 from agents.scenario import Scenario
 from deploy.recording.assembler import Assembly, RunAssembler, assembly_extra
 from deploy.recording.progress import write_json_atomic
@@ -29,7 +30,11 @@ def judged_duration_s(asm: Assembly) -> float:
 
 
 def write_final_outputs(
-    run_dir: Path, scenario: Scenario, asm: RunAssembler, recorder_extra: dict[str, Any]
+    run_dir: Path,
+    scenario: Scenario,
+    asm: RunAssembler,
+    recorder_extra: dict[str, Any],
+    membership: list[tuple[float, frozenset[int]]] | None = None,
 ) -> Metrics | None:
     """Metrics, CSV and figures of the run; None (and metrics.json with "error") if none."""
     try:
@@ -43,7 +48,14 @@ def write_final_outputs(
     info = RunInfo.from_scenario(scenario, RUN_KIND, duration)
     extra = {**assembly_extra(assembly, asm.drops), **recorder_extra,
              "stopped_early": duration != assembly.duration_s}
-    return write_run_outputs(run_dir, assembly.series, info, extra)
+    marks: list[float] = []
+    if membership:
+        changes = [(t - assembly.start_stamp_s, m) for t, m in membership]
+        phases = membership_phases(changes, float(assembly.series.t_s[-1]))
+        marks = [p[0] for p in phases[1:]]
+        extra["membership"] = {"changes_s": marks,
+                               "phases": phase_report(assembly.series, scenario, phases)}
+    return write_run_outputs(run_dir, assembly.series, info, extra, marks)
 
 
 def write_error_metrics(run_dir: Path, reason: str, extra: dict[str, Any]) -> None:
