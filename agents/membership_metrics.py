@@ -101,11 +101,12 @@ def phase_report(
     None if it never did) and the largest errors over the phase's second half."""
     eps_rho, eps_delta = scenario.run.eps_rho_m, scenario.run.eps_delta
     out: list[dict[str, object]] = []
-    for start, end, members in phases:
+    for k, (start, end, members) in enumerate(phases):
         row: dict[str, object] = {"from_s": start, "to_s": end, "members": list(members)}
-        window = (series.t_s >= start) & (series.t_s <= end)
+        last = end if k == len(phases) - 1 else end - 1e-9  # the change belongs to the next
+        window = (series.t_s >= start) & (series.t_s <= last)
         if len(members) >= 2 and window.sum() >= 2:
-            row.update(_phase_numbers(series, scenario, members, start, end, eps_rho, eps_delta))
+            row.update(_phase_numbers(series, scenario, members, start, last, eps_rho, eps_delta))
         out.append(row)
     return out
 

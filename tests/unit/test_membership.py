@@ -143,3 +143,29 @@ def test_any_member_set_forms_one_connected_ring(
     np.testing.assert_allclose(w.sum(axis=0), len(form.members) / s.m)  # mean p~ = LAP
     assert not w[[j for j in range(n) if j not in form.members]].any()
     assert membership(s, list(reversed(members))) == form  # order of the input is irrelevant
+
+
+def test_phases_and_time_to_reform_from_a_synthetic_series() -> None:
+    from agents.core.timeseries import RunSeries
+    from agents.membership_metrics import membership_phases, phase_report
+
+    changes = [(-3.0, frozenset({0, 2})), (-2.0, frozenset({0, 1, 2, 3})),
+               (10.0, frozenset({1, 2, 3}))]
+    phases = membership_phases(changes, 20.0)
+    assert phases == [(0.0, 10.0, (0, 1, 2, 3)), (10.0, 20.0, (1, 2, 3))]
+    t = np.arange(0.0, 20.0, 0.1)
+    ring3 = membership(PAPER, [1, 2, 3])
+    angles4 = np.cumsum([0.0, *PAPER.pattern.angles_rad[:3]])
+    angles3 = {1: 0.0, 2: ring3.angles_rad[1], 3: ring3.angles_rad[1] + ring3.angles_rad[2]}
+    pos = np.zeros((len(t), 4, 2))
+    for k, tk in enumerate(t):
+        for i in range(4):
+            a = angles4[i] if tk < 10.0 or i == 0 else angles3[i]
+            radius = 8.0 if tk < 10.0 or tk >= 13.0 or i == 0 else 9.0  # off for 3 s
+            pos[k, i] = radius * np.array([np.cos(a), np.sin(a)])
+    series = RunSeries(t, pos, np.zeros_like(pos), np.zeros_like(pos), np.zeros((len(t), 2, 2)))
+    rows = phase_report(series, PAPER, phases)
+    assert rows[0]["reform_s"] == 0.0 and rows[0]["radius_error_m"] < 1e-9
+    assert rows[1]["members"] == [1, 2, 3]
+    assert rows[1]["reform_s"] == pytest.approx(3.0, abs=0.11)
+    assert rows[1]["angle_error"] < 1e-9
