@@ -3,7 +3,7 @@
     [[faults]]
     at_s = 30.0               # experiment time (after the start word)
     action = "kill"           # kill | pause | restart | leave
-    target = "follower-1"     # follower-K, target-K (1-based, as everywhere in the file) | recorder
+    target = "follower-1"     # follower-K, target-K (1-based, as in the file) | recorder | sim
     duration_s = 2.0          # pause: how long (required); restart, leave: back after (optional)
 
 kill: SIGKILL, then the run's restart policy decides.  pause: SIGSTOP, SIGCONT after
@@ -24,7 +24,7 @@ from agents.errors import ScenarioError
 
 FAULT_ACTIONS = ("kill", "pause", "restart", "leave")
 FAULT_KEYS = ("at_s", "action", "target", "duration_s")
-_TARGET_RE = re.compile(r"^(follower|target)-([0-9]+)$|^recorder$")
+_TARGET_RE = re.compile(r"^(follower|target)-([0-9]+)$|^recorder$|^sim$")
 
 
 @dataclass(frozen=True)
@@ -100,9 +100,9 @@ def _seconds(raw: Any, where: str, required: bool) -> float | None:
 def _process(raw: Any, where: str, n: int, m: int) -> str:
     match = _TARGET_RE.match(raw) if isinstance(raw, str) else None
     if match is None:
-        raise ScenarioError(where, f"must be follower-K, target-K or recorder, got {raw!r}")
-    if raw == "recorder":
-        return raw
+        raise ScenarioError(where, f"must be follower-K, target-K, recorder or sim, got {raw!r}")
+    if raw in ("recorder", "sim"):
+        return str(raw)
     role, number = match.group(1), int(match.group(2))
     count = n if role == "follower" else m
     if not 1 <= number <= count:

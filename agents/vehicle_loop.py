@@ -5,11 +5,14 @@ from __future__ import annotations
 import argparse
 import logging
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Protocol
 
-from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
+from agents.errors import MavlinkError
+from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter, VehicleState
+from agents.mavlink.modes import OFFBOARD_MODE
 from agents.mavlink.startup import start_offboard
-from agents.process import StatusReporter, Ticker, open_bus, stop_on_signals
+from agents.process import StatusReporter, StopFlag, Ticker, open_bus, stop_on_signals
 from agents.scenario import Scenario
 from transport.bus import Bus
 from transport.keys import SwarmKeys
@@ -30,6 +33,46 @@ class VehicleNode(Protocol):
 
 
 NodeFactory = Callable[[Bus, MavlinkAdapter], VehicleNode]
+RECOVER_AFTER_S = 0.5  # not flying our setpoints this long: start the vehicle up again
+
+
+@dataclass
+class VehicleWatch:
+    """Says when the vehicle stopped flying our setpoints: disarmed or rebooted (a restarted
+    simulator), out of offboard/guided (the autopilot's setpoint-loss failsafe after we
+    stalled), or silent (heartbeat loss).  Real autopilots never return to offboard by
+    themselves, so the agent must ask again."""
+
+    recover_after_s: float = RECOVER_AFTER_S
+    since_s: float | None = None
+
+    def lost(self, state: VehicleState, flavour: str | None, now_s: float) -> bool:
+        ok = state.link_ok and state.armed and flavour is not None and \
+            state.mode == OFFBOARD_MODE[flavour]
+        if ok:
+            self.since_s = None
+            return False
+        if self.since_s is None:
+            self.since_s = now_s
+        return now_s - self.since_s >= self.recover_after_s
+
+
+def _start_again(mav: MavlinkAdapter, altitude_m: float, stop: StopFlag, role: str,
+                 index: int) -> bool:
+    """The start-up sequence again (it skips what is already done); False if stopped."""
+    log.warning("%s %d: vehicle not flying our setpoints (armed=%s mode=%s link=%s): "
+                "starting it up again", role, index, mav.state.armed, mav.state.mode,
+                mav.state.link_ok)
+    stop.interrupt = True
+    try:
+        start_offboard(mav, altitude_m)
+    except KeyboardInterrupt:
+        return False
+    except MavlinkError as exc:  # e.g. no heartbeat yet: try again after RECOVER_AFTER_S
+        log.warning("%s %d: start-up failed, will retry: %s", role, index, exc)
+    finally:
+        stop.interrupt = False
+    return not stop.raised
 
 
 def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
@@ -62,9 +105,17 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         group = scenario.tick_group(index) if role == "follower" else 0
         phase = 0.5 * period * group
         ticker = Ticker(period, bus.now_s, phase_s=phase)
+        watch = VehicleWatch()
         try:
             while not stop.raised and bus.now_s() < node.stop_s:
-                node.tick(ticker.wait())
+                now = ticker.wait()
+                if watch.lost(mav.state, mav.flavour, now):
+                    node.status.counters["vehicle_restarts"] += 1
+                    if not _start_again(mav, scenario.vehicle.altitude_m, stop, role, index):
+                        break
+                    watch.since_s = None
+                    continue
+                node.tick(now)
                 node.status.state = "running" if node.start_s is not None else "linked"
                 if node.status.due():
                     node.status.publish(extra={"overruns": ticker.overruns, **node.counters()})

@@ -1,11 +1,13 @@
 """What the launcher does when a process dies mid-run: restart policies as in systemd / Docker.
 
 `on-failure` (the default, Docker's `on-failure:N`, systemd's `Restart=on-failure`): a
-follower, target or recorder that exits with a non-zero code or a signal is started again
+follower, target, recorder or the simulator (its vehicles reboot: the agents start them up
+again, agents.vehicle_loop) that exits with a non-zero code or a signal is started again
 after a back-off (1 s, doubling per restart of that process, at most 8 s), at most
 `max_restarts` times.  `never`: it stays dead.  A clean exit (code 0) is a leave, never
 restarted.  Either way the run goes on to its end; it is aborted (DeployError) only when
-it cannot: the simulator died, or fewer than two followers are alive or coming back.
+it cannot: the simulator died for good (policy never, or its limit), or fewer than two
+followers are alive or coming back.
 Every death and restart is an event in launch.json, and the launcher exits with
 EXIT_SOMETHING_DIED.
 """
@@ -24,7 +26,7 @@ from deploy.supervisor import Child, Supervisor
 
 log = logging.getLogger("enclose.run")
 RESTART_POLICIES = ("on-failure", "never")
-RESTARTABLE = ("follower-", "target-", "recorder")
+RESTARTABLE = ("follower-", "target-", "recorder", "sim")
 EXIT_SOMETHING_DIED = 3  # the run went to its end, but a process died during it
 
 
@@ -99,9 +101,6 @@ class Watchdog:
 
     def _died(self, child: Child, code: int, now: float) -> None:
         ended = how_it_ended(code)
-        if child.name == "sim":
-            self._event(now, child, "died", **ended)
-            raise DeployError(f"the simulator died ({ended}): the run cannot go on")
         if not child.name.startswith(RESTARTABLE) or self.policy.mode == "never":
             self._event(now, child, "died", **ended, restart="never")
         elif child.restarts >= self.policy.max_restarts:
@@ -110,6 +109,9 @@ class Watchdog:
             delay = self.policy.delay_s(child.restarts)
             self.pending[child.name] = now + delay
             self._event(now, child, "died", **ended, restart_in_s=delay)
+            return
+        if child.name == "sim":
+            raise DeployError(f"the simulator died ({ended}) for good: the run cannot go on")
 
     def _restart(self, name: str, now: float) -> None:
         del self.pending[name]

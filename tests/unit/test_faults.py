@@ -37,7 +37,7 @@ def test_faults_table_is_parsed_sorted_and_one_based() -> None:
         ({"action": "kill", "target": "follower-1"}, r"faults\[0\]\.at_s"),
         ({"at_s": -1, "action": "kill", "target": "follower-1"}, r"faults\[0\]\.at_s"),
         ({"at_s": 1, "action": "kill", "target": "follower-3"}, r"faults\[0\]\.target"),
-        ({"at_s": 1, "action": "kill", "target": "sim"}, r"faults\[0\]\.target"),
+        ({"at_s": 1, "action": "kill", "target": "sim-0"}, r"faults\[0\]\.target"),
         ({"at_s": 1, "action": "pause", "target": "target-1"}, r"faults\[0\]\.duration_s"),
         ({"at_s": 1, "action": "kill", "target": "recorder", "when": 2}, r"faults\[0\]\.when"),
     ],

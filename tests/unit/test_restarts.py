@@ -83,8 +83,14 @@ def test_the_run_aborts_when_the_simulator_or_all_but_one_follower_die(tmp_path:
         dog = Watchdog(sup, RestartPolicy("never"), time.monotonic())
         with pytest.raises(DeployError, match="follower"):
             poll_until(dog, lambda: False)
+    finally:
+        sup.stop_all(grace_s=1.0)
+    sup = Supervisor(tmp_path / "2")
+    try:
+        sup.start("follower-0", "tests.child_proc", ["sleep", "30"])
+        sup.start("follower-1", "tests.child_proc", ["sleep", "30"])
         sup.start("sim", "tests.child_proc", ["exit", "1"])
-        dog = Watchdog(sup, RestartPolicy(), time.monotonic())
+        dog = Watchdog(sup, RestartPolicy(max_restarts=0), time.monotonic())
         with pytest.raises(DeployError, match="simulator"):
             poll_until(dog, lambda: False)
     finally:
