@@ -63,25 +63,42 @@ class LivenessTracker:
 
 
 class MembershipWatch:
-    """The follower member set as seen through one Bus: tokens plus status heartbeats."""
+    """The follower member set as seen through one Bus: tokens plus status heartbeats.
+
+    When the mesh re-forms around a restarted process (the simulator is everyone's
+    rendezvous), a token's reappearance may not reach a watch that saw it vanish; a
+    status from a follower with no known token then re-declares the watch, whose
+    history gives the tokens alive now (at most once per REFRESH_S).
+    """
+
+    REFRESH_S = 1.0
 
     def __init__(self, bus: Bus, keys: SwarmKeys, silence_s: float = SILENCE_S) -> None:
-        self.bus = bus
+        self.bus, self.keys = bus, keys
         self.tracker = LivenessTracker(silence_s)
         self.watch = bus.watch_alive(keys.alive_of("follower"))
         self.status = bus.subscribe(keys.status_of("follower"), capacity=256)
+        self.refreshes = 0
+        self._refreshed_s = -1e18
 
     def members(self, now_s: float) -> frozenset[int]:
         for ev in self.watch.drain_events():
             info = parse_key(ev.key)
             if info is not None and info.index is not None:
                 self.tracker.token(info.index, ev.alive, now_s)
+        unknown = False
         for rec in self.status.drain():
             # The key names the sender; a forged or garbled payload cannot add a member
             # (only a token can), it can at most keep a token-holder counted as heard.
             info = parse_key(rec.key)
             if info is not None and info.index is not None:
                 self.tracker.heard(info.index, now_s)
+                unknown |= info.index not in self.tracker.tokens
+        if unknown and now_s - self._refreshed_s >= self.REFRESH_S:
+            self._refreshed_s = now_s
+            self.refreshes += 1
+            self.watch.close()
+            self.watch = self.bus.watch_alive(self.keys.alive_of("follower"))
         return self.tracker.members(now_s)
 
     def close(self) -> None:

@@ -93,3 +93,16 @@ def test_watch_and_follower_node_reform_when_a_follower_leaves_and_returns() -> 
     watch = MembershipWatch(MemoryBus(hub, "sim"), KEYS)
     assert watch.members(bus.now_s()) == {0, 1, 2, 3}
     node.close()
+
+
+def test_a_status_without_a_known_token_refreshes_the_watch() -> None:
+    hub = MemoryHub()
+    other = MemoryBus(hub, "f1")
+    other.declare_token(KEYS.alive("follower", 1))
+    watch = MembershipWatch(MemoryBus(hub, "rec"), KEYS)
+    assert watch.members(0.0) == {1}
+    watch.tracker.token(1, False, 0.1)  # as if the vanish reached us but not the return
+    assert watch.members(0.2) == frozenset()
+    status(other, 1)
+    watch.members(0.3)  # heard, token unknown: re-declared, history on the next poll
+    assert watch.refreshes == 1 and watch.members(0.4) == {1}
