@@ -82,7 +82,9 @@ def membership_phases(
     current: tuple[int, ...] | None = None
     start = 0.0
     for t, members in sorted(changes, key=lambda c: c[0]):
-        if t > 0.0 and current is not None and t < t_end_s:
+        if t >= t_end_s:
+            break  # processes ending after the run: not a phase of it
+        if t > 0.0 and current is not None:
             phases.append((start, t, current))
             start = t
         current = tuple(sorted(members))

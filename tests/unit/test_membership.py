@@ -150,7 +150,7 @@ def test_phases_and_time_to_reform_from_a_synthetic_series() -> None:
     from agents.membership_metrics import membership_phases, phase_report
 
     changes = [(-3.0, frozenset({0, 2})), (-2.0, frozenset({0, 1, 2, 3})),
-               (10.0, frozenset({1, 2, 3}))]
+               (10.0, frozenset({1, 2, 3})), (20.5, frozenset({0}))]
     phases = membership_phases(changes, 20.0)
     assert phases == [(0.0, 10.0, (0, 1, 2, 3)), (10.0, 20.0, (1, 2, 3))]
     t = np.arange(0.0, 20.0, 0.1)

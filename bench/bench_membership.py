@@ -1,0 +1,90 @@
+"""Time to re-form after membership changes, on real runs (issue 10).
+
+Each case is one `enclose run` with scripted faults; the recorder's metrics.json gives,
+per membership phase, the time the re-formed ring took to enter the paper's bounds
+(|e_rho| < 0.0999 m and |e_delta| < 0.0199 for every member, to the end of the phase).
+Cases:
+  leave     paper, follower 2 leaves cleanly at FAULT_AT
+  join      paper, follower 2 leaves at FAULT_AT and joins again JOIN_AFTER later
+  kill      paper, follower 1 SIGKILLed at FAULT_AT, restarted by the launcher
+  sim       paper, the simulator restarts at FAULT_AT (vehicles reboot: take-off again)
+  ring16x3  ring16, followers 2, 7 and 12 SIGKILLed at once, --restart never
+
+Run: python bench/bench_membership.py [--cases leave,join] [--duration 100] [--at 30]
+(the lead runs it in full; each case takes its duration plus ~20 s of start-up).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+JOIN_AFTER_S = 15.0
+
+
+def cases(at_s: float) -> dict[str, tuple[str, list[str]]]:
+    a = f"{at_s:g}"
+    return {
+        "leave": ("paper", ["--fault", f"{a}:leave:follower-2"]),
+        "join": ("paper", ["--fault", f"{a}:leave:follower-2:{JOIN_AFTER_S:g}"]),
+        "kill": ("paper", ["--fault", f"{a}:kill:follower-1"]),
+        "sim": ("paper", ["--fault", f"{a}:restart:sim:1"]),
+        "ring16x3": ("ring16", ["--restart", "never", "--fault", f"{a}:kill:follower-2",
+                                "--fault", f"{a}:kill:follower-7", "--fault",
+                                f"{a}:kill:follower-12"]),
+    }
+
+
+def run_case(name: str, scenario: str, extra: list[str], duration_s: float,
+             out_root: Path) -> dict[str, Any]:
+    out = out_root / name
+    argv = [sys.executable, "-m", "deploy.cli", "run", scenario, "--duration", f"{duration_s:g}",
+            "--estimator", "robust", "--out", str(out), *extra]
+    start = time.monotonic()
+    code = subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                          check=False).returncode
+    metrics = json.loads((out / "metrics.json").read_text())
+    launch = json.loads((out / "launch.json").read_text())
+    return {"case": name, "exit": code, "wall_s": time.monotonic() - start,
+            "phases": metrics.get("membership", {}).get("phases", []),
+            "events": launch.get("events", [])}
+
+
+def show(result: dict[str, Any]) -> None:
+    print(f"\n{result['case']}: exit {result['exit']}, {result['wall_s']:.0f} s wall")
+    for e in result["events"]:
+        print(f"  event t={e['t_s']:7.2f} s  {e['process']:<12} {e['event']}")
+    print(f"  {'from_s':>8} {'to_s':>8} {'members':<28} {'reform_s':>9} {'|r-LAP|':>8} "
+          f"{'|e_rho|':>8} {'|e_delta|':>9}")
+    for p in result["phases"]:
+        if p["to_s"] - p["from_s"] < 0.5:
+            continue  # the few ms in which members saw a change one after the other
+        reform = p.get("reform_s")
+        cells = [f"{p.get(k, float('nan')):8.4f}" for k in
+                 ("estimator_error_m", "radius_error_m", "angle_error")]
+        print(f"  {p['from_s']:8.2f} {p['to_s']:8.2f} {p['members']!s:<28} "
+              f"{'never' if reform is None else f'{reform:.2f}':>9} {' '.join(cells)}")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--cases", default="leave,join,kill,sim,ring16x3")
+    parser.add_argument("--duration", type=float, default=100.0)
+    parser.add_argument("--at", type=float, default=30.0, help="experiment time of the faults")
+    parser.add_argument("--out", type=Path, default=Path("runs/bench-membership"))
+    args = parser.parse_args()
+    table = cases(args.at)
+    for name in args.cases.split(","):
+        scenario, extra = table[name]
+        show(run_case(name, scenario, extra, args.duration, args.out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
