@@ -19,7 +19,12 @@ from agents.scenario_file import load_scenario
 from deploy.faults import FaultRunner
 from deploy.netns import add_netns_arguments, netns_requested, run_in_namespace
 from deploy.ports import mavlink_bases, rendezvous_endpoint
-from deploy.restarts import EXIT_SOMETHING_DIED, RESTART_POLICIES, RestartPolicy, Watchdog
+from deploy.restarts import (
+    EXIT_SOMETHING_DIED,
+    RestartPolicy,
+    Watchdog,
+    add_supervision_arguments,
+)
 from deploy.run_monitor import StatusBoard, show_progress
 from deploy.supervisor import Child, Supervisor
 from transport.bus import Bus
@@ -54,20 +59,7 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--link-timeout", type=float, default=120.0, help="seconds to wait for all to link"
     )
-    p.add_argument(
-        "--restart",
-        choices=RESTART_POLICIES,
-        default="on-failure",
-        help="a follower, target or recorder that dies: start it again (default) or not",
-    )
-    p.add_argument("--max-restarts", type=int, default=5, help="restarts per process at most")
-    p.add_argument(
-        "--fault",
-        action="append",
-        default=[],
-        metavar="AT_S:ACTION:TARGET[:DURATION_S]",
-        help="inject a fault, e.g. 30:kill:follower-1 (as [[faults]]; repeatable; none: no fault)",
-    )
+    add_supervision_arguments(p)
     add_network_arguments(p)
     add_netns_arguments(p)
     p.set_defaults(func=_main)

@@ -14,6 +14,7 @@ EXIT_SOMETHING_DIED.
 
 from __future__ import annotations
 
+import argparse
 import logging
 import signal
 import time
@@ -48,6 +49,24 @@ class RestartPolicy:
 
     def as_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
+
+
+def add_supervision_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--restart",
+        choices=RESTART_POLICIES,
+        default="on-failure",
+        help="a follower, target, recorder or the simulator that dies: start it again "
+        "(default) or not",
+    )
+    p.add_argument("--max-restarts", type=int, default=5, help="restarts per process at most")
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="AT_S:ACTION:TARGET[:DURATION_S]",
+        help="inject a fault, e.g. 30:kill:follower-1 (as [[faults]]; repeatable; none: no fault)",
+    )
 
 
 def how_it_ended(code: int) -> dict[str, Any]:
