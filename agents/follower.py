@@ -109,6 +109,8 @@ class FollowerNode:
         # A departed peer's last state (and robust link sums) must not outlive it: if it
         # comes back, it is a new process whose links start from zero.
         self.peers = {j: v for j, v in self.peers.items() if j in members}
+        for j in self.members - members:
+            self.decoder.forget(self.keys.follower_state(j))
         log.info(
             "members %s -> %s: neighbours %s, successor %d, angle %.1f deg",
             sorted(self.members), sorted(members), list(new.neighbours), new.successor,

@@ -59,6 +59,12 @@ class Decoder:
         self.stale: Counter[str] = Counter()
         self._last_seq: dict[tuple[str, str], int] = {}
 
+    def forget(self, key: str) -> None:
+        """The sender on `key` is gone: a new process there numbers its messages from 0
+        again, which is neither a gap nor stale."""
+        for stream in [s for s in self._last_seq if s[1] == key]:
+            del self._last_seq[stream]
+
     def decode(self, rec: Received) -> Inbound | None:
         try:
             msg = decode(rec.payload)

@@ -161,6 +161,13 @@ class LinkDecoder(Decoder):
                 tally.observe(head.seq, age_s if head.stamp_s >= self.ages_from_s else None)
         return inbound
 
+    def forget(self, key: str) -> None:
+        """As Decoder.forget; the old process's tally still counts in the link's totals."""
+        super().forget(key)
+        tally = self.tallies.pop(key, None)
+        if tally is not None:
+            self.tallies[f"{key}#{len(self.tallies)}"] = tally
+
     def link_counters(self) -> dict[str, int]:
         """The per-link counters described in the module docstring."""
         merged: dict[str, LinkTally] = {}

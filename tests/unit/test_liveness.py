@@ -106,3 +106,23 @@ def test_a_status_without_a_known_token_refreshes_the_watch() -> None:
     status(other, 1)
     watch.members(0.3)  # heard, token unknown: re-declared, history on the next poll
     assert watch.refreshes == 1 and watch.members(0.4) == {1}
+
+
+def test_a_returning_peer_numbering_from_zero_is_neither_stale_nor_duplicate() -> None:
+    from transport.bus import Received
+    from transport.link_stats import LinkDecoder
+    from transport.messages import FollowerState, Header
+
+    key = KEYS.follower_state(3)
+    z = (0.0, 0.0)
+
+    def rec(seq: int) -> Received:
+        msg = FollowerState(Header("follower-3", seq, 1.0 + seq), 3, z, z, z, z, z, z, 0.0, ())
+        return Received(key, encode(msg), 2.0 + seq)
+
+    dec = LinkDecoder()
+    assert all(dec.decode(rec(k)) is not None for k in range(6))
+    dec.forget(key)  # it left; a new process comes back on the same key
+    assert all(dec.decode(rec(k)) is not None for k in range(3))
+    counters = dec.counters()
+    assert counters["rx_f3"] == 9 and counters["rx_dup_f3"] == 0 and counters["seq_stale"] == 0
