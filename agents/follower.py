@@ -119,6 +119,7 @@ class FollowerNode:
         self.setup, self.members = new, members
         self._follow(set(new.neighbours) | {new.successor})
         self.status.counters["membership_changes"] += 1
+        self.status.counters["members"] = len(members)  # as this follower sees the swarm
 
     def ingest(self) -> None:
         for sub in [*self.subs, *self.peer_subs.values()]:
