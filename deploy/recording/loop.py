@@ -72,6 +72,10 @@ class Recorder:
     # ---- one iteration -------------------------------------------------------------------
     def step(self) -> int:
         """Drain and handle every queued sample; the number decoded."""
+        # Membership first: its events must not wait behind a backlog of samples.
+        members = self.liveness.members(self.bus.now_s())
+        if members and (not self.membership or members != self.membership[-1][1]):
+            self.membership.append((self.bus.now_s(), members))
         inbound = self.decoder.drain(self._sub)
         for item in inbound:
             self.mcap.write(item.received.key, item.message, item.received.recv_stamp_s)
@@ -79,9 +83,6 @@ class Recorder:
             msg = item.message
             if isinstance(msg, ProcessStatus) and msg.role == "follower":
                 self.follower_status[msg.index] = msg
-        members = self.liveness.members(self.bus.now_s())
-        if members and (not self.membership or members != self.membership[-1][1]):
-            self.membership.append((self.bus.now_s(), members))
         if self.asm.start is not None and self.state == "linked":
             self._info = RunInfo.from_scenario(self.scenario, "networked",
                                                self.asm.start.duration_s)
