@@ -98,3 +98,31 @@ def test_signal_stops_the_loop(paper: Scenario, tmp_path: Path) -> None:
         assert recorder.run(lambda: next(calls), poll_s=0.0) == "signal"
         recorder.finish()
     assert (tmp_path / MCAP_FILE).stat().st_size > 0
+
+
+@pytest.mark.timeout(60)
+def test_membership_changes_become_phases_and_marks(paper: Scenario, tmp_path: Path) -> None:
+    """Follower 4 (index 3) leaves 1 s into a 2-s run: two phases in metrics.json."""
+    hub, keys = MemoryHub(), SwarmKeys("members")
+    run = SynthRun(paper, keys, START_S, duration_s=2.0)
+    clock = [START_S - 1.0]
+    tokens = [MemoryBus(hub, f"f{i}").declare_token(keys.alive("follower", i)) for i in range(4)]
+    with MemoryBus(hub, "recorder", clock=lambda: clock[0]) as rbus, \
+            MemoryBus(hub, "swarm") as sbus:
+        recorder = Recorder(rbus, "members", paper, tmp_path)
+        control = Stamper("launcher-0")
+        sbus.publish(keys.control(), encode(run.control(control, "start")))
+        for key, msg in run.samples():
+            clock[0] = msg.header.stamp_s
+            if clock[0] >= START_S + 1.0:
+                tokens[3].close()  # as a SIGKILLed process's token goes (closing twice: no-op)
+            sbus.publish(key, encode(msg))
+            recorder.step()
+        sbus.publish(keys.control(), encode(run.control(control, "stop")))
+        assert recorder.run(lambda: False, poll_s=0.0) == "control_stop"
+        assert recorder.finish()
+    membership = json.loads((tmp_path / "metrics.json").read_text())["membership"]
+    assert membership["changes_s"] == [pytest.approx(1.0, abs=0.03)]
+    first, second = membership["phases"]
+    assert first["members"] == [0, 1, 2, 3] and second["members"] == [0, 1, 2]
+    assert first["reform_s"] == 0.0  # the synthetic ring is the planned one throughout
