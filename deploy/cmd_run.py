@@ -241,7 +241,8 @@ class Launch:
         t0 = time.monotonic() + START_DELAY_S
         self.watchdog = Watchdog(self.sup, self.policy, t0, self._before_restart)
         self.injector = FaultRunner(
-            self.sup, self.faults, t0, self.watchdog.events, self.watchdog.pending
+            self.sup, self.faults, t0, self.watchdog.events, self.watchdog.pending,
+            self._before_restart,
         )
         next_report = next_word = start
         bus.publish(self.keys.control(), encode(word))

@@ -29,6 +29,7 @@ class FaultRunner:
     t0_s: float  # monotonic time of the experiment's start
     events: list[dict[str, Any]]  # shared with the Watchdog: one timeline in launch.json
     pending_restarts: dict[str, float] = field(default_factory=dict)  # the Watchdog's
+    before_restart: Callable[[Child], None] = lambda _c: None  # as the Watchdog's
     clock: Callable[[], float] = time.monotonic
     # (experiment time, what, process): "inject" a fault, "resume" a pause, "start" again
     _todo: list[tuple[float, str, str, FaultSpec]] = field(default_factory=list)
@@ -67,6 +68,7 @@ class FaultRunner:
             return False
         else:
             self.pending_restarts.pop(name, None)  # the fault's own return, not the policy's
+            self.before_restart(child)
             self.sup.restart(child)
             self._event(t, name, "started", pid=child.pid)
         return True
