@@ -215,6 +215,8 @@ def inner_argv(args: argparse.Namespace, out: Path, swarm: str, duration_s: floa
              "--noise-std-m", repr(args.noise_std_m), "--link-timeout", repr(args.link_timeout)]
     if args.zenoh_config:
         argv += ["--zenoh-config", str(Path(args.zenoh_config).resolve())]
+    if getattr(args, "insecure", False):
+        argv.append("--insecure")
     return argv + network_overrides(args)
 
 
