@@ -31,6 +31,7 @@ from agents.process import StatusReporter, add_bus_arguments, load_run_scenario,
 from agents.scenario import Scenario
 from agents.vehicle_loop import add_vehicle_arguments, fly
 from transport.bus import Bus
+from transport.checks import DEFAULT_LIMITS, newer
 from transport.codec import encode
 from transport.decoder import Decoder
 from transport.impairment import ImpairedBus
@@ -79,7 +80,8 @@ class FollowerNode:
         self.subs += [bus.subscribe(self.keys.follower_state(j)) for j in peers]
         self.out = bus.declare_publisher(self.keys.follower_state(index))
         self.stamper = Stamper(f"follower-{index}", bus.now_s)
-        self.decoder: Decoder = LinkDecoder()  # + per-link rx and age (transport.link_stats)
+        # Checked, not trusted (transport.checks); + per-link rx and age (transport.link_stats)
+        self.decoder: Decoder = LinkDecoder(limits=DEFAULT_LIMITS)
         self.status = StatusReporter(bus, self.keys, "follower", index)
         self.memory = FollowerMemory()
         self.peers: dict[int, PeerView] = {}
@@ -103,7 +105,7 @@ class FollowerNode:
             )
         elif isinstance(msg, FollowerState) and msg.index != self.index:
             known = self.peers.get(msg.index)
-            if known is None or msg.header.stamp_s > known.r.stamp_s:
+            if known is None or newer(msg.header.stamp_s, known.r.stamp_s, self.bus.now_s()):
                 self.peers[msg.index] = peer_view(msg, self.index)
         elif isinstance(msg, RunControl):
             if msg.command == "start":

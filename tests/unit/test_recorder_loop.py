@@ -80,8 +80,8 @@ def test_no_truth_gives_error_metrics_and_keeps_the_mcap(
     run = SynthRun(paper, keys, START_S)
     with MemoryBus(hub, "recorder") as rbus, MemoryBus(hub, "swarm") as sbus:
         recorder = Recorder(rbus, "empty", paper, tmp_path)
-        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "start")))
-        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "stop")))
+        sbus.publish(keys.control(), encode(run.control(Stamper("launcher-0"), "start")))
+        sbus.publish(keys.control(), encode(run.control(Stamper("launcher-0"), "stop")))
         recorder.run(lambda: False, poll_s=0.0)
         assert not recorder.finish()
     metrics = json.loads((tmp_path / "metrics.json").read_text())
