@@ -190,10 +190,11 @@ class Launch:
     def execute(self) -> int:
         self.out.mkdir(parents=True, exist_ok=True)
         log.info(
-            "run directory %s; swarm %s; Zenoh rendezvous %s",
+            "run directory %s; swarm %s; Zenoh rendezvous %s; vehicles on UDP 127.0.0.1:%d+",
             self.out,
             self.keys.swarm,
             self.endpoint,
+            self.vehicle_base,
         )
         t0 = time.monotonic()
         interrupted = False

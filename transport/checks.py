@@ -38,9 +38,9 @@ class Limits:
 
 
 DEFAULT_LIMITS = Limits()
-# The recorder judges senders and values but not time: it also records replays of
+# The recorder refuses future stamps but not old ones: it also records replays of
 # synthetic runs, whose stamps are from another day.
-NO_TIME_LIMITS = Limits(future_s=math.inf, max_age_s=math.inf)
+RECORDER_LIMITS = Limits(max_age_s=math.inf)
 
 
 def _finite(values: Iterable[float]) -> bool:
