@@ -105,7 +105,8 @@ json_like = st.recursive(
 
 @settings(max_examples=500, deadline=None)
 @given(st.lists(json_like, max_size=16), st.integers(0, 15), json_like)
-def test_codec_mutated_messages_raise_only_codec_error(items: list, pos: int, value: object) -> None:
+def test_codec_mutated_messages_raise_only_codec_error(items: list, pos: int,
+                                                       value: object) -> None:
     good = msgpack.unpackb(encode(state()))
     mutated = list(good)
     mutated[pos % len(mutated)] = value
