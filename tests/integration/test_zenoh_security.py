@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import stat
 from pathlib import Path
 
@@ -62,3 +63,16 @@ def test_rights_per_process_and_no_join_without_a_swarm_certificate(tmp_path: Pa
         assert all(p != b"forged" for _, p in seen), seen
         assert plain.peers() == [] and foreign.peers() == []  # never linked
         assert {k for k, _ in seen} == {KEYS.follower_state(1)}
+
+
+def test_enclose_keys_makes_a_swarms_credentials(tmp_path: Path) -> None:
+    from deploy.cli import main
+
+    assert main(["keys", str(tmp_path / "k"), "paper", "--swarm", "field"]) == 0
+    files = {f.name: f for f in (tmp_path / "k").iterdir()}
+    assert {"ca.pem", "ca.key", "acl.json", "mavlink-signing-key.bin", "launcher.json",
+            "follower-3.json", "target-1.key"} <= set(files)
+    assert all(stat.S_IMODE(f.stat().st_mode) == 0o600 for f in files.values())
+    ident = Identity.load(files["follower-3.json"])
+    acl = ident.acl()
+    assert "enclose/field/follower/3/state" in json.dumps(acl)
