@@ -33,6 +33,7 @@ from agents.process import StatusReporter, add_bus_arguments, load_run_scenario,
 from agents.scenario import Scenario
 from agents.vehicle_loop import add_vehicle_arguments, fly
 from transport.bus import Bus, Subscription
+from transport.checks import DEFAULT_LIMITS, newer
 from transport.codec import encode
 from transport.decoder import Decoder
 from transport.impairment import ImpairedBus
@@ -84,7 +85,8 @@ class FollowerNode:
         self._follow(set(self.setup.neighbours) | {self.setup.successor})
         self.out = bus.declare_publisher(self.keys.follower_state(index))
         self.stamper = Stamper(f"follower-{index}", bus.now_s)
-        self.decoder: Decoder = LinkDecoder()  # + per-link rx and age (transport.link_stats)
+        # Checked, not trusted (transport.checks); + per-link rx and age (transport.link_stats)
+        self.decoder: Decoder = LinkDecoder(limits=DEFAULT_LIMITS)
         self.status = StatusReporter(bus, self.keys, "follower", index)
         self.memory = FollowerMemory()
         self.peers: dict[int, PeerView] = {}
@@ -137,7 +139,7 @@ class FollowerNode:
             )
         elif isinstance(msg, FollowerState) and msg.index in self.peer_subs:
             known = self.peers.get(msg.index)
-            if known is None or msg.header.stamp_s > known.r.stamp_s:
+            if known is None or newer(msg.header.stamp_s, known.r.stamp_s, self.bus.now_s()):
                 self.peers[msg.index] = peer_view(msg, self.index)
         elif isinstance(msg, RunControl):
             if msg.command == "start":

@@ -22,6 +22,7 @@ from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
 from transport.bus import Bus
 from transport.codec import encode
+from transport.credentials import Identity
 from transport.keys import SwarmKeys
 from transport.messages import ProcessStatus, Stamper
 from transport.zenoh_bus import ZenohBus
@@ -54,6 +55,13 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="JSON5",
         help="your own Zenoh config file, used as the base",
     )
+    parser.add_argument(
+        "--credentials",
+        default=None,
+        metavar="IDENTITY_JSON",
+        help="this process's identity file (transport.credentials): mTLS + access control; "
+        "without it the session is unauthenticated",
+    )
     parser.add_argument("--log-level", default="INFO")
     add_network_arguments(parser)
 
@@ -71,6 +79,7 @@ def open_bus(args: argparse.Namespace) -> Bus:
         connect=tuple(args.connect),
         user_config_path=args.zenoh_config,
         link=load_run_scenario(args).network.link,
+        identity=None if args.credentials is None else Identity.load(args.credentials),
     )
     return ZenohBus(cfg)
 

@@ -5,12 +5,13 @@ from __future__ import annotations
 import argparse
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 from agents.errors import MavlinkError
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter, VehicleState
 from agents.mavlink.modes import OFFBOARD_MODE
+from agents.mavlink.signing import load_key
 from agents.mavlink.startup import start_offboard
 from agents.process import StatusReporter, StopFlag, Ticker, open_bus, stop_on_signals
 from agents.scenario import Scenario
@@ -80,12 +81,16 @@ def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the adapter of vehicle v binds BASE+v (PX4 SITL: 14540)")
     parser.add_argument("--mav-vehicle-base", type=int, default=14580,
                         help="vehicle v listens on BASE+v (PX4 SITL: 14580)")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="32-byte MAVLink 2 signing key: sign everything sent to the vehicle")
 
 
 def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, vehicle: int,
         make_node: NodeFactory) -> int:
     """Take off, declare the process linked, tick until stopped; returns the exit code."""
     cfg = AdapterConfig.px4_sitl(vehicle, args.mav_local_base, args.mav_vehicle_base)
+    if args.signing_key is not None:  # link id: the vehicle's number, one stream per agent
+        cfg = replace(cfg, signing_key=load_key(args.signing_key), signing_link_id=vehicle & 0xFF)
     keys = SwarmKeys(args.swarm)
     with stop_on_signals() as stop, open_bus(args) as bus, MavlinkAdapter(cfg, bus.now_s) as mav:
         node = make_node(bus, mav)

@@ -17,6 +17,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "deploy.report",
     "deploy.cmd_sim",
     "deploy.sweep",
+    "deploy.run_secrets",
 )
 
 

@@ -26,6 +26,7 @@ from deploy.restarts import (
     add_supervision_arguments,
 )
 from deploy.run_monitor import StatusBoard, show_progress
+from deploy.run_secrets import RunSecrets
 from deploy.supervisor import Child, Supervisor
 from transport.bus import Bus
 from transport.codec import encode
@@ -59,6 +60,11 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--link-timeout", type=float, default=120.0, help="seconds to wait for all to link"
     )
+    p.add_argument(
+        "--insecure",
+        action="store_true",
+        help="no Zenoh authentication/access control and no MAVLink signing (not recommended)",
+    )
     add_supervision_arguments(p)
     add_network_arguments(p)
     add_netns_arguments(p)
@@ -70,6 +76,11 @@ def _main(args: argparse.Namespace) -> int:
     duration = scenario.run.duration_s if args.duration is None else args.duration
     if duration <= 0:
         raise DeployError("--duration must be > 0")
+    if scenario.network.link != "tcp" and not args.insecure:
+        raise DeployError(
+            f"network.link = {scenario.network.link!r} cannot be authenticated (Zenoh mTLS "
+            "runs over TCP): use link tcp, or --insecure"
+        )
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = (args.out or Path("runs") / f"run-{scenario.name}-{stamp}").resolve()
     swarm = args.swarm or f"{scenario.name}-{stamp}".replace("_", "-")
@@ -99,7 +110,10 @@ class Launch:
         blocks = [
             range(b, b + scenario.n + scenario.m) for b in (self.vehicle_base, self.adapter_base)
         ]
-        self.endpoint = rendezvous_endpoint(scenario.network.link, avoid=blocks)
+        self.endpoint = rendezvous_endpoint(
+            scenario.network.link, avoid=blocks, secure=not args.insecure
+        )
+        self.secrets = RunSecrets(None)
         self.timings: dict[str, float] = {}
         self.board = StatusBoard()
         self.policy = RestartPolicy(args.restart, args.max_restarts)
@@ -136,14 +150,20 @@ class Launch:
                 str(self.adapter_base),
                 "--noise-std-m",
                 str(self.args.noise_std_m),
+                *self.secrets.args_for("sim"),
             ],
         )
         joins = [*c, "--connect", self.endpoint]
-        self.sup.start("recorder", "deploy.recorder", [*joins, "--out", str(self.out)])
+        sec = self.secrets.args_for
+        self.sup.start(
+            "recorder", "deploy.recorder", [*joins, "--out", str(self.out), *sec("recorder")]
+        )
         for i in range(s.n):
-            self.sup.start(f"follower-{i}", "agents.follower", [*joins, *mav, "--index", str(i)])
+            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
+            self.sup.start(f"follower-{i}", "agents.follower", argv)
         for j in range(s.m):
-            self.sup.start(f"target-{j}", "agents.target", [*joins, *mav, "--index", str(j)])
+            argv = [*joins, *mav, "--index", str(j), *sec(f"target-{j}")]
+            self.sup.start(f"target-{j}", "agents.target", argv)
 
     def expected_tokens(self) -> set[str]:
         k, s = self.keys, self.scenario
@@ -185,13 +205,16 @@ class Launch:
     def execute(self) -> int:
         self.out.mkdir(parents=True, exist_ok=True)
         log.info(
-            "run directory %s; swarm %s; Zenoh rendezvous %s",
+            "run directory %s; swarm %s; Zenoh rendezvous %s; vehicles on UDP 127.0.0.1:%d+",
             self.out,
             self.keys.swarm,
             self.endpoint,
+            self.vehicle_base,
         )
         t0 = time.monotonic()
         interrupted = False
+        s = self.scenario
+        self.secrets = RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure)
         try:
             self.start_all()
             with ZenohBus(
@@ -199,6 +222,7 @@ class Launch:
                     connect=(self.endpoint,),
                     user_config_path=self.args.zenoh_config,
                     link=self.scenario.network.link,
+                    identity=self.secrets.identity("launcher"),
                 )
             ) as bus:
                 self.board.subscription = bus.subscribe(self.keys.all_status())

@@ -16,6 +16,7 @@ from typing import Any
 
 from agents.errors import EncloseError
 from agents.mavlink.modes import FLAVOURS
+from agents.mavlink.signing import load_key
 from agents.scenario import HomeConfig, VehicleConfig
 from agents.scenario_file import load_scenario
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned, spawn_points_ned
@@ -46,6 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="vehicle i listens on BASE+i (PX4 SITL: 14580)")
     parser.add_argument("--send-base-port", type=int, default=14540,
                         help="vehicle i sends telemetry to SEND_BASE+i (PX4 SITL: 14540)")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="32-byte MAVLink 2 signing key: vehicles drop unsigned or badly "
+                        "signed messages (default: unsigned, so any ground station connects)")
     parser.add_argument("--duration-s", type=float, default=None,
                         help="stop after this much simulated time (default: until Ctrl-C)")
 
@@ -60,7 +64,8 @@ def build_simulator(args: argparse.Namespace) -> Simulator:
         spawn, vehicle, home = spawn_points_ned(scenario), scenario.vehicle, scenario.home
     cfg = SimConfig(rate_hz=args.rate_hz, telemetry_hz=args.telemetry_hz,
                     flavour=args.flavour or vehicle.flavour, host=args.host,
-                    listen_base_port=args.base_port, send_base_port=args.send_base_port)
+                    listen_base_port=args.base_port, send_base_port=args.send_base_port,
+                    signing_key=None if args.signing_key is None else load_key(args.signing_key))
     return Simulator(spawn, vehicle, home, cfg)
 
 

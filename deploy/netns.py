@@ -219,6 +219,8 @@ def inner_argv(args: argparse.Namespace, out: Path, swarm: str, duration_s: floa
         argv += ["--fault", fault]
     if args.zenoh_config:
         argv += ["--zenoh-config", str(Path(args.zenoh_config).resolve())]
+    if getattr(args, "insecure", False):
+        argv.append("--insecure")
     return argv + network_overrides(args)
 
 

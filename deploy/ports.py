@@ -24,15 +24,16 @@ def free_udp_port(host: str = HOST) -> int:
         return int(sock.getsockname()[1])
 
 
-def rendezvous_endpoint(link: str, avoid: Sequence[range] = ()) -> str:
-    """The endpoint the simulator listens on and everyone connects to, in the run's protocol.
+def rendezvous_endpoint(link: str, avoid: Sequence[range] = (), secure: bool = False) -> str:
+    """The endpoint the simulator listens on and everyone connects to, in the run's protocol
+    (`tls` over a TCP port for an authenticated run).
 
     A UDP port must not fall in the MAVLink blocks (`avoid`), bound only later by the sim.
     """
     for _ in range(50):
         port = free_udp_port() if link == "udp" else free_tcp_port()
         if link != "udp" or not any(port in r for r in avoid):
-            return loopback_endpoint(port, link)
+            return loopback_endpoint(port, "tls" if secure and link == "tcp" else link)
     raise DeployError(f"no free {link} port on {HOST} outside the MAVLink blocks")
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from agents.frames import ned_to_enu
 from agents.liveness import MembershipWatch
+from agents.mavlink.signing import load_key
 from agents.membership import membership
 from agents.process import (
     StatusReporter,
@@ -115,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
         flavour=scenario.vehicle.flavour,
         listen_base_port=args.base_port,
         send_base_port=args.send_base_port,
+        signing_key=None if args.signing_key is None else load_key(args.signing_key),
     )
     keys = SwarmKeys(args.swarm)
     with stop_on_signals() as stop, open_bus(args) as bus:
@@ -169,6 +171,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the observation noise")
     parser.add_argument("--base-port", type=int, default=14580)
     parser.add_argument("--send-base-port", type=int, default=14540)
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="MAVLink 2 signing key the vehicles enforce")
     return process_main(parser, argv, run, lambda _a: "sim")
 
 

@@ -97,6 +97,8 @@ class SweepSpec:
         argv += ["--out", str(cell_dir)]
         for key, value in (*self.fixed, *cell.values):
             argv += [flag(key), format_value(value)]
+        if ("link", "udp") in (*self.fixed, *cell.values):
+            argv.append("--insecure")  # Zenoh's authenticated links (mTLS) are TCP only
         return [*argv, "--impair-seed", str(cell.seed)]
 
 

@@ -14,7 +14,8 @@ from collections import Counter
 from pymavlink.dialects.v20 import common as mavlink2
 
 from agents.mavlink.modes import MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, decode_custom_mode
-from agents.mavlink.wire import decode_datagram, encode, new_codec
+from agents.mavlink.signing import SignatureVerifier
+from agents.mavlink.wire import decode_datagram, encode, frame_bytes, new_codec
 from agents.scenario import HomeConfig
 from sim_backend import telemetry as tm
 from sim_backend.autopilot import ACCEPTED, DENIED, Autopilot
@@ -57,6 +58,9 @@ class VehicleEndpoint:
             msg_id: (index % max(1, round(interval / tick_s))) * tick_s
             for msg_id, interval in self.intervals.items()}
         self._announced: tuple[str, bool] = ("", False)
+        # Set when the vehicle enforces MAVLink 2 signing (like PX4 with a key): received
+        # messages failing it are dropped and counted (signing_rejected_<reason>).
+        self.verifier: SignatureVerifier | None = None
 
     # ---- receive ------------------------------------------------------------------------
     def on_datagram(self, data: bytes, addr: Addr, now_s: float, row: tm.Row) -> None:
@@ -64,10 +68,20 @@ class VehicleEndpoint:
         decoded = decode_datagram(self.mav, data)
         if decoded.bad:
             self.counters["bad_packets"] += decoded.bad
-        if decoded.messages:
+        messages = [m for m in decoded.messages if self._signed_ok(m)]
+        if messages:
             self._remember(addr, now_s)
-        for msg in decoded.messages:
+        for msg in messages:
             self._dispatch(msg, addr, now_s, row)
+
+    def _signed_ok(self, msg: mavlink2.MAVLink_message) -> bool:
+        if self.verifier is None:
+            return True
+        reason = self.verifier.check(frame_bytes(msg), msg.get_msgId(), msg.get_srcSystem(),
+                                     msg.get_srcComponent())
+        if reason is not None:
+            self.counters[f"signing_rejected_{reason}"] += 1
+        return reason is None
 
     def _remember(self, addr: Addr, now_s: float) -> None:
         if addr not in self.peers and len(self.peers) >= MAX_PEERS:

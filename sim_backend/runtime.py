@@ -21,6 +21,7 @@ import numpy as np
 from agents.errors import SimulatorError
 from agents.frames import enu_to_ned
 from agents.mavlink.modes import FLAVOURS
+from agents.mavlink.signing import SignatureVerifier
 from agents.scenario import HomeConfig, Scenario, VehicleConfig
 from sim_backend import model
 from sim_backend.autopilot import Autopilot
@@ -44,6 +45,7 @@ class SimConfig:
     host: str = "127.0.0.1"
     listen_base_port: int = 14580
     send_base_port: int = 14540
+    signing_key: bytes | None = None  # vehicles enforce MAVLink 2 signing with this key
 
 
 @dataclass(frozen=True)
@@ -124,6 +126,8 @@ class Simulator:
         dest = (self.cfg.host, self.cfg.send_base_port + i)
         endpoint = VehicleEndpoint(sysid, sock, dest, autopilot, store, home,
                                    self.cfg.telemetry_hz, self.counters, index=i, tick_s=self.dt_s)
+        if self.cfg.signing_key is not None:
+            endpoint.verifier = SignatureVerifier(self.cfg.signing_key)
         self._selector.register(sock, selectors.EVENT_READ, i)
         return endpoint
 

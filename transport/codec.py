@@ -195,7 +195,8 @@ def decode(payload: bytes) -> Message:
         raise _fail("version", f"version {version!r} is not an int")
     if not MIN_VERSION <= version <= CODEC_VERSION:
         raise _fail("version", f"version {version} not in [{MIN_VERSION}, {CODEC_VERSION}]")
-    if isinstance(tag, bool) or tag not in _BY_TAG:
+    # A list or map as tag is unhashable: `in` would raise TypeError (found by fuzzing).
+    if isinstance(tag, bool) or not isinstance(tag, int | str) or tag not in _BY_TAG:
         raise _fail("unknown_type", f"type tag {tag!r}")
     cls, fields = _BY_TAG[tag]
     present = [f for f in fields if f.since <= version]

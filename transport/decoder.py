@@ -3,7 +3,8 @@
 A `Decoder` belongs to one process loop.  Every payload that fails to decode
 is dropped and counted under its `CodecError.reason`; a message whose type is
 not expected on that subscription, or whose index disagrees with its key, is
-dropped too.  Per stream -- (sender id, key), since a sender numbers each
+dropped too, and so, given `limits`, is an implausible one (transport.checks).
+Per stream -- (sender id, key), since a sender numbers each
 key it publishes on separately -- it counts sequence gaps (messages never seen) and
 stale messages (sequence number not above the last one: duplicated or
 reordered) -- stale messages are still delivered, flagged, since only the
@@ -18,6 +19,7 @@ from dataclasses import dataclass
 
 from agents.errors import CodecError
 from transport.bus import Received, Subscription
+from transport.checks import Limits, check
 from transport.codec import decode
 from transport.keys import parse_key
 from transport.messages import FollowerState, Message, TargetObservation
@@ -51,8 +53,10 @@ def _key_index_ok(msg: Message, key: str) -> bool:
 class Decoder:
     """Decodes, validates and counts; `expect` limits the accepted message types."""
 
-    def __init__(self, expect: tuple[type, ...] | None = None) -> None:
+    def __init__(self, expect: tuple[type, ...] | None = None,
+                 limits: Limits | None = None) -> None:
         self.expect = expect
+        self.limits = limits  # with limits, implausible messages are dropped (transport.checks)
         self.dropped: Counter[str] = Counter()
         self.accepted = 0
         self.gaps: Counter[str] = Counter()  # per sender id, over its streams
@@ -77,6 +81,11 @@ class Decoder:
         if not _key_index_ok(msg, rec.key):
             self.dropped["key_mismatch"] += 1
             return None
+        if self.limits is not None:
+            reason = check(msg, rec.key, rec.recv_stamp_s, self.limits)
+            if reason is not None:
+                self.dropped[f"rejected_{reason}"] += 1
+                return None
         self.accepted += 1
         return Inbound(msg, rec, self._track(msg.header.sender_id, rec.key, msg.header.seq))
 

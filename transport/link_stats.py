@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from transport.bus import Received
+from transport.checks import Limits
 from transport.decoder import Decoder, Inbound
 from transport.keys import parse_key
 from transport.messages import RunControl
@@ -137,8 +138,9 @@ def _us(value_s: float | None) -> int | None:
 class LinkDecoder(Decoder):
     """A Decoder that also tallies, per link, unique deliveries and their age."""
 
-    def __init__(self, expect: tuple[type, ...] | None = None) -> None:
-        super().__init__(expect)
+    def __init__(self, expect: tuple[type, ...] | None = None,
+                 limits: Limits | None = None) -> None:
+        super().__init__(expect, limits)
         self.tallies: dict[str, LinkTally] = {}  # per key
         self.ages_from_s = -float("inf")
 

@@ -8,6 +8,10 @@ message stamps need, and non-empty `listen`/`connect` lists given here, which
 are explicit choices of the caller.  Keys the file leaves unset get the safe
 values, so a file that only tunes, say, buffers never opens multicast scouting
 or a listener on every interface.
+
+With an `identity` (transport.credentials) the session is authenticated: every link
+is mutual TLS with the swarm's CA (a peer without a swarm certificate cannot link),
+and the swarm's `access_control` rules are loaded; default endpoints become `tls/`.
 """
 
 from __future__ import annotations
@@ -19,9 +23,11 @@ from pathlib import Path
 import zenoh
 
 from agents.errors import ConfigError
+from transport.credentials import Identity
 
 LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
 LINK_PROTOCOLS = ("tcp", "udp")
+ENDPOINT_PROTOCOLS = (*LINK_PROTOCOLS, "tls")
 _MODES = ("peer", "client", "router")
 
 
@@ -35,6 +41,7 @@ class ZenohConfig:
     user_config_path: str | None = None
     lowlatency: bool = False  # `transport/unicast/lowlatency`; also turns QoS off
     link: str = "tcp"  # protocol of the default listen endpoint (scenario `[network] link`)
+    identity: Identity | None = None  # None: unauthenticated (`--insecure`)
 
     def __post_init__(self) -> None:
         if self.mode not in _MODES:
@@ -47,6 +54,9 @@ class ZenohConfig:
             for e in endpoints:
                 if "/" not in e:
                     raise ConfigError(field, f"{e!r} is not a locator like tcp/127.0.0.1:7447")
+        if self.identity is not None and self.link != "tcp":
+            raise ConfigError("zenoh.link", f"{self.link!r} cannot be authenticated (mTLS is "
+                              "over TCP): use link tcp, or --insecure")
         if self.user_config_path is not None and not Path(self.user_config_path).is_file():
             raise ConfigError("zenoh.user_config_path", f"{self.user_config_path} is not a file")
 
@@ -74,8 +84,9 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
     user = cfg.user_config_path is not None
     if not (user and _is_set(config, default, "mode")):
         _put(config, "mode", cfg.mode)
+    proto = "tls" if cfg.identity is not None else cfg.link
     if cfg.listen or not (user and _is_set(config, default, "listen/endpoints")):
-        _put(config, "listen/endpoints", list(cfg.listen or (loopback_endpoint(0, cfg.link),)))
+        _put(config, "listen/endpoints", list(cfg.listen or (loopback_endpoint(0, proto),)))
     if cfg.connect:
         _put(config, "connect/endpoints", list(cfg.connect))
     if not (user and _is_set(config, default, "scouting/multicast/enabled")):
@@ -84,17 +95,34 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
     if cfg.lowlatency:
         _put(config, "transport/unicast/lowlatency", True)
         _put(config, "transport/unicast/qos/enabled", False)
+    if cfg.identity is not None:
+        _secure(config, cfg.identity)
     return config
 
 
+def _secure(config: zenoh.Config, ident: Identity) -> None:
+    """mTLS on every link with the swarm's CA, and the swarm's ACL (transport.access)."""
+    _put(config, "transport/link/tls", {
+        "root_ca_certificate": ident.ca_path,
+        "listen_private_key": ident.key_path,
+        "listen_certificate": ident.cert_path,
+        "connect_private_key": ident.key_path,
+        "connect_certificate": ident.cert_path,
+        "enable_mtls": True,
+        # The certificate names a process, not a host; trust comes from the private CA.
+        "verify_name_on_connect": False,
+    })
+    _put(config, "access_control", ident.acl())
+
+
 def loopback_endpoint(port: int, proto: str = "tcp") -> str:
-    """`<proto>/127.0.0.1:<port>`, proto tcp or udp: the only kind of endpoint used by default.
+    """`<proto>/127.0.0.1:<port>`, proto tcp, udp or tls: the only kind of endpoint used by default.
 
     Port 0 lets the OS choose, for udp as for tcp (Zenoh 1.10 binds `udp/127.0.0.1:0` and
     gossips the port it got, so peers listening that way still mesh).
     """
     if not 0 <= port <= 65535:
         raise ConfigError("zenoh.port", f"{port} out of range")
-    if proto not in LINK_PROTOCOLS:
-        raise ConfigError("zenoh.link", f"{proto!r} not in {LINK_PROTOCOLS}")
+    if proto not in ENDPOINT_PROTOCOLS:
+        raise ConfigError("zenoh.link", f"{proto!r} not in {ENDPOINT_PROTOCOLS}")
     return f"{proto}/127.0.0.1:{port}"

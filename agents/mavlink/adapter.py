@@ -27,8 +27,9 @@ from agents.mavlink.modes import (
     decode_custom_mode,
     flavour_of_autopilot,
 )
+from agents.mavlink.signing import signing_timestamp
 from agents.mavlink.timemap import BootClockMap
-from agents.mavlink.wire import MAVLinkMessage, decode_datagram, encode, new_codec
+from agents.mavlink.wire import MAVLinkMessage, decode_datagram, encode, new_codec, sign_outgoing
 
 log = logging.getLogger(__name__)
 Addr = tuple[str, int]
@@ -66,6 +67,8 @@ class AdapterConfig:
     own_sysid: int = 245
     own_compid: int = 191
     link_timeout_s: float = 0.5
+    signing_key: bytes | None = None  # MAVLink 2 signing of everything we send
+    signing_link_id: int = 0
 
     @classmethod
     def px4_sitl(cls, index: int, local_base: int = 14540, vehicle_base: int = 14580,
@@ -83,6 +86,11 @@ class MavlinkAdapter:
         self.clock = clock
         self.counters: Counter[str] = Counter()
         self.mav = new_codec(cfg.own_sysid, cfg.own_compid)
+        self.tx = self.mav  # the codec that packs what we send: a signing one when keyed
+        if cfg.signing_key is not None:
+            self.tx = new_codec(cfg.own_sysid, cfg.own_compid)
+            sign_outgoing(self.tx, cfg.signing_key, cfg.signing_link_id,
+                          signing_timestamp(time.time()))
         self.sysid = cfg.target_sysid
         self.flavour: str | None = None
         self.remote: Addr | None = None if cfg.remote_port is None else (cfg.remote_host,
@@ -265,6 +273,6 @@ class MavlinkAdapter:
             self.counters["tx_dropped"] += 1
             return
         try:
-            self.sock.sendto(encode(self.mav, msg), self.remote)
+            self.sock.sendto(encode(self.tx, msg), self.remote)
         except OSError:
             self.counters["tx_errors"] += 1

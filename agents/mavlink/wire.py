@@ -22,6 +22,23 @@ def new_codec(sysid: int, compid: int) -> mavlink2.MAVLink:
     return mav
 
 
+def sign_outgoing(mav: mavlink2.MAVLink, key: bytes, link_id: int, timestamp: int) -> None:
+    """Sign every packet `mav` packs from now on (MAVLink 2 signing, agents.mavlink.signing).
+
+    Only for a codec that sends: pymavlink's receive-side check is not trusted (it moves a
+    stream's timestamp before it verifies), so received frames go to a SignatureVerifier.
+    """
+    mav.signing.secret_key = key
+    mav.signing.link_id = link_id & 0xFF
+    mav.signing.timestamp = timestamp
+    mav.signing.sign_outgoing = True
+
+
+def frame_bytes(msg: MAVLinkMessage) -> bytes:
+    """The received frame of `msg` as it came off the wire, signature block included."""
+    return bytes(msg.get_msgbuf())
+
+
 @dataclass(frozen=True)
 class Decoded:
     """Good messages of one datagram and how many bad fragments it held."""

@@ -23,6 +23,7 @@ from deploy.recording.outputs import write_final_outputs
 from deploy.recording.progress import PROGRESS_FILE, live_errors, write_json_atomic
 from deploy.rundir import RunInfo
 from transport.bus import Bus, Congestion
+from transport.checks import RECORDER_LIMITS
 from transport.codec import encode
 from transport.decoder import Decoder
 from transport.keys import SwarmKeys
@@ -52,7 +53,7 @@ class Recorder:
         run_dir.mkdir(parents=True, exist_ok=True)
         self.mcap = McapLog(run_dir / MCAP_FILE,
                             metadata={"swarm": swarm, "scenario": scenario.name})
-        self.decoder = Decoder()
+        self.decoder = Decoder(limits=RECORDER_LIMITS)  # implausible messages dropped, counted
         self.asm = RunAssembler(scenario.n, scenario.m)
         self.state = "starting"
         self.stop_reason = ""

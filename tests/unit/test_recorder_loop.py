@@ -80,8 +80,8 @@ def test_no_truth_gives_error_metrics_and_keeps_the_mcap(
     run = SynthRun(paper, keys, START_S)
     with MemoryBus(hub, "recorder") as rbus, MemoryBus(hub, "swarm") as sbus:
         recorder = Recorder(rbus, "empty", paper, tmp_path)
-        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "start")))
-        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "stop")))
+        sbus.publish(keys.control(), encode(run.control(Stamper("launcher-0"), "start")))
+        sbus.publish(keys.control(), encode(run.control(Stamper("launcher-0"), "stop")))
         recorder.run(lambda: False, poll_s=0.0)
         assert not recorder.finish()
     metrics = json.loads((tmp_path / "metrics.json").read_text())
@@ -110,7 +110,7 @@ def test_membership_changes_become_phases_and_marks(paper: Scenario, tmp_path: P
     with MemoryBus(hub, "recorder", clock=lambda: clock[0]) as rbus, \
             MemoryBus(hub, "swarm") as sbus:
         recorder = Recorder(rbus, "members", paper, tmp_path)
-        control = Stamper("launcher-0")
+        control = Stamper("launcher-0", lambda: clock[0])  # checked against the bus clock
         sbus.publish(keys.control(), encode(run.control(control, "start")))
         for key, msg in run.samples():
             clock[0] = msg.header.stamp_s
@@ -118,6 +118,7 @@ def test_membership_changes_become_phases_and_marks(paper: Scenario, tmp_path: P
                 tokens[3].close()  # as a SIGKILLed process's token goes (closing twice: no-op)
             sbus.publish(key, encode(msg))
             recorder.step()
+        clock[0] += 0.1
         sbus.publish(keys.control(), encode(run.control(control, "stop")))
         assert recorder.run(lambda: False, poll_s=0.0) == "control_stop"
         assert recorder.finish()

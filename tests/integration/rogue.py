@@ -1,0 +1,162 @@
+"""A hostile process for the security tests (issue #12's attack), run as its own OS process.
+
+    python -m tests.integration.rogue --vehicle-port P --vehicles N --endpoint E --swarm S \
+        --followers N --fuzz-identity FILE --fuzz-count K --seconds T --out report.json
+
+- MAVLink: unsigned COMMAND_LONG force-disarm and NAV_LAND to every vehicle port every 0.2 s;
+  counts what it sent and every COMMAND_ACK it got back.
+- Zenoh without credentials: a plain peer connecting to the swarm's endpoint, publishing
+  forged follower states on every follower key at 50 Hz; records whether it ever linked.
+- Zenoh with follower j's certificate (`--fuzz-identity`): K random and mutated payloads on
+  follower j's state key, all of them invalid (garbage, wrong types, wrong sender or index,
+  non-finite, impossible or future-stamped values), paced over the run; and forged states on
+  follower j+1's key, which its rights do not cover.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import random
+import socket
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import msgpack
+
+from agents.mavlink.wire import decode_datagram, new_codec
+from transport.codec import encode
+from transport.credentials import Identity
+from transport.keys import SwarmKeys
+from transport.messages import FollowerState, Header
+from transport.zenoh_bus import ZenohBus
+from transport.zenoh_config import ZenohConfig
+
+ARM_DISARM, NAV_LAND, FORCE = 400, 21, 21196.0
+PARTS = os.environ.get("ROGUE_PARTS", "mav,plain,insider")
+
+
+def forged_state(i: int, seq: int, **kw: object) -> FollowerState:
+    f: dict[str, object] = dict(r_m=(500.0, -500.0), dr_m_s=(0.0, 0.0), phi_m=(0.0, 0.0),
+                                pos_m=(500.0, -500.0), vel_m_s=(0.0, 0.0), u_m_s=(0.0, 0.0),
+                                vehicle_stamp_s=time.time())
+    f.update(kw)
+    stamp = float(f.pop("stamp_s", time.time()))  # type: ignore[arg-type]
+    sender = str(f.pop("sender", f"follower-{i}"))
+    return FollowerState(Header(sender, seq, stamp), i, **f)  # type: ignore[arg-type]
+
+
+def fuzz_payload(rng: random.Random, j: int, seq: int) -> bytes:
+    """One invalid payload for follower j's key (each kind is refused by every receiver)."""
+    kind = rng.randrange(8)
+    if kind == 0:
+        return rng.randbytes(rng.randrange(0, 200))
+    if kind == 1:
+        good = msgpack.unpackb(encode(forged_state(j, seq)))
+        good[rng.randrange(len(good))] = rng.choice([None, "x", [1], {"a": 1}, b"\x00", True])
+        return bytes(msgpack.packb(good))
+    if kind == 2:
+        return encode(forged_state(j, seq, sender=f"follower-{j + 1}"))
+    if kind == 3:
+        return encode(forged_state(j + 1, seq))  # index does not match the key
+    if kind == 4:  # the codec refuses to encode a NaN: write it in by hand
+        good = msgpack.unpackb(encode(forged_state(j, seq)))
+        good[6] = [float("nan"), 0.0]
+        return bytes(msgpack.packb(good))
+    if kind == 5:
+        return encode(forged_state(j, seq, pos_m=(1e9, 0.0)))
+    if kind == 6:
+        return encode(forged_state(j, seq, stamp_s=time.time() + 1e6))
+    data = bytearray(encode(forged_state(j, seq)))
+    return bytes(data[: rng.randrange(1, len(data))])  # truncated
+
+
+def attack_mavlink(sock: socket.socket, ports: list[int], report: dict[str, int]) -> None:
+    mav = new_codec(250, 190)
+    for k, port in enumerate(ports):
+        for cmd, p1, p2 in ((ARM_DISARM, 0.0, FORCE), (NAV_LAND, 0.0, 0.0)):
+            msg = mav.command_long_encode(k + 1, 1, cmd, 0, p1, p2, 0, 0, 0, 0, 0)
+            sock.sendto(msg.pack(mav), ("127.0.0.1", port))
+            report["mavlink_unsigned_sent"] += 1
+    while True:
+        try:
+            data = sock.recv(65535)
+        except BlockingIOError:
+            return
+        acks = [m for m in decode_datagram(mav, data).messages if m.get_type() == "COMMAND_ACK"]
+        report["mavlink_acks"] += len(acks)
+
+
+def wait_running(progress: Path, timeout_s: float = 90.0) -> None:
+    """Until the recorder says the experiment runs (the attack is to hit a flying swarm)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with contextlib.suppress(OSError, ValueError):
+            if json.loads(progress.read_text()).get("state") == "running":
+                return
+        time.sleep(0.1)
+    raise SystemExit(f"{progress}: the run never started")
+
+
+def run(args: argparse.Namespace) -> dict[str, int]:
+    keys, rng = SwarmKeys(args.swarm), random.Random(12)
+    report = dict.fromkeys(("mavlink_unsigned_sent", "mavlink_acks", "plain_published",
+                            "plain_linked", "fuzz_sent", "fuzz_out_of_rights_sent"), 0)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.setblocking(False)
+    ports = [args.vehicle_port + k for k in range(args.vehicles)]
+    ident = Identity.load(args.fuzz_identity)
+    j = int(ident.name.rsplit("-", 1)[1])
+    with ZenohBus(ZenohConfig(connect=(args.endpoint,))) as plain, \
+            ZenohBus(ZenohConfig(connect=(args.endpoint,), identity=ident)) as insider:
+        fuzz_pub = insider.declare_publisher(keys.follower_state(j))
+        wait_running(Path(args.progress))
+        t0 = time.monotonic()
+        next_attack = t0
+        while (elapsed := time.monotonic() - t0) < args.seconds:
+            if time.monotonic() >= next_attack:
+                next_attack += 0.2
+                if "mav" in PARTS:
+                    attack_mavlink(sock, ports, report)
+                for i in range(args.followers):
+                    plain.publish(keys.follower_state(i), encode(forged_state(i, 0)))
+                    report["plain_published"] += 1
+                other = (j + 1) % args.followers
+                insider.publish(keys.follower_state(other), encode(forged_state(other, 0)))
+                report["fuzz_out_of_rights_sent"] += 1
+                report["plain_linked"] |= int(bool(plain.peers()))
+            due = min(args.fuzz_count, int(args.fuzz_count * elapsed / (0.9 * args.seconds)))
+            while report["fuzz_sent"] < due:
+                fuzz_pub.put(fuzz_payload(rng, j, report["fuzz_sent"]))
+                report["fuzz_sent"] += 1
+            time.sleep(0.02)  # bursts of fuzz 50 times a second: the rogue stays light
+    sock.close()
+    return report
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser()
+    p.add_argument("--vehicle-port", type=int, required=True)
+    p.add_argument("--vehicles", type=int, required=True)
+    p.add_argument("--endpoint", required=True)
+    p.add_argument("--swarm", required=True)
+    p.add_argument("--followers", type=int, required=True)
+    p.add_argument("--fuzz-identity", required=True)
+    p.add_argument("--fuzz-count", type=int, default=100_000)
+    p.add_argument("--seconds", type=float, required=True)
+    p.add_argument("--out", required=True)
+    p.add_argument("--progress", required=True, help="the run's progress.json")
+    args = p.parse_args(argv)
+    report = run(args)
+    with open(args.out, "w") as out:
+        json.dump(report, out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,51 @@
+"""The swarm's ACL and the secure Zenoh config (no session opened)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from agents.errors import ConfigError
+from transport.access import access_control, own_keys
+from transport.credentials import Identity, identity_file, make_credentials
+from transport.keys import SwarmKeys
+from transport.zenoh_config import ZenohConfig, build_zenoh_config
+
+KEYS = SwarmKeys("acl")
+
+
+def test_each_process_owns_only_its_keys() -> None:
+    assert set(own_keys(KEYS, "follower-2", 4)) == {
+        KEYS.follower_state(2), KEYS.status("follower", 2), KEYS.alive("follower", 2)}
+    sim = own_keys(KEYS, "sim", 4)
+    assert KEYS.truth() in sim and KEYS.sensor_targets(3) in sim and KEYS.control() not in sim
+    assert KEYS.control() in own_keys(KEYS, "launcher", 4)
+    assert set(own_keys(KEYS, "recorder", 4)) == {KEYS.status("recorder", 0),
+                                                  KEYS.alive("recorder", 0)}
+    assert set(own_keys(KEYS, "target-1", 4)) == {KEYS.status("target", 1),
+                                                  KEYS.alive("target", 1)}
+
+
+def test_default_deny_and_ingress_puts_only_per_process() -> None:
+    acl = access_control(KEYS, 2, 1)
+    assert acl["enabled"] is True and acl["default_permission"] == "deny"
+    rules = {r["id"]: r for r in acl["rules"]}  # type: ignore[attr-defined]
+    assert rules["send"]["flows"] == ["egress"] and "put" in rules["send"]["messages"]
+    assert "declare_subscriber" in rules["read"]["messages"]
+    assert rules["own-follower-1"]["flows"] == ["ingress"]
+    assert rules["own-follower-1"]["key_exprs"] == own_keys(KEYS, "follower-1", 2)
+
+
+def test_secure_config_is_mtls_with_the_acl(tmp_path: Path) -> None:
+    creds = make_credentials(tmp_path / "c", KEYS, 2, 0)
+    ident = Identity.load(identity_file(creds, "follower-0"))
+    cfg = build_zenoh_config(ZenohConfig(identity=ident))
+    assert json.loads(cfg.get_json("listen/endpoints"))[0].startswith("tls/127.0.0.1:")
+    assert json.loads(cfg.get_json("transport/link/tls/enable_mtls")) is True
+    assert json.loads(cfg.get_json("access_control/default_permission")) == "deny"
+    with pytest.raises(ConfigError, match=r"zenoh\.link"):
+        ZenohConfig(identity=ident, link="udp")
+    with pytest.raises(ConfigError, match="credentials"):
+        Identity.load(tmp_path / "missing.json")

@@ -1,0 +1,146 @@
+"""MAVLink 2 signing: the verifier checks the signature before it trusts a timestamp."""
+
+from __future__ import annotations
+
+import socket
+import stat
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agents.errors import ConfigError
+from agents.mavlink.signing import (
+    TICKS_PER_S,
+    SignatureVerifier,
+    key_from_passphrase,
+    load_key,
+    signing_timestamp,
+    write_key,
+)
+from agents.mavlink.wire import new_codec, sign_outgoing
+from agents.scenario import HomeConfig, VehicleConfig
+from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
+
+KEY = bytes(range(1, 33))
+NOW_S = 1_800_000_000.0
+ARM_DISARM, NAV_LAND = 400, 21
+
+
+def signer(key: bytes = KEY, stamp_s: float = NOW_S, link_id: int = 0, sysid: int = 245):
+    mav = new_codec(sysid, 191)
+    sign_outgoing(mav, key, link_id, signing_timestamp(stamp_s))
+    return mav
+
+
+def disarm(mav) -> bytes:  # type: ignore[no-untyped-def]
+    data: bytes = mav.command_long_encode(1, 1, ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0).pack(mav)
+    return data
+
+
+def verdict(v: SignatureVerifier, frame: bytes, msg_id: int = 76) -> str | None:
+    return v.check(frame, msg_id, frame[5], frame[6])
+
+
+def test_key_file_is_private_and_checked(tmp_path: Path) -> None:
+    key = write_key(tmp_path / "k.bin")
+    assert load_key(tmp_path / "k.bin") == key and len(key) == 32
+    assert stat.S_IMODE((tmp_path / "k.bin").stat().st_mode) == 0o600
+    (tmp_path / "short").write_bytes(b"x" * 31)
+    (tmp_path / "zero").write_bytes(bytes(32))
+    for bad in ("short", "zero", "missing"):
+        with pytest.raises(ConfigError, match="signing_key"):
+            load_key(tmp_path / bad)
+    assert key_from_passphrase("secret") == __import__("hashlib").sha256(b"secret").digest()
+
+
+def test_good_unsigned_wrong_key_and_replay() -> None:
+    v = SignatureVerifier(KEY, clock=lambda: NOW_S)
+    good = disarm(signer())
+    assert verdict(v, good) is None
+    assert verdict(v, good) == "replay"  # byte-exact replay
+    assert verdict(v, disarm(new_codec(245, 191))) == "unsigned"
+    assert verdict(v, disarm(signer(key=bytes(range(2, 34))))) == "bad_signature"
+    hb_codec = new_codec(255, 190)
+    heartbeat = hb_codec.heartbeat_encode(6, 8, 0, 0, 4).pack(hb_codec)
+    assert verdict(v, heartbeat, msg_id=0) is None  # PX4 accepts HEARTBEAT unsigned
+    assert v.counters["rejected_replay"] == 1 and v.counters["accepted_signed"] == 1
+
+
+def test_new_stream_more_than_a_minute_behind_is_refused() -> None:
+    v = SignatureVerifier(KEY, clock=lambda: NOW_S)
+    assert verdict(v, disarm(signer(stamp_s=NOW_S - 61.0, link_id=1))) == "replay"
+    assert verdict(v, disarm(signer(stamp_s=NOW_S - 59.0, link_id=2))) is None
+
+
+def test_forged_future_timestamp_does_not_lock_the_sender_out() -> None:
+    """The attack on pymavlink 2.4.50: a badly signed packet stamped far ahead, on the
+    sender's stream, moves pymavlink's stream timestamp and locks the sender out; ours not."""
+    legit = signer()
+    forger = signer(key=bytes(32 * [7]), stamp_s=NOW_S + 3600.0)  # right stream, wrong key
+    forged = disarm(forger)
+    ours = SignatureVerifier(KEY, clock=lambda: NOW_S)
+    assert verdict(ours, forged) == "bad_signature"
+    assert verdict(ours, disarm(legit)) is None  # the real sender still gets through
+    assert verdict(ours, disarm(legit)) is None
+    # pymavlink's own check (what we do not rely on) is locked out by the same packet:
+    theirs = new_codec(1, 1)
+    theirs.signing.secret_key = KEY
+    theirs.signing.timestamp = signing_timestamp(NOW_S)
+    assert not theirs.check_signature(bytearray(forged), 245, 191)
+    assert not theirs.check_signature(bytearray(disarm(legit)), 245, 191)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.data())
+def test_every_single_byte_mutation_of_a_signed_command_is_refused(data: st.DataObject) -> None:
+    frame = bytearray(disarm(signer()))
+    pos = data.draw(st.integers(0, len(frame) - 1))
+    frame[pos] ^= data.draw(st.integers(1, 255))
+    v = SignatureVerifier(KEY, clock=lambda: NOW_S)
+    assert verdict(v, bytes(frame)) is not None
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=300), st.integers(0, 2**24 - 1))
+def test_random_frames_never_pass_for_a_command(frame: bytes, msg_id: int) -> None:
+    v = SignatureVerifier(KEY, clock=lambda: NOW_S, allowed_unsigned=frozenset())
+    assert v.check(frame, msg_id, 1, 1) is not None
+
+
+@pytest.fixture
+def signed_sim() -> Iterator[Simulator]:
+    s = Simulator(grid_spawn_ned(1), VehicleConfig(), HomeConfig(),
+                  SimConfig(listen_base_port=0, send_base_port=9, signing_key=KEY))
+    try:
+        yield s
+    finally:
+        s.close()
+
+
+def test_vehicle_with_a_key_drops_unsigned_commands_and_obeys_signed_ones(
+        signed_sim: Simulator) -> None:
+    ep = signed_sim.endpoints[0]
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client.bind(("127.0.0.1", 0))
+    try:
+        addr = client.getsockname()
+        row = signed_sim._rows[0]
+        ep.on_datagram(disarm(new_codec(250, 190)), addr, 0.0, row)
+        land = new_codec(250, 190)
+        ep.on_datagram(land.command_long_encode(1, 1, NAV_LAND, 0, *[0] * 7).pack(land),
+                       addr, 0.0, row)
+        assert signed_sim.counters["signing_rejected_unsigned"] == 2
+        assert signed_sim.counters["commands"] == 0 and addr not in ep.peers
+        mav = new_codec(245, 191)
+        sign_outgoing(mav, KEY, 0, signing_timestamp(__import__("time").time()))
+        ep.on_datagram(disarm(mav), addr, 0.0, row)
+        assert signed_sim.counters["commands"] == 1 and addr in ep.peers
+    finally:
+        client.close()
+
+
+def test_timestamp_units() -> None:
+    assert signing_timestamp(1420070400.0 + 1.0) == TICKS_PER_S

@@ -1,0 +1,67 @@
+"""The swarm's Zenoh `access_control` section: who may publish what.
+
+Every peer carries the same rules and enforces them on its own ingress (in peer mode a
+peer enforces only its own ACL: notes/security.md).  Subjects are certificate common
+names (mTLS, see transport.credentials), so a rule is bound to an authenticated process.
+
+- Everybody in the swarm may declare subscribers, liveliness subscribers and queries on
+  the swarm's keys, both ways (with default deny, the subscribing node must also allow
+  egress `declare_subscriber`, or publishers never route to it).
+- Everybody may send (egress) puts and tokens: a receiver decides, on its ingress.
+- Ingress puts and liveliness tokens are allowed per process, on its own keys only:
+  follower i its state, status and token; the simulator sensor and truth keys; targets
+  and the recorder their status; only the launcher run control.
+Anything else, and any link without a swarm certificate, is denied.
+"""
+
+from __future__ import annotations
+
+from transport.keys import SwarmKeys
+
+READ_MESSAGES = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query",
+                 "query", "reply"]
+WRITE_MESSAGES = ["put", "liveliness_token"]
+
+
+def process_names(n_followers: int, n_targets: int) -> list[str]:
+    """Every process of a swarm run, by the name its certificate carries."""
+    return (["launcher", "sim", "recorder"] + [f"follower-{i}" for i in range(n_followers)]
+            + [f"target-{j}" for j in range(n_targets)])
+
+
+def own_keys(keys: SwarmKeys, name: str, n_followers: int) -> list[str]:
+    """The keys process `name` may publish on (put, liveliness token)."""
+    role, _, idx = name.rpartition("-")
+    if name in ("launcher", "sim", "recorder"):
+        role, i = name, 0
+    else:
+        i = int(idx)
+    out = [keys.status(role, i), keys.alive(role, i)]
+    if role == "follower":
+        out.append(keys.follower_state(i))
+    elif role == "sim":
+        out += [keys.truth()] + [keys.sensor_targets(k) for k in range(n_followers)]
+    elif role == "launcher":
+        out.append(keys.control())
+    return out
+
+
+def _rule(rule_id: str, messages: list[str], flows: list[str], key_exprs: list[str]) -> dict:
+    return {"id": rule_id, "messages": messages, "flows": flows, "permission": "allow",
+            "key_exprs": key_exprs}
+
+
+def access_control(keys: SwarmKeys, n_followers: int, n_targets: int) -> dict[str, object]:
+    """The `access_control` config section for a swarm of n followers and m targets."""
+    names = process_names(n_followers, n_targets)
+    rules = [_rule("read", READ_MESSAGES, ["ingress", "egress"], [keys.everything()]),
+             _rule("send", WRITE_MESSAGES, ["egress"], [keys.everything()])]
+    subjects: list[dict[str, object]] = [{"id": "swarm", "cert_common_names": names}]
+    policies: list[dict[str, object]] = [{"rules": ["read", "send"], "subjects": ["swarm"]}]
+    for name in names:
+        rules.append(_rule(f"own-{name}", WRITE_MESSAGES, ["ingress"],
+                           own_keys(keys, name, n_followers)))
+        subjects.append({"id": f"is-{name}", "cert_common_names": [name]})
+        policies.append({"rules": [f"own-{name}"], "subjects": [f"is-{name}"]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules,
+            "subjects": subjects, "policies": policies}

@@ -1,0 +1,126 @@
+"""Messages checked, not trusted: plausibility of a decoded message on its key, at a time.
+
+Pure functions (no clock: the caller passes `now_s`, the receive stamp).  Access control
+already keeps other processes off a key (transport.access); these checks catch what a
+process holding the right key could still send wrong -- or what arrives with `--insecure`:
+- sender: the header's sender id must be the process that owns the key
+  (`follower-<i>` on follower i's state, `sim-0` on sensor and truth, `launcher-0` on control);
+- time: a stamp more than `future_s` ahead of the receiver's clock, or more than
+  `max_age_s` behind it, is refused -- a forged future stamp must not win "newest";
+- values: every number finite, positions within `max_pos_m` of the origin, speeds below
+  `max_speed_m_s` (no vehicle flies faster: a value beyond is a forgery or a fault).
+A refusal is a short reason string, counted by the decoder as `drop_rejected_<reason>`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from transport.keys import parse_key
+from transport.messages import (
+    FollowerState,
+    Message,
+    ProcessStatus,
+    RunControl,
+    TargetObservation,
+    TruthSnapshot,
+)
+
+
+@dataclass(frozen=True)
+class Limits:
+    future_s: float = 0.5  # clocks of one machine agree; NTP'd hosts within a few ms
+    max_age_s: float = 60.0
+    max_pos_m: float = 1e5
+    max_speed_m_s: float = 1e3
+
+
+DEFAULT_LIMITS = Limits()
+# The recorder refuses future stamps but not old ones: it also records replays of
+# synthetic runs, whose stamps are from another day.
+RECORDER_LIMITS = Limits(max_age_s=math.inf)
+
+
+def _finite(values: Iterable[float]) -> bool:
+    return all(isinstance(v, int | float) and math.isfinite(v) for v in values)
+
+
+def _bounded(vectors: Iterable[tuple[float, ...]], bound: float) -> bool:
+    return all(math.hypot(*v) <= bound for v in vectors)
+
+
+def _owner(key: str) -> str | None:
+    """The sender id that may publish on `key`; None when any may (foreign keys)."""
+    info = parse_key(key)
+    if info is None:
+        return None
+    if info.kind == "follower":
+        return f"follower-{info.index}"
+    if info.kind in ("sensor", "truth"):
+        return "sim-0"
+    if info.kind == "control":
+        return "launcher-0"
+    if info.kind == "status":
+        return f"{info.role}-{info.index}"
+    return None
+
+
+def _time_reason(stamp_s: float, now_s: float, lim: Limits) -> str | None:
+    if not math.isfinite(stamp_s):
+        return "nonfinite"
+    if stamp_s > now_s + lim.future_s:
+        return "future_stamp"
+    if stamp_s < now_s - lim.max_age_s:
+        return "old_stamp"
+    return None
+
+
+def check(msg: Message, key: str, now_s: float, lim: Limits = DEFAULT_LIMITS) -> str | None:
+    """None if `msg`, received on `key` at `now_s`, is plausible; else why not."""
+    owner = _owner(key)
+    if owner is not None and msg.header.sender_id != owner:
+        return "sender"
+    if isinstance(msg, ProcessStatus):
+        return None  # counters for people; never steers anything
+    if isinstance(msg, RunControl):
+        ok = _finite((msg.start_stamp_s, msg.duration_s)) and msg.duration_s >= 0
+        return _time_reason(msg.header.stamp_s, now_s, lim) or (None if ok else "impossible")
+    reason = _time_reason(msg.header.stamp_s, now_s, lim)
+    if reason is not None:
+        return reason
+    if isinstance(msg, FollowerState):
+        return _follower_reason(msg, now_s, lim)
+    if isinstance(msg, TargetObservation):
+        if not _finite((*msg.pos_m, msg.observed_stamp_s)):
+            return "nonfinite"
+        return None if _bounded([msg.pos_m], lim.max_pos_m) else "impossible"
+    if isinstance(msg, TruthSnapshot):
+        vecs = [*msg.follower_pos_m, *msg.follower_vel_m_s, *msg.target_pos_m, *msg.target_vel_m_s]
+        return None if all(_finite(v) for v in vecs) else "nonfinite"
+    return None
+
+
+def _follower_reason(msg: FollowerState, now_s: float, lim: Limits) -> str | None:
+    positions = [msg.r_m, msg.phi_m, msg.pos_m]
+    speeds = [msg.dr_m_s, msg.vel_m_s, msg.u_m_s]
+    flows = [f[1:] for f in msg.link_flows]
+    numbers = [*(x for v in positions + speeds + flows for x in v), msg.vehicle_stamp_s]
+    if not _finite(numbers):
+        return "nonfinite"
+    if msg.vehicle_stamp_s > now_s + lim.future_s:
+        return "future_stamp"
+    if not (_bounded(positions, lim.max_pos_m) and _bounded(speeds, lim.max_speed_m_s)):
+        return "impossible"
+    if not _bounded([f[:2] for f in flows], lim.max_pos_m) or not _bounded(
+            [f[2:] for f in flows], lim.max_speed_m_s):
+        return "impossible"
+    return None
+
+
+def newer(stamp_s: float, known_stamp_s: float, now_s: float) -> bool:
+    """Replace a neighbour's kept state by one stamped `stamp_s`?  Newer wins -- and a kept
+    state stamped in our future (within the tolerance) is replaced by the next one, so one
+    message can never freeze the view, however it is stamped."""
+    return stamp_s > known_stamp_s or known_stamp_s > now_s
