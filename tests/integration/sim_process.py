@@ -125,3 +125,24 @@ class PlainClient:
         self.send(self.mav.command_long_encode(self.sysid, 1, cmd, 0, *p))
         self.until(lambda: any(c == cmd for c, _ in self.acks), timeout_s, f"ACK of {cmd}")
         return next(r for c, r in self.acks if c == cmd)
+
+
+PENDING_ELSEWHERE = frozenset({"TIMESYNC", "SYSTEM_TIME"})  # answered once issue #9 lands
+
+
+def message_outcomes(output: str) -> dict[str, int]:
+    """The simulator's closing "sim messages:" line as {"TYPE:outcome": count}."""
+    for line in output.splitlines():
+        if line.startswith("sim messages:"):
+            pairs = (item.rsplit("=", 1) for item in line.split(":", 1)[1].split())
+            return {k: int(v) for k, v in pairs}
+    raise AssertionError(f"no 'sim messages:' line in simulator output:\n{output[-2000:]}")
+
+
+def assert_all_answered(output: str) -> dict[str, int]:
+    """Every message a client sent was answered, handled or ignored by design; none failed."""
+    outcomes = message_outcomes(output)
+    bad = {k: v for k, v in outcomes.items()
+           if k.endswith((":unhandled", ":failed")) and k.split(":")[0] not in PENDING_ELSEWHERE}
+    assert not bad, f"messages left unanswered or failed: {bad}"
+    return outcomes
