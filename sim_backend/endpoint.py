@@ -157,6 +157,8 @@ class VehicleEndpoint:
         """One packed message of id msg_id describing `row`, or None if not produced here."""
         if msg_id in tm.FAST_IDS:
             return tm.fast_bytes(self.mav, msg_id, row, self.home)
+        if msg_id == tm.MSG_PROTOCOL_VERSION:
+            return tm.protocol_version(self.mav)
         ap = self.autopilot
         msg = tm.status_message(self.mav, msg_id, row, self.home, ap.flavour, ap.mode, ap.armed,
                                 self.sysid, ap.home_ned_m)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink2
@@ -14,7 +15,7 @@ from agents.mavlink.modes import (
     autopilot_of_flavour,
     encode_custom_mode,
 )
-from agents.mavlink.wire import encode_fields
+from agents.mavlink.wire import encode_fields, encode_payload
 from agents.scenario import HomeConfig
 
 MSG_HEARTBEAT = 0
@@ -89,6 +90,15 @@ def landed_state(row: Row, mode: str, armed: bool) -> int:
     return LANDED_TAKEOFF if mode == "TAKEOFF" else LANDED_IN_AIR
 
 
+PROTOCOL_VERSION_CRC_EXTRA = 217
+
+
+def protocol_version(mav: mavlink2.MAVLink) -> bytes:
+    """PROTOCOL_VERSION (300): MAVLink 2 (version 200, min 100, max 200), no hashes."""
+    payload = struct.pack("<HHH8B8B", 200, 100, 200, *([0] * 16))
+    return encode_payload(mav, MSG_PROTOCOL_VERSION, PROTOCOL_VERSION_CRC_EXTRA, payload)
+
+
 FAST_IDS = (MSG_LOCAL_POSITION_NED, MSG_ATTITUDE, MSG_GLOBAL_POSITION_INT)
 
 
@@ -158,6 +168,4 @@ def status_message(mav: mavlink2.MAVLink, msg_id: int, row: Row, home: HomeConfi
         caps = CAPABILITIES | PARAM_ENCODING[flavour]
         return mav.autopilot_version_encode(caps, SW_VERSION[flavour], 0, 0, 0,
                                             [0] * 8, [0] * 8, [0] * 8, 0x26AC, 0x0011, sysid)
-    if msg_id == MSG_PROTOCOL_VERSION:
-        return mav.protocol_version_encode(200, 100, 200, [0] * 8, [0] * 8)
     return None
