@@ -88,6 +88,7 @@ class PlainClient:
         self.last: dict[str, object] = {}
         self.acks: list[tuple[int, int]] = []
         self.received: list[str] = []
+        self.history: list[object] = []  # every message, when several share one datagram
 
     def close(self) -> None:
         self.sock.close()
@@ -106,6 +107,7 @@ class PlainClient:
         for m in decode_datagram(self.mav, data).messages:
             self.last[m.get_type()] = m
             self.received.append(m.get_type())
+            self.history.append(m)
             if m.get_type() == "COMMAND_ACK":
                 self.acks.append((m.command, m.result))
 
