@@ -117,7 +117,7 @@ def _set_interval(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
     msg_id, interval_us = exact_id(p[0]), p[1]
     if msg_id is None or msg_id not in ep.default_intervals:
         return DENIED, b"", f"SET_MESSAGE_INTERVAL: message {p[0]:g} is not streamed"
-    if not math.isfinite(interval_us) or interval_us < -1:
+    if not math.isfinite(interval_us) or not -1 <= interval_us <= INT32_MAX:
         return DENIED, b"", f"SET_MESSAGE_INTERVAL: interval {interval_us:g} us invalid"
     if interval_us == -1:
         ep.intervals[msg_id] = 0.0
@@ -135,7 +135,8 @@ def _get_interval(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
         return DENIED, b"", f"GET_MESSAGE_INTERVAL: param1 {p[0]:g} is not a message id"
     interval = ep.intervals.get(msg_id)
     # -1: stream off; 0: not produced as a stream.
-    us = 0 if interval is None else (-1 if interval <= 0 else round(interval * 1e6))
+    us = 0 if interval is None else (-1 if interval <= 0 else min(round(interval * 1e6),
+                                                                  INT32_MAX))
     reply = encode(ep.mav, ep.mav.message_interval_encode(msg_id, us))
     return ACCEPTED, reply, ""
 

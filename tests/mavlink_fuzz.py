@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import struct
 
 from pymavlink.dialects.v20 import common as mavlink2
@@ -35,3 +36,13 @@ def raw_frame(cls: type[mavlink2.MAVLink_message], payload: bytes, seq: int = 0,
     body = head + payload
     crc = mcrf4xx(body[1:] + bytes((cls.crc_extra,)), 0xFFFF)
     return body + crc.to_bytes(2, "little")
+
+
+def target_offset(cls: type) -> int | None:
+    """Byte offset of target_system in the payload (fields in wire order), or None."""
+    names = list(cls.ordered_fieldnames)
+    if "target_system" not in names:
+        return None
+    codes = re.findall(r"(\d*)([a-zA-Z?])", cls.unpacker.format.lstrip("<"))
+    sizes = [struct.calcsize("<" + n + c) for n, c in codes]
+    return sum(sizes[:names.index("target_system")])

@@ -104,12 +104,28 @@ class PlainClient:
             data, _ = self.sock.recvfrom(65535)
         except TimeoutError:
             return
+        self._take(data)
+
+    def _take(self, data: bytes) -> None:
         for m in decode_datagram(self.mav, data).messages:
             self.last[m.get_type()] = m
             self.received.append(m.get_type())
             self.history.append(m)
             if m.get_type() == "COMMAND_ACK":
                 self.acks.append((m.command, m.result))
+
+    def drain(self) -> None:
+        """Process every datagram already queued (so `last` is current), without waiting."""
+        self.sock.settimeout(0.0)
+        try:
+            while True:
+                try:
+                    data, _ = self.sock.recvfrom(65535)
+                except (BlockingIOError, TimeoutError):
+                    return
+                self._take(data)
+        finally:
+            self.sock.settimeout(0.02)
 
     def until(self, ok: Callable[[], bool], timeout_s: float, what: str,
               every: Callable[[], None] | None = None) -> None:

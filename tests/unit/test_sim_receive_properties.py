@@ -8,9 +8,7 @@ command is answered with exactly one COMMAND_ACK, and that the vehicles stay fin
 from __future__ import annotations
 
 import math
-import re
 import socket
-import struct
 from collections.abc import Iterator
 
 import numpy as np
@@ -21,7 +19,7 @@ from hypothesis import strategies as st
 from agents.mavlink.wire import decode_datagram, new_codec
 from agents.scenario import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
-from tests.mavlink_fuzz import HANDLED_CLASSES, payload_size, raw_frame
+from tests.mavlink_fuzz import HANDLED_CLASSES, payload_size, raw_frame, target_offset
 
 SETTINGS = settings(max_examples=150, deadline=None,
                     suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -84,16 +82,6 @@ def test_any_bytes_in_any_handled_message(sim: Simulator, index: int, payload: b
     check_healthy(sim)
 
 
-def target_offset(cls: type) -> int | None:
-    """Byte offset of target_system in the payload (fields in wire order), or None."""
-    names = list(cls.ordered_fieldnames)
-    if "target_system" not in names:
-        return None
-    codes = re.findall(r"(\d*)([a-zA-Z?])", cls.unpacker.format.lstrip("<"))
-    sizes = [struct.calcsize("<" + n + c) for n, c in codes]
-    return sum(sizes[:names.index("target_system")])
-
-
 @SETTINGS
 @given(command=st.one_of(st.sampled_from(COMMANDS), st.integers(0, 65535)),
        params=st.lists(floats, min_size=7, max_size=7), as_int=st.booleans(),
@@ -127,4 +115,17 @@ def test_set_mode_any_custom_mode_is_acked_and_heartbeat_survives(sim: Simulator
     assert got and got[0].get_type() == "COMMAND_ACK"
     ep = sim.endpoints[0]
     assert ep.build(0, sim._rows[0]) is not None  # the next HEARTBEAT can still be built
+    check_healthy(sim)
+
+
+@SETTINGS
+@given(msg_id=st.sampled_from([24, 32, 0, 74]), interval=floats)
+def test_any_set_interval_then_get_interval_answers(sim: Simulator, msg_id: int,
+                                                    interval: float) -> None:
+    # Found by the UDP fuzz: a huge interval set, then read back, overflowed int32.
+    gcs = new_codec(255, 190)
+    deliver(sim, gcs.command_long_encode(1, 1, 511, 0, msg_id, interval, 0, 0, 0, 0, 0).pack(gcs))
+    got = deliver(sim, gcs.command_long_encode(1, 1, 510, 0, msg_id, 0, 0, 0, 0, 0, 0).pack(gcs))
+    assert [m.get_type() for m in got if m.get_type() != "STATUSTEXT"][:2] == \
+        ["COMMAND_ACK", "MESSAGE_INTERVAL"]
     check_healthy(sim)
