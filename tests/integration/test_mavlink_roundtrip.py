@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from agents.errors import LinkLostError
+from agents.errors import CommandRejectedError, LinkLostError
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.startup import StartupTimeouts, command, start_offboard, wait_until
 from tests.integration.sim_process import start_sim
@@ -66,6 +66,10 @@ def test_bad_datagrams_are_counted_and_the_vehicle_keeps_answering() -> None:
         for payload in (b"", b"\xfd" * 300, bytes(range(256)) * 4, junk, junk[:7], nan_sp,
                         inf_sp, nan_sp[:-1] + b"\x00"):
             ad.sock.sendto(payload, ad.remote)
+        # A refusal carries the vehicle's reason (its STATUSTEXT), as real autopilots send it.
+        with pytest.raises(CommandRejectedError, match="not armed") as refused:
+            command(ad, 22, (0.0,) * 6 + (float("nan"),), StartupTimeouts(command_s=2.0))
+        assert refused.value.result == 2
         command(ad, 400, (1.0,), StartupTimeouts(command_s=2.0))
         state = wait_until(ad, lambda s: s.armed, 2.0, "armed")
         assert state.armed
