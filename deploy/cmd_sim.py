@@ -93,6 +93,9 @@ def run(args: argparse.Namespace) -> int:
     counters = " ".join(f"{k}={v}" for k, v in sorted(sim.counters.items()))
     print(f"sim stopped: ticks={stats.ticks} sim_time_s={sim.sim_time_s:.2f} wall_s={wall_s:.2f} "
           f"overruns={stats.overruns} resyncs={stats.resyncs} {counters}", flush=True)
+    # Every received message by type and outcome: proves none was left unanswered.
+    messages = " ".join(f"{k}={v}" for k, v in sorted(sim.messages.items()))
+    print(f"sim messages: {messages}", flush=True)
     return 0
 
 

@@ -1,4 +1,11 @@
-"""One simulated vehicle's MAVLink endpoint: a UDP socket, its streams, commands and params.
+"""One simulated vehicle's MAVLink endpoint: a UDP socket, its streams and its one dispatch.
+
+`on_datagram` is the single entry point for received bytes and `HANDLERS` the single
+message dispatch (commands live in `sim_backend.commands`, the ground-station protocols
+in `sim_backend.protocols`).  Every message is handled inside its own error boundary:
+a handler that raises is counted and answered (FAILED + STATUSTEXT), never propagated,
+so no packet can stop the simulator.  Each message is counted by type and outcome in
+`messages` ("answered", "handled", "ignored", "refused", "failed", "unhandled").
 
 Replies (COMMAND_ACK, PARAM_VALUE, requested messages) go to the sender; streamed
 telemetry goes to the PX4-SITL-style default destination and to every address
@@ -7,27 +14,39 @@ that talked to the vehicle recently, bundled into one datagram per tick.
 
 from __future__ import annotations
 
-import math
+import logging
 import socket
 from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
 
-from pymavlink.dialects.v20 import common as mavlink2
-
-from agents.mavlink.modes import MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, decode_custom_mode
 from agents.mavlink.signing import SignatureVerifier
+from agents.mavlink.wire import MAVLinkMessage as Msg
 from agents.mavlink.wire import decode_datagram, encode, frame_bytes, new_codec
 from agents.scenario import HomeConfig
+from sim_backend import commands, protocols
 from sim_backend import telemetry as tm
-from sim_backend.autopilot import ACCEPTED, DENIED, Autopilot
+from sim_backend.autopilot import SEVERITY_WARNING, Autopilot
 from sim_backend.params import ParamStore
-from sim_backend.setpoint import SetpointRejected, decode_setpoint
 
-MAV_CMD_SET_MESSAGE_INTERVAL = 511
-MAV_CMD_REQUEST_MESSAGE = 512
-MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES = 520
+log = logging.getLogger(__name__)
 PEER_TIMEOUT_S = 30.0
 MAX_PEERS = 8
+MAX_LOGGED_ERRORS = 5
 Addr = tuple[str, int]
+
+
+
+@dataclass(frozen=True)
+class Rx:
+    """Where and when one message arrived, and the vehicle's state at that tick."""
+
+    addr: Addr
+    now_s: float
+    row: tm.Row
+
+
+Handler = Callable[["VehicleEndpoint", Msg, Rx], str]
 
 
 class VehicleEndpoint:
@@ -35,7 +54,8 @@ class VehicleEndpoint:
 
     def __init__(self, sysid: int, sock: socket.socket, default_dest: Addr, autopilot: Autopilot,
                  params: ParamStore, home: HomeConfig, telemetry_hz: float,
-                 counters: Counter[str], index: int = 0, tick_s: float = 0.01) -> None:
+                 counters: Counter[str], index: int = 0, tick_s: float = 0.01,
+                 messages: Counter[str] | None = None) -> None:
         self.sysid = sysid
         self.sock = sock
         self.default_dest = default_dest
@@ -43,13 +63,16 @@ class VehicleEndpoint:
         self.params = params
         self.home = home
         self.counters = counters
+        self.messages: Counter[str] = Counter() if messages is None else messages
         self.mav = new_codec(sysid, 1)
         self.peers: dict[Addr, float] = {}
+        self.missions = protocols.MissionStore()
         fast = 1.0 / telemetry_hz
         self.default_intervals: dict[int, float] = {
             tm.MSG_HEARTBEAT: 1.0, tm.MSG_SYS_STATUS: 1.0, tm.MSG_EXTENDED_SYS_STATE: 1.0,
             tm.MSG_HOME_POSITION: 5.0, tm.MSG_LOCAL_POSITION_NED: fast,
-            tm.MSG_GLOBAL_POSITION_INT: fast, tm.MSG_ATTITUDE: fast,
+            tm.MSG_GLOBAL_POSITION_INT: fast, tm.MSG_ATTITUDE: fast, tm.MSG_GPS_RAW_INT: 0.2,
+            tm.MSG_VFR_HUD: 0.25, tm.MSG_BATTERY_STATUS: 2.0,
         }
         self.intervals = dict(self.default_intervals)
         # Vehicle `index` starts each stream at its own tick within the stream's period, so
@@ -61,9 +84,11 @@ class VehicleEndpoint:
         # Set when the vehicle enforces MAVLink 2 signing (like PX4 with a key): received
         # messages failing it are dropped and counted (signing_rejected_<reason>).
         self.verifier: SignatureVerifier | None = None
+        protocols.apply_params(self)
 
     # ---- receive ------------------------------------------------------------------------
     def on_datagram(self, data: bytes, addr: Addr, now_s: float, row: tm.Row) -> None:
+        """The one entry point for a received UDP datagram; never raises."""
         self.counters["rx_datagrams"] += 1
         decoded = decode_datagram(self.mav, data)
         if decoded.bad:
@@ -71,17 +96,55 @@ class VehicleEndpoint:
         messages = [m for m in decoded.messages if self._signed_ok(m)]
         if messages:
             self._remember(addr, now_s)
+        rx = Rx(addr, now_s, row)
         for msg in messages:
-            self._dispatch(msg, addr, now_s, row)
+            self.dispatch(msg, rx)
 
-    def _signed_ok(self, msg: mavlink2.MAVLink_message) -> bool:
+    def _signed_ok(self, msg: Msg) -> bool:
         if self.verifier is None:
             return True
-        reason = self.verifier.check(frame_bytes(msg), msg.get_msgId(), msg.get_srcSystem(),
-                                     msg.get_srcComponent())
+        try:
+            reason = self.verifier.check(frame_bytes(msg), msg.get_msgId(), msg.get_srcSystem(),
+                                         msg.get_srcComponent())
+        except Exception:  # same boundary as dispatch: a frame must not stop the vehicle
+            reason = "error"
         if reason is not None:
             self.counters[f"signing_rejected_{reason}"] += 1
         return reason is None
+
+    def dispatch(self, msg: Msg, rx: Rx) -> str:
+        """Handle one message inside its own error boundary; returns and counts its outcome."""
+        kind = msg.get_type()
+        try:
+            outcome = self._route(kind, msg, rx)
+        except Exception:  # a bug or a hostile value: count it, answer it, keep flying
+            outcome = "failed"
+            self.counters["handler_errors"] += 1
+            if self.counters["handler_errors"] <= MAX_LOGGED_ERRORS:
+                log.exception("vehicle %d: %s handler failed", self.sysid, kind)
+            self._answer_failure(msg, rx)
+        self.messages[f"{kind}:{outcome}"] += 1
+        return outcome
+
+    def _route(self, kind: str, msg: Msg, rx: Rx) -> str:
+        handler = HANDLERS.get(kind)
+        if handler is None:
+            return "ignored" if kind in IGNORED else "unhandled"
+        target = getattr(msg, "target_system", 0)
+        if target not in (0, self.sysid):
+            self.counters["ignored_other_sysid"] += 1
+            return "ignored"
+        return handler(self, msg, rx)
+
+    def _answer_failure(self, msg: Msg, rx: Rx) -> None:
+        try:
+            if msg.get_type() in ("COMMAND_LONG", "COMMAND_INT"):
+                ack = self.mav.command_ack_encode(msg.command, 4, 0, 0, msg.get_srcSystem(),
+                                                  msg.get_srcComponent())
+                self.send_to(encode(self.mav, ack), rx.addr)
+            self.send_to(self.statustext(SEVERITY_WARNING, f"{msg.get_type()} failed"), rx.addr)
+        except Exception:  # the answer itself failed: the count above is all we can do
+            self.counters["answer_errors"] += 1
 
     def _remember(self, addr: Addr, now_s: float) -> None:
         if addr not in self.peers and len(self.peers) >= MAX_PEERS:
@@ -89,126 +152,21 @@ class VehicleEndpoint:
             del self.peers[oldest]
         self.peers[addr] = now_s
 
-    def _for_me(self, msg: mavlink2.MAVLink_message) -> bool:
-        if msg.target_system not in (0, self.sysid):
-            self.counters["ignored_other_sysid"] += 1
-            return False
-        return True
-
-    def _dispatch(self, msg: mavlink2.MAVLink_message, addr: Addr, now_s: float,
-                  row: tm.Row) -> None:
-        kind = msg.get_type()
-        if kind == "HEARTBEAT":
-            return
-        if kind == "SET_POSITION_TARGET_LOCAL_NED":
-            if self._for_me(msg):
-                self._setpoint(msg, now_s, row)
-        elif kind == "COMMAND_LONG":
-            if self._for_me(msg):
-                params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5,
-                          msg.param6, msg.param7)
-                self._command(msg, params, addr, now_s, row)
-        elif kind == "COMMAND_INT":
-            if self._for_me(msg):
-                params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.x * 1e-7,
-                          msg.y * 1e-7, msg.z)
-                self._command(msg, params, addr, now_s, row)
-        elif kind == "SET_MODE":
-            if self._for_me(msg) and msg.base_mode & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                name = decode_custom_mode(self.autopilot.flavour, msg.custom_mode)
-                self.autopilot.set_mode(name, now_s, row.pos, row.landed)
-        elif kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
-            if self._for_me(msg):
-                self._param(msg, addr)
-        else:
-            self.counters["unhandled_messages"] += 1
-
-    def _setpoint(self, msg: mavlink2.MAVLink_message, now_s: float, row: tm.Row) -> None:
-        try:
-            sp = decode_setpoint(msg.type_mask, msg.coordinate_frame, (msg.x, msg.y, msg.z),
-                                 (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate,
-                                 row.pos, row.yaw)
-        except SetpointRejected as exc:
-            key = "ignored_nonfinite" if "finite" in str(exc) else "ignored_setpoints"
-            self.counters[key] += 1
-            return
-        self.counters["setpoints"] += 1
-        self.autopilot.on_setpoint(sp, now_s, row.landed)
-
-    def _command(self, msg: mavlink2.MAVLink_message, params: tuple[float, ...], addr: Addr,
-                 now_s: float, row: tm.Row) -> None:
-        self.counters["commands"] += 1
-        reply: bytes | None = None
-        cmd = msg.command
-        if not all(math.isfinite(p) for p in params[:2]):
-            result = DENIED
-            self.counters["ignored_nonfinite"] += 1
-        elif cmd in (MAV_CMD_REQUEST_MESSAGE, MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            wanted = tm.MSG_AUTOPILOT_VERSION if cmd != MAV_CMD_REQUEST_MESSAGE else int(params[0])
-            reply = self.build(wanted, row)
-            result = ACCEPTED if reply is not None else DENIED
-        elif cmd == MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = self._set_interval(int(params[0]), params[1], now_s)
-        else:
-            result = self.autopilot.command(cmd, params, now_s, row.pos, row.landed)
-        if result != ACCEPTED:
-            self.counters["commands_not_accepted"] += 1
-        ack = self.mav.command_ack_encode(cmd, result, 0, 0, msg.get_srcSystem(),
-                                          msg.get_srcComponent())
-        self._send_to(encode(self.mav, ack) + (reply or b""), addr)
-
-    def _set_interval(self, msg_id: int, interval_us: float, now_s: float) -> int:
-        if msg_id not in self.default_intervals:
-            return DENIED
-        if interval_us < 0:
-            self.intervals[msg_id] = 0.0
-        elif interval_us == 0:
-            self.intervals[msg_id] = self.default_intervals[msg_id]
-        else:
-            self.intervals[msg_id] = interval_us * 1e-6
-        self.next_due[msg_id] = now_s
-        return ACCEPTED
-
-    def _param(self, msg: mavlink2.MAVLink_message, addr: Addr) -> None:
-        kind = msg.get_type()
-        if kind == "PARAM_REQUEST_LIST":
-            names = [self.params.name_at(k) for k in range(len(self.params))]
-        elif kind == "PARAM_REQUEST_READ":
-            by_index = self.params.name_at(msg.param_index) if msg.param_index >= 0 else None
-            known = self.params.index_of(msg.param_id) >= 0
-            names = [by_index or (msg.param_id if known else None)]
-        else:
-            ok = self.params.set_from_wire(msg.param_id, msg.param_value, msg.param_type)
-            names = [msg.param_id if ok else None]
-            self._apply_params()
-        out = b""
-        for name in names:
-            if name is None:
-                self.counters["ignored_params"] += 1
-                continue
-            value, ptype = self.params.wire(name)
-            msg = self.mav.param_value_encode(name.encode(), value, ptype, len(self.params),
-                                               self.params.index_of(name))
-            out += encode(self.mav, msg)
-        if out:
-            self._send_to(out, addr)
-
-    def _apply_params(self) -> None:
-        for name in ("COM_OF_LOSS_T", "GUID_TIMEOUT"):
-            if self.params.index_of(name) >= 0:
-                self.autopilot.setpoint_timeout_s = self.params.get(name)
-        if self.params.index_of("MIS_TAKEOFF_ALT") >= 0:
-            self.autopilot.default_takeoff_alt_m = self.params.get("MIS_TAKEOFF_ALT")
-
     # ---- send ---------------------------------------------------------------------------
     def build(self, msg_id: int, row: tm.Row) -> bytes | None:
         """One packed message of id msg_id describing `row`, or None if not produced here."""
         if msg_id in tm.FAST_IDS:
             return tm.fast_bytes(self.mav, msg_id, row, self.home)
+        if msg_id == tm.MSG_PROTOCOL_VERSION:
+            return tm.protocol_version(self.mav)
         ap = self.autopilot
         msg = tm.status_message(self.mav, msg_id, row, self.home, ap.flavour, ap.mode, ap.armed,
-                                self.sysid)
+                                self.sysid, ap.home_ned_m)
         return None if msg is None else encode(self.mav, msg)
+
+    def statustext(self, severity: int, text: str) -> bytes:
+        msg = self.mav.statustext_encode(severity, text.encode()[:50])
+        return encode(self.mav, msg)
 
     def telemetry(self, now_s: float, row: tm.Row) -> None:
         """Send every stream that is due at sim time `now_s`, as one datagram per destination."""
@@ -218,6 +176,9 @@ class VehicleEndpoint:
             # Announce mode and arming changes at once so clients need not wait up to 1 s.
             self._announced = (ap.mode, ap.armed)
             self.next_due[tm.MSG_HEARTBEAT] = now_s
+        while ap.notices:
+            severity, text = ap.notices.pop(0)
+            out += self.statustext(severity, text)
         for msg_id, interval in self.intervals.items():
             if interval <= 0.0 or now_s < self.next_due[msg_id]:
                 continue
@@ -226,19 +187,41 @@ class VehicleEndpoint:
             data = self.build(msg_id, row)
             if data is not None:
                 out += data
-        if not out:
-            return
+        if out:
+            self.broadcast(out, now_s)
+
+    def broadcast(self, data: bytes, now_s: float) -> None:
         stale = [a for a, t in self.peers.items() if now_s - t > PEER_TIMEOUT_S]
         for addr in stale:
             del self.peers[addr]
-        self._send_to(out, self.default_dest)
+        self.send_to(data, self.default_dest)
         for addr in self.peers:
             if addr != self.default_dest:
-                self._send_to(out, addr)
+                self.send_to(data, addr)
 
-    def _send_to(self, data: bytes, addr: Addr) -> None:
+    def send_to(self, data: bytes, addr: Addr) -> None:
         try:
             self.sock.sendto(data, addr)
             self.counters["tx_datagrams"] += 1
         except OSError:
             self.counters["tx_errors"] += 1
+
+
+def _heartbeat(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+    return "handled"  # a GCS's heartbeat only keeps it in `peers` (done on receipt)
+
+
+# The one dispatch table: message type -> handler returning the outcome.
+HANDLERS: dict[str, Handler] = {
+    "HEARTBEAT": _heartbeat,
+    "SET_POSITION_TARGET_LOCAL_NED": commands.on_setpoint,
+    "COMMAND_LONG": commands.on_command,
+    "COMMAND_INT": commands.on_command,
+    **protocols.HANDLERS,
+}
+# Types received from ground stations that need no answer and change nothing here.
+IGNORED = frozenset({
+    "COMMAND_ACK", "STATUSTEXT", "MANUAL_CONTROL", "RC_CHANNELS_OVERRIDE", "PARAM_VALUE",
+    "PARAM_EXT_REQUEST_LIST", "PARAM_EXT_REQUEST_READ", "PARAM_EXT_SET", "GPS_RTCM_DATA",
+    "MISSION_ITEM_REACHED", "MISSION_CURRENT", "AUTOPILOT_VERSION",
+})

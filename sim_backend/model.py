@@ -126,13 +126,16 @@ def step(state: FleetState, cmd: FleetCommand, p: ModelParams, dt_s: float) -> F
     dv = _limit_xy(dv, max_dv)
     dv[:, 2] = np.clip(dv[:, 2], -max_dv, max_dv)
     vel = state.vel_ned_m_s + dv
-    pos = state.pos_ned_m + 0.5 * (state.vel_ned_m_s + vel) * dt_s
+    # A multirotor on the ground does not slide: only a climb command frees it (PX4 lifts
+    # off in offboard only with vz < 0).  Decided before integrating, so it cannot creep.
+    stuck = (state.pos_ned_m[:, 2] >= 0.0) & (want[:, 2] >= 0.0)
+    vel[stuck] = 0.0
+    vel_before = state.vel_ned_m_s.copy()
+    vel_before[stuck] = 0.0
+    pos = state.pos_ned_m + 0.5 * (vel_before + vel) * dt_s
     ground = pos[:, 2] >= 0.0
     pos[ground, 2] = 0.0
     vel[ground, 2] = np.minimum(vel[ground, 2], 0.0)
-    # A multirotor on the ground does not slide: only a climb command frees it.
-    stuck = ground & (want[:, 2] >= 0.0)
-    vel[stuck] = 0.0
     yaw_rate = np.where(stuck, 0.0, _yaw_rate(state, cmd, p))
     yaw = np.angle(np.exp(1j * (state.yaw_rad + yaw_rate * dt_s)))
     acc = (vel - state.vel_ned_m_s) / dt_s

@@ -25,23 +25,49 @@ class Param:
 
 
 def default_params(flavour: str, sysid: int, cfg: VehicleConfig) -> dict[str, Param]:
-    """Parameters SDKs commonly read, with values taken from the vehicle config."""
+    """Parameters SDKs and ground stations commonly read, typed as the real autopilot types them.
+
+    Values the simulator obeys (take-off, RTL, failsafe and disarm times) are read back
+    from here at start and after every PARAM_SET; the rest describe the vehicle.
+    """
     real, integer = MAV_PARAM_TYPE_REAL32, MAV_PARAM_TYPE_INT32
     if flavour == PX4:
         return {
             "MAV_SYS_ID": Param(sysid, integer),
+            "MAV_COMP_ID": Param(1, integer),
+            "MAV_TYPE": Param(2, integer),
+            "SYS_AUTOSTART": Param(4001, integer),
             "MIS_TAKEOFF_ALT": Param(2.5, real),
+            # The documented choice: 0.5 s (PX4's default is 1.0 s).
             "COM_OF_LOSS_T": Param(0.5, real),
+            "COM_OBL_RC_ACT": Param(0, integer),
+            "COM_DISARM_PRFLT": Param(10.0, real),
+            "COM_DISARM_LAND": Param(2.0, real),
+            "COM_RC_IN_MODE": Param(4, integer),
+            "NAV_DLL_ACT": Param(0, integer),
+            "NAV_RCL_ACT": Param(0, integer),
+            "RTL_RETURN_ALT": Param(10.0, real),
+            "RTL_DESCEND_ALT": Param(10.0, real),
             "MPC_XY_VEL_MAX": Param(cfg.max_speed_xy_m_s, real),
+            "MPC_XY_CRUISE": Param(min(5.0, cfg.max_speed_xy_m_s), real),
             "MPC_Z_VEL_MAX_UP": Param(cfg.max_speed_z_m_s, real),
+            "MPC_Z_VEL_MAX_DN": Param(cfg.max_speed_z_m_s, real),
+            "MPC_TKO_SPEED": Param(min(1.5, cfg.max_speed_z_m_s), real),
             "MPC_LAND_SPEED": Param(0.7, real),
         }
     return {
         "SYSID_THISMAV": Param(sysid, integer),
+        "SYSID_MYGCS": Param(255, integer),
+        "FRAME_CLASS": Param(1, integer),
+        "FRAME_TYPE": Param(1, integer),
         "PILOT_TKOFF_ALT": Param(250.0, real),
-        "GUID_TIMEOUT": Param(0.5, real),
+        "GUID_TIMEOUT": Param(3.0, real),
+        "DISARM_DELAY": Param(10, integer),
+        "FS_GCS_ENABLE": Param(0, integer),
+        "RTL_ALT": Param(1000.0, real),
         "WPNAV_SPEED": Param(cfg.max_speed_xy_m_s * 100.0, real),
         "WPNAV_SPEED_UP": Param(cfg.max_speed_z_m_s * 100.0, real),
+        "WPNAV_SPEED_DN": Param(cfg.max_speed_z_m_s * 100.0, real),
         "LAND_SPEED": Param(70.0, real),
     }
 
@@ -84,5 +110,9 @@ class ParamStore:
             return True
         if not math.isfinite(wire_value):
             return False
-        p.value = float(round(wire_value)) if p.param_type == MAV_PARAM_TYPE_INT32 else wire_value
+        if p.param_type == MAV_PARAM_TYPE_INT32:
+            if not -2**31 <= wire_value < 2**31:
+                return False
+            wire_value = float(round(wire_value))
+        p.value = wire_value
         return True

@@ -97,6 +97,8 @@ class Simulator:
         self.command = model.FleetCommand.idle(self.state.n)
         self.sim_time_s = 0.0
         self.counters: Counter[str] = Counter()
+        # Received messages by "TYPE:outcome" (answered, handled, ignored, refused, ...).
+        self.messages: Counter[str] = Counter()
         self.stats = LoopStats()
         self.on_tick: list[TickHook] = []
         self._clock = clock
@@ -122,10 +124,12 @@ class Simulator:
             raise
         flavour, sysid = self.cfg.flavour, i + 1
         store = ParamStore(flavour, default_params(flavour, sysid, vehicle))
-        autopilot = Autopilot(flavour, home.alt_m)
+        spawn = tuple(float(v) for v in self.state.pos_ned_m[i])
+        autopilot = Autopilot(flavour, home.alt_m, home_ned_m=(spawn[0], spawn[1], spawn[2]))
         dest = (self.cfg.host, self.cfg.send_base_port + i)
         endpoint = VehicleEndpoint(sysid, sock, dest, autopilot, store, home,
-                                   self.cfg.telemetry_hz, self.counters, index=i, tick_s=self.dt_s)
+                                   self.cfg.telemetry_hz, self.counters, index=i, tick_s=self.dt_s,
+                                   messages=self.messages)
         if self.cfg.signing_key is not None:
             endpoint.verifier = SignatureVerifier(self.cfg.signing_key)
         self._selector.register(sock, selectors.EVENT_READ, i)
@@ -166,7 +170,12 @@ class Simulator:
         self.sim_time_s = round(self.sim_time_s + self.dt_s, 9)
         self._rows = self._build_rows()
         for i, ep in enumerate(self.endpoints):
-            ep.telemetry(self.sim_time_s, self._rows[i])
+            try:
+                ep.telemetry(self.sim_time_s, self._rows[i])
+            except Exception:  # one vehicle's bad state must not stop the others
+                self.counters["telemetry_errors"] += 1
+                if self.counters["telemetry_errors"] <= 5:
+                    log.exception("vehicle %d: telemetry failed", ep.sysid)
         for hook in self.on_tick:
             hook(self.sim_time_s, self.state)
         self.stats.ticks += 1

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink2
@@ -14,11 +15,15 @@ from agents.mavlink.modes import (
     autopilot_of_flavour,
     encode_custom_mode,
 )
-from agents.mavlink.wire import encode_fields
+from agents.mavlink.wire import encode_fields, encode_payload
 from agents.scenario import HomeConfig
 
 MSG_HEARTBEAT = 0
 MSG_SYS_STATUS = 1
+MSG_GPS_RAW_INT = 24
+MSG_VFR_HUD = 74
+MSG_BATTERY_STATUS = 147
+MSG_PROTOCOL_VERSION = 300
 MSG_ATTITUDE = 30
 MSG_LOCAL_POSITION_NED = 32
 MSG_GLOBAL_POSITION_INT = 33
@@ -32,8 +37,11 @@ MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 3, 4
 LANDED_ON_GROUND, LANDED_IN_AIR, LANDED_TAKEOFF, LANDED_LANDING = 1, 2, 3, 4
 # gyro, accel, mag, baro, GPS and the pre-arm check bit: present, enabled and healthy.
 SENSORS_OK = 1 | 2 | 4 | 8 | 32 | 0x10000000
-# PARAM_FLOAT, COMMAND_INT, SET_POSITION_TARGET_LOCAL_NED, MAVLINK2
-CAPABILITIES = 2 | 8 | 128 | 8192
+# MISSION_INT (missions are stored, not flown), PARAM_FLOAT, COMMAND_INT,
+# SET_POSITION_TARGET_LOCAL_NED, MAVLINK2; plus how integer parameters travel (PX4 bytewise,
+# ArduPilot C cast).  No FTP: MAVFTP requests get a NAK so clients fall back at once.
+CAPABILITIES = 4 | 2 | 8 | 128 | 8192
+PARAM_ENCODING = {PX4: 16, "ardupilot": 131072}
 SW_VERSION = {PX4: (1 << 24) | (14 << 16) | 255, "ardupilot": (4 << 24) | (5 << 16) | 255}
 
 
@@ -59,6 +67,13 @@ def geodetic(home: HomeConfig, north_m: float, east_m: float) -> tuple[int, int]
     return round(lat * 1e7), round(lon * 1e7)
 
 
+def local_of_geodetic(home: HomeConfig, lat_deg: float, lon_deg: float) -> tuple[float, float]:
+    """north, east in m of a lat/lon (the inverse of `geodetic`)."""
+    north_m = math.radians(lat_deg - home.lat_deg) * EARTH_RADIUS_M
+    east_radius_m = EARTH_RADIUS_M * math.cos(math.radians(home.lat_deg))
+    return north_m, math.radians(lon_deg - home.lon_deg) * east_radius_m
+
+
 def heartbeat(mav: mavlink2.MAVLink, flavour: str, mode: str,
               armed: bool) -> mavlink2.MAVLink_message:
     base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
@@ -73,6 +88,15 @@ def landed_state(row: Row, mode: str, armed: bool) -> int:
     if mode == "LAND" and armed:
         return LANDED_LANDING
     return LANDED_TAKEOFF if mode == "TAKEOFF" else LANDED_IN_AIR
+
+
+PROTOCOL_VERSION_CRC_EXTRA = 217
+
+
+def protocol_version(mav: mavlink2.MAVLink) -> bytes:
+    """PROTOCOL_VERSION (300): MAVLink 2 (version 200, min 100, max 200), no hashes."""
+    payload = struct.pack("<HHH8B8B", 200, 100, 200, *([0] * 16))
+    return encode_payload(mav, MSG_PROTOCOL_VERSION, PROTOCOL_VERSION_CRC_EXTRA, payload)
 
 
 FAST_IDS = (MSG_LOCAL_POSITION_NED, MSG_ATTITUDE, MSG_GLOBAL_POSITION_INT)
@@ -94,25 +118,54 @@ def fast_bytes(mav: mavlink2.MAVLink, msg_id: int, row: Row, home: HomeConfig) -
                          round(-row.pos[2] * 1000.0), *vel_cm, hdg)
 
 
-def home_position(mav: mavlink2.MAVLink, row: Row, home: HomeConfig) -> mavlink2.MAVLink_message:
-    lat, lon = geodetic(home, 0.0, 0.0)
-    return mav.home_position_encode(lat, lon, round(home.alt_m * 1000.0), 0.0, 0.0, 0.0,
-                                    [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, row.time_boot_ms * 1000)
+def home_position(mav: mavlink2.MAVLink, row: Row, home: HomeConfig,
+                  home_ned_m: tuple[float, float, float]) -> mavlink2.MAVLink_message:
+    lat, lon = geodetic(home, home_ned_m[0], home_ned_m[1])
+    alt_mm = round((home.alt_m - home_ned_m[2]) * 1000.0)
+    return mav.home_position_encode(lat, lon, alt_mm, *home_ned_m, [1.0, 0.0, 0.0, 0.0],
+                                    0.0, 0.0, 0.0, row.time_boot_ms * 1000)
+
+
+def _gps_raw_int(mav: mavlink2.MAVLink, row: Row, home: HomeConfig) -> mavlink2.MAVLink_message:
+    lat, lon = geodetic(home, row.pos[0], row.pos[1])
+    speed_cm_s = min(65534, round(math.hypot(row.vel[0], row.vel[1]) * 100.0))
+    course = round(math.degrees(math.atan2(row.vel[1], row.vel[0])) * 100.0) % 36000
+    # 3D fix, HDOP/VDOP 0.8, 12 satellites: what a healthy SITL GPS reports.
+    return mav.gps_raw_int_encode(row.time_boot_ms * 1000, 3, lat, lon,
+                                  round((home.alt_m - row.pos[2]) * 1000.0), 80, 80,
+                                  speed_cm_s, course, 12)
+
+
+def _vfr_hud(mav: mavlink2.MAVLink, row: Row, home: HomeConfig,
+             armed: bool) -> mavlink2.MAVLink_message:
+    speed = math.hypot(row.vel[0], row.vel[1])
+    heading = round(math.degrees(row.yaw)) % 360
+    return mav.vfr_hud_encode(speed, speed, heading, 50 if armed else 0,
+                              home.alt_m - row.pos[2], -row.vel[2])
 
 
 def status_message(mav: mavlink2.MAVLink, msg_id: int, row: Row, home: HomeConfig, flavour: str,
-                   mode: str, armed: bool, sysid: int) -> mavlink2.MAVLink_message | None:
+                   mode: str, armed: bool, sysid: int,
+                   home_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                   ) -> mavlink2.MAVLink_message | None:
     """A low-rate message object, or None for an id this module does not produce."""
     if msg_id == MSG_HEARTBEAT:
         return heartbeat(mav, flavour, mode, armed)
     if msg_id == MSG_HOME_POSITION:
-        return home_position(mav, row, home)
+        return home_position(mav, row, home, home_ned_m)
     if msg_id == MSG_SYS_STATUS:
         return mav.sys_status_encode(SENSORS_OK, SENSORS_OK, SENSORS_OK, 200, 16200, -1, 100,
                                      0, 0, 0, 0, 0, 0)
     if msg_id == MSG_EXTENDED_SYS_STATE:
         return mav.extended_sys_state_encode(0, landed_state(row, mode, armed))
+    if msg_id == MSG_GPS_RAW_INT:
+        return _gps_raw_int(mav, row, home)
+    if msg_id == MSG_VFR_HUD:
+        return _vfr_hud(mav, row, home, armed)
+    if msg_id == MSG_BATTERY_STATUS:
+        return mav.battery_status_encode(0, 1, 1, 32767, [16200] + [65535] * 9, -1, -1, -1, 100)
     if msg_id == MSG_AUTOPILOT_VERSION:
-        return mav.autopilot_version_encode(CAPABILITIES, SW_VERSION[flavour], 0, 0, 0,
+        caps = CAPABILITIES | PARAM_ENCODING[flavour]
+        return mav.autopilot_version_encode(caps, SW_VERSION[flavour], 0, 0, 0,
                                             [0] * 8, [0] * 8, [0] * 8, 0x26AC, 0x0011, sysid)
     return None

@@ -38,6 +38,8 @@ MASK_VELOCITY = 3527
 MASK_VELOCITY_YAW = 2503
 MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID = 18, 8
 HEARTBEAT_PERIOD_S = 1.0
+MAV_SEVERITY_WARNING = 4
+STATUSTEXT_KEPT = 20
 
 
 @dataclass(frozen=True)
@@ -97,6 +99,8 @@ class MavlinkAdapter:
                                                                          cfg.remote_port)
         self.home_amsl_m: float | None = None
         self.acks: dict[int, int] = {}
+        self.statustexts: list[str] = []
+        self.statustext_count = 0
         self._state = NO_STATE
         self._armed, self._mode = False, "UNKNOWN"
         self._last_rx_s = -math.inf
@@ -155,7 +159,13 @@ class MavlinkAdapter:
             decoded = decode_datagram(self.mav, data)
             self.counters["bad_packets"] += decoded.bad
             for msg in decoded.messages:
-                self.handle(msg, addr, now)
+                try:
+                    self.handle(msg, addr, now)
+                except Exception:  # a hostile or odd packet must not stop the follower
+                    self.counters["handler_errors"] += 1
+                    if self.counters["handler_errors"] <= 5:
+                        log.exception("vehicle %s: cannot handle %s", self.sysid,
+                                      msg.get_type())
         if now - self._last_hb_tx_s >= HEARTBEAT_PERIOD_S and self.remote is not None:
             self._last_hb_tx_s = now
             self._send(self.mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER,
@@ -201,10 +211,26 @@ class MavlinkAdapter:
             self._local_position(msg, now)
         elif kind == "COMMAND_ACK":
             self.acks[msg.command] = msg.result
+        elif kind == "STATUSTEXT":
+            self._statustext(msg)
         elif kind == "GLOBAL_POSITION_INT":
             self.home_amsl_m = (msg.alt - msg.relative_alt) * 1e-3
         elif kind == "HOME_POSITION":
             self.home_amsl_m = msg.altitude * 1e-3
+
+    def _statustext(self, msg: MAVLinkMessage) -> None:
+        """Keep the vehicle's recent STATUSTEXTs: the reasons behind refusals and failsafes."""
+        text = str(msg.text).rstrip("\x00")
+        self.statustexts.append(text)
+        del self.statustexts[:-STATUSTEXT_KEPT]
+        self.statustext_count += 1
+        if msg.severity <= MAV_SEVERITY_WARNING:
+            log.warning("vehicle %s says: %s", self.sysid, text)
+
+    def statustexts_since(self, count: int) -> list[str]:
+        """The STATUSTEXTs received after the `statustext_count` value `count` (newest last)."""
+        return self.statustexts[len(self.statustexts) - min(self.statustext_count - count,
+                                                            len(self.statustexts)):]
 
     def _heartbeat(self, msg: MAVLinkMessage, addr: Addr) -> None:
         flavour = flavour_of_autopilot(msg.autopilot)

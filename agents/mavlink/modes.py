@@ -6,6 +6,7 @@ one plain number.  Code everywhere else speaks mode *names*.
 
 from __future__ import annotations
 
+import math
 from typing import Final
 
 PX4: Final = "px4"
@@ -92,18 +93,35 @@ def do_set_mode_params(flavour: str, name: str) -> tuple[float, float, float]:
     return (float(MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(ARDUPILOT_MODES[name]), 0.0)
 
 
+def _exact_int(value: float) -> int | None:
+    """value as an int when it is a finite whole number in 0..2**31-1, else None (NaN, inf, 1.5)."""
+    if not math.isfinite(value) or value != int(value) or not 0 <= value < 2**31:
+        return None
+    return int(value)
+
+
 def mode_of_do_set_mode(flavour: str, param1: float, param2: float, param3: float) -> str | None:
-    """The mode name DO_SET_MODE asks for, or None when the request names no known mode."""
-    if not int(param1) & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+    """The mode name DO_SET_MODE asks for, or None when the request names no known mode.
+
+    Never raises: NaN, inf and fractions (SDKs fill unused fields with NaN) name no mode,
+    except a NaN sub-mode, which MAVLink allows to mean "unused" (read as 0).
+    """
+    base, main = _exact_int(param1), _exact_int(param2)
+    sub = 0 if math.isnan(param3) else _exact_int(param3)
+    if base is None or main is None or sub is None or not base & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
         return None
     if flavour == PX4:
-        main, sub = int(param2), int(param3)
         for name, (m, s) in PX4_MODES.items():
             if m == main and (s == sub or (main != 4 and sub == 0)):
                 return name
         # A bare AUTO request (sub 0) means "continue in auto", which PX4 maps to HOLD here.
-        return "HOLD" if main == 4 else None
+        return "HOLD" if main == 4 and sub == 0 else None
     for name, number in ARDUPILOT_MODES.items():
-        if number == int(param2):
+        if number == main:
             return name
     return None
+
+
+def known_mode(flavour: str, name: str) -> bool:
+    """True when `name` is in the flavour's mode table (so encode_custom_mode cannot fail)."""
+    return name in (PX4_MODES if flavour == PX4 else ARDUPILOT_MODES)

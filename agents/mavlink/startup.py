@@ -70,6 +70,7 @@ def command(ad: MavlinkAdapter, cmd: int, params: tuple[float, ...], t: StartupT
     """
     deadline = ad.clock() + t.command_s
     attempt = 0
+    texts_before = ad.statustext_count
     while True:
         ad.send_command(cmd, params, confirmation=min(attempt, 255))
         attempt += 1
@@ -86,11 +87,18 @@ def command(ad: MavlinkAdapter, cmd: int, params: tuple[float, ...], t: StartupT
         if result == ACCEPTED:
             return
         if result not in (None, TEMPORARILY_REJECTED, IN_PROGRESS):
-            raise CommandRejectedError(cmd, int(result))
+            raise CommandRejectedError(cmd, int(result), _why(ad, texts_before))
         if ad.clock() >= deadline:
             if result is None:
                 raise MavlinkError(f"no COMMAND_ACK for command {cmd} within {t.command_s:.1f} s")
-            raise CommandRejectedError(cmd, result, "(still rejected at timeout)")
+            raise CommandRejectedError(cmd, result, "(still rejected at timeout) " +
+                                       _why(ad, texts_before))
+
+
+def _why(ad: MavlinkAdapter, texts_before: int) -> str:
+    """The vehicle's STATUSTEXTs since the command was first sent: the reason for a refusal."""
+    texts = ad.statustexts_since(texts_before)
+    return f"({'; '.join(texts)})" if texts else ""
 
 
 def set_mode(ad: MavlinkAdapter, name: str, t: StartupTimeouts, keepalive_hz: float = 0.0) -> None:

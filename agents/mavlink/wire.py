@@ -86,12 +86,18 @@ def encode_fields(mav: mavlink2.MAVLink, msg_cls: type[MAVLinkMessage], *fields:
     their declaration order (the position and attitude messages the simulator streams at
     high rate); about three times faster, which sets how many vehicles one process holds.
     """
-    payload = msg_cls.unpacker.pack(*fields)
+    return encode_payload(mav, msg_cls.id, msg_cls.crc_extra, msg_cls.unpacker.pack(*fields))
+
+
+def encode_payload(mav: mavlink2.MAVLink, msg_id: int, crc_extra: int, payload: bytes) -> bytes:
+    """Frame a packed payload as the next MAVLink 2 packet of `mav`'s stream.
+
+    Also for messages this pymavlink's dialect lacks (PROTOCOL_VERSION, id 300).
+    """
     payload = payload.rstrip(b"\x00") or payload[:1]
-    msg_id = msg_cls.id
     header = _HEADER_V2.pack(0xFD, len(payload), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent,
                              msg_id & 0xFFFF, msg_id >> 16)
     mav.seq = (mav.seq + 1) & 0xFF
     body = header + payload
-    crc = mcrf4xx(body[1:] + bytes((msg_cls.crc_extra,)), 0xFFFF)
+    crc = mcrf4xx(body[1:] + bytes((crc_extra,)), 0xFFFF)
     return body + crc.to_bytes(2, "little")

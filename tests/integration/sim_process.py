@@ -88,6 +88,7 @@ class PlainClient:
         self.last: dict[str, object] = {}
         self.acks: list[tuple[int, int]] = []
         self.received: list[str] = []
+        self.history: list[object] = []  # every message, when several share one datagram
 
     def close(self) -> None:
         self.sock.close()
@@ -103,11 +104,28 @@ class PlainClient:
             data, _ = self.sock.recvfrom(65535)
         except TimeoutError:
             return
+        self._take(data)
+
+    def _take(self, data: bytes) -> None:
         for m in decode_datagram(self.mav, data).messages:
             self.last[m.get_type()] = m
             self.received.append(m.get_type())
+            self.history.append(m)
             if m.get_type() == "COMMAND_ACK":
                 self.acks.append((m.command, m.result))
+
+    def drain(self) -> None:
+        """Process every datagram already queued (so `last` is current), without waiting."""
+        self.sock.settimeout(0.0)
+        try:
+            while True:
+                try:
+                    data, _ = self.sock.recvfrom(65535)
+                except (BlockingIOError, TimeoutError):
+                    return
+                self._take(data)
+        finally:
+            self.sock.settimeout(0.02)
 
     def until(self, ok: Callable[[], bool], timeout_s: float, what: str,
               every: Callable[[], None] | None = None) -> None:
@@ -125,3 +143,24 @@ class PlainClient:
         self.send(self.mav.command_long_encode(self.sysid, 1, cmd, 0, *p))
         self.until(lambda: any(c == cmd for c, _ in self.acks), timeout_s, f"ACK of {cmd}")
         return next(r for c, r in self.acks if c == cmd)
+
+
+PENDING_ELSEWHERE = frozenset({"TIMESYNC", "SYSTEM_TIME"})  # answered once issue #9 lands
+
+
+def message_outcomes(output: str) -> dict[str, int]:
+    """The simulator's closing "sim messages:" line as {"TYPE:outcome": count}."""
+    for line in output.splitlines():
+        if line.startswith("sim messages:"):
+            pairs = (item.rsplit("=", 1) for item in line.split(":", 1)[1].split())
+            return {k: int(v) for k, v in pairs}
+    raise AssertionError(f"no 'sim messages:' line in simulator output:\n{output[-2000:]}")
+
+
+def assert_all_answered(output: str) -> dict[str, int]:
+    """Every message a client sent was answered, handled or ignored by design; none failed."""
+    outcomes = message_outcomes(output)
+    bad = {k: v for k, v in outcomes.items()
+           if k.endswith((":unhandled", ":failed")) and k.split(":")[0] not in PENDING_ELSEWHERE}
+    assert not bad, f"messages left unanswered or failed: {bad}"
+    return outcomes

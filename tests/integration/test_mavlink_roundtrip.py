@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from agents.errors import LinkLostError
+from agents.errors import CommandRejectedError, LinkLostError
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.startup import StartupTimeouts, command, start_offboard, wait_until
 from tests.integration.sim_process import start_sim
@@ -38,8 +38,9 @@ def test_adapter_starts_flies_east_and_detects_link_loss(flavour: str) -> None:
         assert abs(s.vel_enu_m_s[1]) < 0.05
         assert 0.0 <= ad.clock() - s.stamp_s < 0.2  # telemetry stamped on our clock, fresh
         assert ad.counters["bad_packets"] == 0
-        sim.stop()
+        # Telemetry stops when SIGTERM arrives; the process may take a while longer to exit.
         lost = ad.clock()
+        sim.stop()
         wait_until(ad, lambda st: not st.link_ok, 2.0, "link loss")
         assert 0.3 < ad.clock() - lost < 1.0
         with pytest.raises(LinkLostError):
@@ -66,6 +67,10 @@ def test_bad_datagrams_are_counted_and_the_vehicle_keeps_answering() -> None:
         for payload in (b"", b"\xfd" * 300, bytes(range(256)) * 4, junk, junk[:7], nan_sp,
                         inf_sp, nan_sp[:-1] + b"\x00"):
             ad.sock.sendto(payload, ad.remote)
+        # A refusal carries the vehicle's reason (its STATUSTEXT), as real autopilots send it.
+        with pytest.raises(CommandRejectedError, match="not armed") as refused:
+            command(ad, 22, (0.0,) * 6 + (float("nan"),), StartupTimeouts(command_s=2.0))
+        assert refused.value.result == 2
         command(ad, 400, (1.0,), StartupTimeouts(command_s=2.0))
         state = wait_until(ad, lambda s: s.armed, 2.0, "armed")
         assert state.armed

@@ -81,7 +81,11 @@ def test_ardupilot_guided_takeoff_and_velocity() -> None:
         client.until(lambda: time.monotonic() > deadline, 3.0, "flight",
                      every=lambda: velocity(client, 0.0, 1.5, 0.0))
         assert client.last["LOCAL_POSITION_NED"].y - east0 > 0.8
-        client.until(lambda: client.last["HEARTBEAT"].custom_mode == 5, 2.0, "LOITER failsafe")
+        # ArduPilot: setpoints stop -> stays GUIDED and stops after GUID_TIMEOUT (3 s).
+        client.until(lambda: "STATUSTEXT" in client.last, 5.0, "guided timeout STATUSTEXT")
+        assert b"timed out" in client.last["STATUSTEXT"].text.encode()
+        client.until(lambda: abs(client.last["LOCAL_POSITION_NED"].vy) < 0.1, 2.0, "stopped")
+        assert client.last["HEARTBEAT"].custom_mode == 4  # still GUIDED
     finally:
         client.close()
         assert sim.stop() == 0

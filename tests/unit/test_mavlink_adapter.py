@@ -121,3 +121,27 @@ def test_ack_recorded() -> None:
     feed(ad, heartbeat(), clock.t)
     feed(ad, lambda mav: mav.command_ack_encode(400, 0, 0, 0, 245, 191), clock.t)
     assert ad.acks[400] == 0
+
+
+def test_statustext_kept_and_a_failing_handler_is_contained() -> None:
+    ad, clock = make()
+    feed(ad, heartbeat(), clock.t)
+    before = ad.statustext_count
+    feed(ad, lambda mav: mav.statustext_encode(4, b"Takeoff denied: vehicle not armed"), clock.t)
+    assert ad.statustexts_since(before) == ["Takeoff denied: vehicle not armed"]
+    assert ad.statustexts_since(ad.statustext_count) == []
+    ad.open()
+    try:
+        assert ad.sock is not None
+        sender = new_codec(1, 1)
+        # A message the handler chokes on (patched to raise) is counted, not raised.
+        ad._local_position = lambda msg, now: 1 / 0  # type: ignore[method-assign]
+        ad.sock.sendto(local_pos(10)(sender).pack(sender), ad.sock.getsockname())
+        for _ in range(100):
+            ad.poll()
+            if ad.counters["handler_errors"]:
+                break
+            ad.wait_readable(0.01)
+        assert ad.counters["handler_errors"] == 1
+    finally:
+        ad.close()

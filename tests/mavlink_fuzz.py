@@ -1,0 +1,48 @@
+"""Build MAVLink 2 frames with arbitrary payload bytes (valid CRC), for property and fuzz tests."""
+
+from __future__ import annotations
+
+import re
+import struct
+
+from pymavlink.dialects.v20 import common as mavlink2
+from pymavlink.dialects.v20.common import mcrf4xx
+
+from sim_backend.endpoint import HANDLERS, IGNORED
+
+HEADER = struct.Struct("<BBBBBBBHB")
+
+
+def message_class(kind: str) -> type[mavlink2.MAVLink_message]:
+    return next(c for c in mavlink2.mavlink_map.values() if c.msgname == kind)
+
+
+# Every message type the simulator handles or ignores by design.
+HANDLED_TYPES = tuple(sorted(set(HANDLERS) | IGNORED))
+HANDLED_CLASSES = tuple(message_class(k) for k in HANDLED_TYPES)
+
+
+def payload_size(cls: type[mavlink2.MAVLink_message]) -> int:
+    return int(cls.unpacker.size)
+
+
+def raw_frame(cls: type[mavlink2.MAVLink_message], payload: bytes, seq: int = 0,
+              sysid: int = 255, compid: int = 190) -> bytes:
+    """One MAVLink 2 packet of `cls` carrying `payload` (any bytes) with a correct CRC."""
+    payload = payload[:payload_size(cls)]
+    msg_id = cls.id
+    head = HEADER.pack(0xFD, len(payload), 0, 0, seq & 0xFF, sysid, compid, msg_id & 0xFFFF,
+                       msg_id >> 16)
+    body = head + payload
+    crc = mcrf4xx(body[1:] + bytes((cls.crc_extra,)), 0xFFFF)
+    return body + crc.to_bytes(2, "little")
+
+
+def target_offset(cls: type) -> int | None:
+    """Byte offset of target_system in the payload (fields in wire order), or None."""
+    names = list(cls.ordered_fieldnames)
+    if "target_system" not in names:
+        return None
+    codes = re.findall(r"(\d*)([a-zA-Z?])", cls.unpacker.format.lstrip("<"))
+    sizes = [struct.calcsize("<" + n + c) for n, c in codes]
+    return sum(sizes[:names.index("target_system")])
