@@ -9,6 +9,7 @@ from dataclasses import replace
 from typing import Protocol
 
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
+from agents.mavlink.offboard import OffboardKeeper
 from agents.mavlink.signing import load_key
 from agents.mavlink.startup import start_offboard
 from agents.process import StatusReporter, Ticker, open_bus, stop_on_signals
@@ -68,13 +69,21 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         group = scenario.tick_group(index) if role == "follower" else 0
         phase = 0.5 * period * group
         ticker = Ticker(period, bus.now_s, phase_s=phase)
+        keeper = OffboardKeeper(mav)
+
+        def extra() -> dict[str, int]:
+            return {"overruns": ticker.overruns, "offboard_requests": keeper.requests,
+                    **mav.clock_counters(), **node.counters()}
+
         try:
             while not stop.raised and bus.now_s() < node.stop_s:
-                node.tick(ticker.wait())
+                now = ticker.wait()
+                node.tick(now)
+                keeper.check(now)
                 node.status.state = "running" if node.start_s is not None else "linked"
                 if node.status.due():
-                    node.status.publish(extra={"overruns": ticker.overruns, **node.counters()})
-            node.status.set("done", extra={"overruns": ticker.overruns, **node.counters()})
+                    node.status.publish(extra=extra())
+            node.status.set("done", extra=extra())
             log.info("%s %d done: ticks=%d overruns=%d %s", role, index, ticker.ticks,
                      ticker.overruns, node.counters())
         finally:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import socket
 from collections import Counter
+from collections.abc import Callable
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -28,6 +29,7 @@ MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES = 520
 PEER_TIMEOUT_S = 30.0
 MAX_PEERS = 8
 Addr = tuple[str, int]
+Handler = Callable[[mavlink2.MAVLink_message, Addr], None]
 
 
 class VehicleEndpoint:
@@ -45,6 +47,8 @@ class VehicleEndpoint:
         self.counters = counters
         self.mav = new_codec(sysid, 1)
         self.peers: dict[Addr, float] = {}
+        # Services that own a message type (sim_backend.timesync: TIMESYNC, SYSTEM_TIME).
+        self.handlers: dict[str, Handler] = {}
         fast = 1.0 / telemetry_hz
         self.default_intervals: dict[int, float] = {
             tm.MSG_HEARTBEAT: 1.0, tm.MSG_SYS_STATUS: 1.0, tm.MSG_EXTENDED_SYS_STATE: 1.0,
@@ -99,6 +103,10 @@ class VehicleEndpoint:
                   row: tm.Row) -> None:
         kind = msg.get_type()
         if kind == "HEARTBEAT":
+            return
+        handler = self.handlers.get(kind)
+        if handler is not None:
+            handler(msg, addr)
             return
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
             if self._for_me(msg):
@@ -219,7 +227,8 @@ class VehicleEndpoint:
             self._announced = (ap.mode, ap.armed)
             self.next_due[tm.MSG_HEARTBEAT] = now_s
         for msg_id, interval in self.intervals.items():
-            if interval <= 0.0 or now_s < self.next_due[msg_id]:
+            # 1 us of slack: summed float periods (0.1 + 0.02 > 0.12) must not skip a tick.
+            if interval <= 0.0 or now_s + 1e-6 < self.next_due[msg_id]:
                 continue
             due = self.next_due[msg_id] + interval
             self.next_due[msg_id] = due if due > now_s else now_s + interval
