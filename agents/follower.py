@@ -152,20 +152,26 @@ class FollowerNode:
         self.regroup(now_s)
         self.ingest()
         state = self.vehicle.poll()
+        # The law is computed for the instant its command leaves, not the tick's nominal
+        # one: if we were descheduled since, our inputs are fresher than now_s.
+        now_s = max(now_s, self.bus.now_s())
         own = Sample(
             np.asarray(state.pos_enu_m[:2]), np.asarray(state.vel_enu_m_s[:2]), state.stamp_s
         )
         r, dr, u = None, np.zeros(2), np.zeros(2)
         running = self.start_s is not None and now_s >= self.start_s
-        if not state.link_ok:
-            self.status.counters["ticks_without_vehicle"] += 1
-        elif running and ready(self.memory, self.setup, self.peers):
+        if running and ready(self.memory, self.setup, self.peers):
+            # The estimator needs no vehicle: it keeps running (and its estimate is what
+            # we publish) while our vehicle's telemetry is missing; only the command waits.
             self.memory, out = follower_tick(self.memory, self.setup, own, self.peers, now_s)
             r, dr, u = out.r_m, out.dr_m_s, out.u_m_s
             self.status.counters["stale_inputs"] += len(out.stale)
             self.ages_s.extend(now_s - self.peers[j].r.stamp_s for j in self.setup.neighbours)
         elif running:
             self.status.counters["ticks_not_ready"] += 1
+        if not state.link_ok:
+            self.status.counters["ticks_without_vehicle"] += 1
+            u = np.zeros(2)  # hover until our vehicle is heard again
         if r is None:  # not flying the law yet: publish r = p~ so that neighbours get ready
             r = reference(self.memory, self.setup, now_s)[0]
         self._command(state, u)

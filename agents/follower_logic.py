@@ -4,8 +4,19 @@ The networked follower sees the world as the latest timestamped samples: its own
 vehicle state, observations of the targets it watches, and the states its
 neighbours and its successor published.  `follower_tick` extrapolates every input
 to `now_s` with its own rate (first order), integrates the estimator over the
-measured time since the previous tick, and returns the command.  It holds no
-clock and does no I/O; time is an argument.
+measured time since the previous tick (at most `max_gap_s`), and returns the
+command.  It holds no clock and does no I/O; time is an argument.
+
+Inputs are not extrapolated for seconds.  Positions, estimates and link sums are
+carried at most `hold_after_s` past their stamp, then held: a stall of the data
+(a scheduling hiccup, a simulator catching up) is bridged by extrapolation, which
+is exact for a vehicle flying its last setpoint, while a long silence does not fly
+the swarm on a guess.  A neighbour or successor older than `stale_after_s` (the
+vehicle link timeout) is missing: its link carries no flow (neither end integrates
+on it, so a link's two flows still cancel for the paper's estimator; the robust one
+keeps the neighbour's link sum as last known), and a missing successor drops the
+spacing term (radius and rotation go on, as if it were where it should be) instead
+of chasing a stale bearing.
 """
 
 from __future__ import annotations
@@ -21,7 +32,6 @@ from agents.core.controller import ControlGains, enclosing_control
 from agents.core.estimator import (
     EstimatorParams,
     consensus_flows,
-    consensus_rate,
     edge_fractions,
     finite_difference_velocity,
     link_balance,
@@ -49,7 +59,8 @@ class FollowerSetup:
     control: ControlGains
     period_s: float
     robust: bool = False  # the link-sum estimator (agents.core.estimator.link_balance)
-    stale_after_s: float = 0.5
+    stale_after_s: float = 0.5  # a peer older than this is missing (no flow, no spacing)
+    hold_after_s: float = 1.0  # longest extrapolation of any input; held afterwards
     target_vel_tau_s: float = 0.1
     max_gap_s: float = 0.25  # longest dt the estimator integrates over one tick
     age_tau_s: float = 0.5  # time constant of the low-passed data ages
@@ -89,6 +100,16 @@ class Sample:
 
     def at(self, t_s: float) -> FloatArray:
         return self.value + self.rate * (t_s - self.stamp_s)
+
+    def fresh(self, t_s: float, limit_s: float) -> bool:
+        return t_s - self.stamp_s <= limit_s
+
+    def held(self, t_s: float, limit_s: float) -> FloatArray:
+        """The value at t_s, extrapolated over at most `limit_s` past its stamp, then held."""
+        return self.at(min(t_s, self.stamp_s + limit_s))
+
+    def held_rate(self, t_s: float, limit_s: float) -> FloatArray:
+        return self.rate if self.fresh(t_s, limit_s) else ZERO2
 
 
 @dataclass(frozen=True)
@@ -172,8 +193,9 @@ def reference(
     heard = [j for j in setup.observed if j in memory.targets]
     w = setup.weights[heard]
     tracks = [memory.targets[j] for j in heard]
-    p_tilde = sum((wj * s.at(now_s) for wj, s in zip(w, tracks, strict=True)), ZERO2)
-    rate = sum((wj * s.rate for wj, s in zip(w, tracks, strict=True)), ZERO2)
+    limit = setup.hold_after_s
+    p_tilde = sum((wj * s.held(now_s, limit) for wj, s in zip(w, tracks, strict=True)), ZERO2)
+    rate = sum((wj * s.held_rate(now_s, limit) for wj, s in zip(w, tracks, strict=True)), ZERO2)
     return np.asarray(p_tilde), np.asarray(rate)
 
 
@@ -182,10 +204,11 @@ def _their_flows(
 ) -> tuple[FloatArray, FloatArray]:
     """(d, 2) each neighbour's running sum on its link to us, carried to now_s, and its rate."""
     sums, rates = np.zeros((len(setup.neighbours), 2)), np.zeros((len(setup.neighbours), 2))
+    limit = setup.hold_after_s
     for k, j in enumerate(setup.neighbours):
         flow = peers[j].flow
         if flow is not None:
-            sums[k], rates[k] = flow.at(now_s), flow.rate
+            sums[k], rates[k] = flow.held(now_s, limit), flow.held_rate(now_s, limit)
     return sums, rates
 
 
@@ -198,7 +221,9 @@ def _estimate(
 ) -> tuple[FollowerMemory, FloatArray, FloatArray]:
     """New memory, r_i and dr_i/dt at now_s, with the paper's or the robust estimator."""
     p_tilde, p_tilde_rate = reference(memory, setup, now_s)
-    r_nbrs = np.array([peers[j].r.at(now_s) for j in setup.neighbours]).reshape(-1, 2)
+    hold, limit = setup.hold_after_s, setup.stale_after_s
+    r_nbrs = np.array([peers[j].r.held(now_s, hold) for j in setup.neighbours]).reshape(-1, 2)
+    live = np.array([peers[j].r.fresh(now_s, limit) for j in setup.neighbours], float)[:, None]
     # Both estimators: a link's flow may remove at most step_fraction of the gap per age
     # of the data it acts on (not per tick), so that late or lost data slow the
     # consensus down instead of making it ring.  Neither law changes; the discretisation
@@ -208,7 +233,7 @@ def _estimate(
     args = (fractions, setup.estimator, setup.period_s)
     if not setup.robust:
         phi = memory.phi_m + dt * memory.phi_rate_m_s
-        phi_rate = consensus_rate(phi + p_tilde, r_nbrs, *args)
+        phi_rate = (live * consensus_flows(phi + p_tilde, r_nbrs, *args)).sum(axis=0)
         memory = replace(memory, phi_m=phi, phi_rate_m_s=phi_rate)
         return memory, phi + p_tilde, phi_rate + p_tilde_rate
     d = len(setup.neighbours)
@@ -217,7 +242,7 @@ def _estimate(
     sums = sums + dt * rates
     their_sums, their_rates = _their_flows(setup, peers, now_s)
     phi = link_balance(sums, their_sums)
-    flows = consensus_flows(phi + p_tilde, r_nbrs, *args)
+    flows = live * consensus_flows(phi + p_tilde, r_nbrs, *args)
     phi_rate = link_balance(flows, their_rates)
     memory = replace(
         memory, phi_m=phi, phi_rate_m_s=phi_rate, link_sums_m=sums, link_rates_m_s=flows
@@ -235,7 +260,9 @@ def _smoothed_ages(
     gain = 1.0 - math.exp(-dt / setup.age_tau_s)
     ages = dict(memory.peer_age_s)
     for j in set(setup.neighbours) | {setup.successor}:
-        age = now_s - peers[j].r.stamp_s
+        # A missing peer's age stops at the limit: its link is off meanwhile, and its step
+        # limits must be back to normal soon after it is heard again.
+        age = min(now_s - peers[j].r.stamp_s, setup.stale_after_s)
         ages[j] = age if j not in ages else ages[j] + gain * (age - ages[j])
     return ages
 
@@ -252,10 +279,17 @@ def follower_tick(
     dt = 0.0 if last is None else min(max(now_s - last, 0.0), setup.max_gap_s)
     memory = replace(memory, peer_age_s=_smoothed_ages(memory, setup, peers, now_s, dt))
     new_memory, r, dr = _estimate(memory, setup, peers, now_s, dt)
+    own_pos = own.held(now_s, setup.hold_after_s)
     succ = peers[setup.successor].pos
+    if succ.fresh(now_s, setup.stale_after_s):
+        succ_pos = succ.at(now_s)
+    else:  # missing: where it should be, so that only radius and rotation act
+        rel = complex(*(own_pos - r)) * complex(math.cos(setup.angle_rad),
+                                                 math.sin(setup.angle_rad))
+        succ_pos = r + np.array([rel.real, rel.imag])
     out = enclosing_control(
-        own.at(now_s)[None, :],
-        succ.at(now_s)[None, :],
+        own_pos[None, :],
+        succ_pos[None, :],
         r[None, :],
         dr[None, :],
         np.array([setup.angle_rad]),

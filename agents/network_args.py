@@ -13,7 +13,7 @@ FLAGS = {key: "--" + key.replace("_", "-") for key in IMPAIRMENT_KEYS}
 
 def add_network_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("network (overrides the scenario's [network] table)")
-    g.add_argument("--estimator", choices=ESTIMATORS, default=None, help="paper | robust")
+    g.add_argument("--estimator", choices=ESTIMATORS, default=None, help="robust (default) | paper")
     g.add_argument("--link", choices=LINK_PROTOCOLS, default=None, help="Zenoh link protocol")
     g.add_argument("--delay-ms", type=float, default=None, help="added one-way delay per message")
     g.add_argument("--jitter-ms", type=float, default=None, help="std of the added delay")

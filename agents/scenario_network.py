@@ -70,7 +70,7 @@ def network(table: Table, n: int) -> NetworkConfig:
             ends.append(v - 1)
         links.append((ends[0], ends[1], impairment(link, where, default)))
     return NetworkConfig(
-        estimator=choice(table.get("estimator", "paper"), ESTIMATORS, "network.estimator"),
+        estimator=choice(table.get("estimator", "robust"), ESTIMATORS, "network.estimator"),
         link=choice(table.get("link", "tcp"), LINK_PROTOCOLS, "network.link"),
         default=default,
         links=tuple(links),

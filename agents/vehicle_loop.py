@@ -10,7 +10,8 @@ from typing import Protocol
 
 from agents.errors import MavlinkError
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter, VehicleState
-from agents.mavlink.modes import OFFBOARD_MODE
+from agents.mavlink.modes import HOLD_MODE, OFFBOARD_MODE
+from agents.mavlink.offboard import OffboardKeeper
 from agents.mavlink.signing import load_key
 from agents.mavlink.startup import start_offboard
 from agents.process import StatusReporter, StopFlag, Ticker, open_bus, stop_on_signals
@@ -40,16 +41,18 @@ RECOVER_AFTER_S = 0.5  # not flying our setpoints this long: start the vehicle u
 @dataclass
 class VehicleWatch:
     """Says when the vehicle stopped flying our setpoints: disarmed or rebooted (a restarted
-    simulator), out of offboard/guided (the autopilot's setpoint-loss failsafe after we
-    stalled), or silent (heartbeat loss).  Real autopilots never return to offboard by
-    themselves, so the agent must ask again."""
+    simulator), in a mode other than offboard/guided or the failsafe's hold, or silent
+    (heartbeat loss).  Real autopilots never return to offboard by themselves, so the
+    agent must start it up again."""
 
     recover_after_s: float = RECOVER_AFTER_S
     since_s: float | None = None
 
     def lost(self, state: VehicleState, flavour: str | None, now_s: float) -> bool:
+        # The failsafe's Hold of an armed, linked vehicle is OffboardKeeper's: it asks for
+        # offboard again without blocking the loop; a full start-up is for the rest.
         ok = state.link_ok and state.armed and flavour is not None and \
-            state.mode == OFFBOARD_MODE[flavour]
+            state.mode in (OFFBOARD_MODE[flavour], HOLD_MODE[flavour])
         if ok:
             self.since_s = None
             return False
@@ -110,7 +113,12 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         group = scenario.tick_group(index) if role == "follower" else 0
         phase = 0.5 * period * group
         ticker = Ticker(period, bus.now_s, phase_s=phase)
-        watch = VehicleWatch()
+        watch, keeper = VehicleWatch(), OffboardKeeper(mav)
+
+        def extra() -> dict[str, int]:
+            return {"overruns": ticker.overruns, "offboard_requests": keeper.requests,
+                    **mav.clock_counters(), **node.counters()}
+
         try:
             while not stop.raised and bus.now_s() < node.stop_s:
                 now = ticker.wait()
@@ -121,10 +129,11 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
                     watch.since_s = None
                     continue
                 node.tick(now)
+                keeper.check(now)
                 node.status.state = "running" if node.start_s is not None else "linked"
                 if node.status.due():
-                    node.status.publish(extra={"overruns": ticker.overruns, **node.counters()})
-            node.status.set("done", extra={"overruns": ticker.overruns, **node.counters()})
+                    node.status.publish(extra=extra())
+            node.status.set("done", extra=extra())
             log.info("%s %d done: ticks=%d overruns=%d %s", role, index, ticker.ticks,
                      ticker.overruns, node.counters())
         finally:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -50,6 +50,7 @@ class SensorPublisher:
         every_ticks: int,
         noise_std_m: float = 0.0,
         seed: int = 0,
+        late_s: Callable[[float], float] = lambda _t: 0.0,
     ) -> None:
         self.n, self.m = scenario.n, scenario.m
         self.bus, self.keys, self.every = bus, keys, max(1, every_ticks)
@@ -66,12 +67,16 @@ class SensorPublisher:
         self.truth_out = bus.declare_publisher(keys.truth())
         self.sensor_out = [bus.declare_publisher(keys.sensor_targets(i)) for i in range(self.n)]
         self.ticks = 0
+        # How far the real clock is past the state's boot time when the hook runs: the
+        # state is stamped with the time it is true, not with when it was published, so a
+        # late tick does not make the followers' finite-difference velocities jump.
+        self.late_s = late_s
 
     def __call__(self, sim_time_s: float, state: FleetState) -> None:
         self.ticks += 1
         if self.ticks % self.every:
             return
-        now = self.bus.now_s()
+        now = self.bus.now_s() - max(0.0, self.late_s(sim_time_s))
         pos = ned_to_enu(state.pos_ned_m)
         vel = ned_to_enu(state.vel_ned_m_s)
         truth = TruthSnapshot(
@@ -122,14 +127,26 @@ def run(args: argparse.Namespace) -> int:
     with stop_on_signals() as stop, open_bus(args) as bus:
         sim = Simulator(spawn_points_ned(scenario), scenario.vehicle, scenario.home, cfg)
         sensor = SensorPublisher(
-            scenario, bus, keys, round(args.rate_hz / args.sensor_hz), args.noise_std_m, args.seed
+            scenario,
+            bus,
+            keys,
+            round(args.rate_hz / args.sensor_hz),
+            args.noise_std_m,
+            args.seed,
+            late_s=lambda t: sim.boot_time_s() - t,
         )
         status = StatusReporter(bus, keys, "sim", 0)
         sim.on_tick.append(sensor)
 
+        def loop_counters() -> dict[str, int]:
+            st = sim.stats
+            return {"overruns": st.overruns, "catch_ups": st.catch_ups,
+                    "caught_up_ticks": st.caught_up_ticks, "resyncs": st.resyncs,
+                    **dict(sim.counters)}
+
         def report(_t: float, _s: FleetState) -> None:
             if status.due():
-                status.publish(extra={"overruns": sim.stats.overruns, **dict(sim.counters)})
+                status.publish(extra=loop_counters())
 
         sim.on_tick.append(report)
         token = bus.declare_token(keys.alive("sim", 0))
@@ -140,12 +157,14 @@ def run(args: argparse.Namespace) -> int:
             token.close()
             sensor.close()
             sim.close()
-        status.set("done", extra={"overruns": stats.overruns, **dict(sim.counters)})
+        status.set("done", extra=loop_counters())
     log.info(
-        "simulator stopped at t=%.1f s: ticks=%d overruns=%d %s",
+        "simulator stopped at t=%.1f s: ticks=%d overruns=%d catch-ups=%d (%d ticks) %s",
         sim.sim_time_s,
         stats.ticks,
         stats.overruns,
+        stats.catch_ups,
+        stats.caught_up_ticks,
         dict(sim.counters),
     )
     return 0

@@ -47,6 +47,7 @@ class Rx:
 
 
 Handler = Callable[["VehicleEndpoint", Msg, Rx], str]
+ServiceHandler = Callable[[Msg, Addr], str]  # a service that owns a message type; outcome
 
 
 class VehicleEndpoint:
@@ -67,6 +68,8 @@ class VehicleEndpoint:
         self.mav = new_codec(sysid, 1)
         self.peers: dict[Addr, float] = {}
         self.missions = protocols.MissionStore()
+        # Services that own a message type (sim_backend.timesync: TIMESYNC, SYSTEM_TIME).
+        self.handlers: dict[str, ServiceHandler] = {}
         fast = 1.0 / telemetry_hz
         self.default_intervals: dict[int, float] = {
             tm.MSG_HEARTBEAT: 1.0, tm.MSG_SYS_STATUS: 1.0, tm.MSG_EXTENDED_SYS_STATE: 1.0,
@@ -127,6 +130,9 @@ class VehicleEndpoint:
         return outcome
 
     def _route(self, kind: str, msg: Msg, rx: Rx) -> str:
+        service = self.handlers.get(kind)
+        if service is not None:
+            return service(msg, rx.addr)
         handler = HANDLERS.get(kind)
         if handler is None:
             return "ignored" if kind in IGNORED else "unhandled"
@@ -180,7 +186,8 @@ class VehicleEndpoint:
             severity, text = ap.notices.pop(0)
             out += self.statustext(severity, text)
         for msg_id, interval in self.intervals.items():
-            if interval <= 0.0 or now_s < self.next_due[msg_id]:
+            # 1 us of slack: summed float periods (0.1 + 0.02 > 0.12) must not skip a tick.
+            if interval <= 0.0 or now_s + 1e-6 < self.next_due[msg_id]:
                 continue
             due = self.next_due[msg_id] + interval
             self.next_due[msg_id] = due if due > now_s else now_s + interval

@@ -3,7 +3,14 @@
 The backend owns simulated time: `sim_time_s` advances by exactly one tick per
 step.  Real-time pacing reads an injectable clock; `step_once()` advances one tick
 without waiting, so tests can drive the simulator without sleeping.  Hooks in
-`on_tick` see every tick's state (a future Zenoh publisher attaches here).
+`on_tick` see every tick's state (the swarm's truth and sensor publisher attaches here).
+
+While `run()` paces, the vehicles' boot clock is locked to the real clock as a real
+autopilot's is: a late tick (a scheduling stall, a SIGSTOP of this process) is caught
+up by integrating the missed time in one-tick physics sub-steps, never dropped, and
+what arrived meanwhile is stamped with the real boot time, so that the simulator's own
+stall does not trip the vehicles' setpoint-loss failsafe.  Telemetry and hooks run
+once per real tick, not once per sub-step: a caught-up burst sends nothing extra.
 """
 
 from __future__ import annotations
@@ -28,11 +35,13 @@ from sim_backend.autopilot import Autopilot
 from sim_backend.endpoint import VehicleEndpoint
 from sim_backend.params import ParamStore, default_params
 from sim_backend.telemetry import Row
+from sim_backend.timesync import ClockService
 
 log = logging.getLogger(__name__)
 TickHook = Callable[[float, model.FleetState], None]
-RESYNC_TICKS = 5
+MAX_CATCHUP_S = 30.0  # a longer stall (a debugger, a laptop lid) is dropped, counted, logged
 MAX_VEHICLES = 255
+CATCH_UP_DRAIN = 1024  # datagrams per vehicle taken before a catch-up (a socket buffer's worth)
 
 
 @dataclass(frozen=True)
@@ -63,8 +72,10 @@ class Snapshot:
 @dataclass
 class LoopStats:
     ticks: int = 0
-    overruns: int = 0
-    resyncs: int = 0
+    overruns: int = 0  # ticks that ended after the next tick was due
+    catch_ups: int = 0  # times the loop woke up more than a tick late and caught up
+    caught_up_ticks: int = 0  # physics sub-steps run without telemetry while catching up
+    resyncs: int = 0  # stalls longer than MAX_CATCHUP_S: the rest of the time was dropped
     max_late_s: float = 0.0
 
 
@@ -102,8 +113,10 @@ class Simulator:
         self.stats = LoopStats()
         self.on_tick: list[TickHook] = []
         self._clock = clock
+        self._origin_s: float | None = None  # clock reading at boot time 0 while run() paces
         self._selector = selectors.DefaultSelector()
         self.endpoints: list[VehicleEndpoint] = []
+        self.clocks: list[ClockService] = []
         self._rows: list[Row] = []
         try:
             for i in range(self.state.n):
@@ -133,6 +146,8 @@ class Simulator:
         if self.cfg.signing_key is not None:
             endpoint.verifier = SignatureVerifier(self.cfg.signing_key)
         self._selector.register(sock, selectors.EVENT_READ, i)
+        self.clocks.append(ClockService(endpoint.mav, sock, self.boot_time_s, time.time,
+                                        self.counters).attach(endpoint))
         return endpoint
 
     @property
@@ -147,6 +162,7 @@ class Simulator:
             self._selector.unregister(ep.sock)
             ep.sock.close()
         self.endpoints = []
+        self.clocks = []
         self._selector.close()
 
     # ---- one tick -----------------------------------------------------------------------
@@ -172,6 +188,7 @@ class Simulator:
         for i, ep in enumerate(self.endpoints):
             try:
                 ep.telemetry(self.sim_time_s, self._rows[i])
+                self.clocks[i].due(ep.default_dest)
             except Exception:  # one vehicle's bad state must not stop the others
                 self.counters["telemetry_errors"] += 1
                 if self.counters["telemetry_errors"] <= 5:
@@ -195,7 +212,7 @@ class Simulator:
         s = self.state
         roll, pitch = model.tilt_rad(s.acc_ned_m_s2, s.yaw_rad)
         on_ground = model.landed(s).tolist()
-        ms = int(self.sim_time_s * 1000.0)
+        ms = round(self.sim_time_s * 1000.0)
         return [Row(ms, tuple(p), tuple(v), r, q, y, w, g)
                 for p, v, r, q, y, w, g in zip(s.pos_ned_m.tolist(), s.vel_ned_m_s.tolist(),
                                                 roll.tolist(), pitch.tolist(), s.yaw_rad.tolist(),
@@ -217,9 +234,9 @@ class Simulator:
             if not events or remaining <= 0.0:
                 return
 
-    def _drain(self, i: int) -> None:
+    def _drain(self, i: int, most: int = 16) -> None:
         ep = self.endpoints[i]
-        for _ in range(16):  # bounded so one chatty peer cannot starve the others
+        for _ in range(most):  # bounded so one chatty peer cannot starve the others
             try:
                 data, addr = ep.sock.recvfrom(65535)
             except (BlockingIOError, InterruptedError):
@@ -227,28 +244,62 @@ class Simulator:
             except OSError:
                 self.counters["rx_errors"] += 1
                 return
-            ep.on_datagram(data, addr, self.sim_time_s, self._rows[i])
+            ep.on_datagram(data, addr, self.boot_time_s(), self._rows[i])
 
     # ---- real time ----------------------------------------------------------------------
+    def boot_time_s(self) -> float:
+        """The vehicles' boot clock: real time since boot while run() paces, else sim time."""
+        if self._origin_s is None:
+            return self.sim_time_s
+        return max(self.sim_time_s, self._clock() - self._origin_s)
+
     def run(self, should_stop: Callable[[], bool], max_ticks: int | None = None) -> LoopStats:
-        """Tick at rate_hz in real time until should_stop() or max_ticks; counts overruns."""
-        start = self._clock()
+        """Tick at rate_hz in real time until should_stop() or max_ticks.
+
+        Each tick first serves datagrams until it is due, then advances, so the state sent
+        with time_boot_ms t is the state at boot time t, sent at t.  Late ticks catch up.
+        """
+        self._origin_s = self._clock() - self.sim_time_s
         k = 0
-        while not should_stop() and (max_ticks is None or k < max_ticks):
-            self._advance()
-            k += 1
-            deadline = start + k * self.dt_s
-            now = self._clock()
-            if now > deadline:
-                self.stats.overruns += 1
-                self.stats.max_late_s = max(self.stats.max_late_s, now - deadline)
-                if now - deadline > RESYNC_TICKS * self.dt_s:
-                    start = now - k * self.dt_s
-                    self.stats.resyncs += 1
-                # Even when late, serve commands and setpoints for a fifth of a tick.
-                deadline = now + 0.2 * self.dt_s
-            self.receive_until(deadline)
+        try:
+            while not should_stop() and (max_ticks is None or k < max_ticks):
+                self.receive_until(self._origin_s + self.sim_time_s + self.dt_s)
+                self._catch_up()
+                self._advance()
+                k += 1
+                late_s = self._clock() - (self._origin_s + self.sim_time_s + self.dt_s)
+                if late_s > 0.0:
+                    self.stats.overruns += 1
+                    self.stats.max_late_s = max(self.stats.max_late_s, late_s)
+        finally:
+            self._origin_s = None
         return self.stats
+
+    def _catch_up(self) -> None:
+        """Integrate, in one-tick physics sub-steps, every tick but the last that is due."""
+        assert self._origin_s is not None
+        behind = int((self._clock() - self._origin_s - self.sim_time_s) / self.dt_s + 1e-6) - 1
+        if behind <= 0:
+            return
+        # Everything that waited out the stall, on every socket, is taken now (stamped with
+        # the boot time it is taken at): a setpoint sent in time must not count as missing.
+        for i in range(self.n):
+            self._drain(i, CATCH_UP_DRAIN)
+        limit = int(MAX_CATCHUP_S / self.dt_s)
+        if behind > limit:
+            dropped_s = (behind - limit) * self.dt_s
+            self._origin_s += dropped_s
+            self.stats.resyncs += 1
+            log.warning("simulator stalled %.1f s: dropped %.1f s of vehicle time",
+                        (behind + 1) * self.dt_s, dropped_s)
+            behind = limit
+        self.stats.catch_ups += 1
+        self.stats.caught_up_ticks += behind
+        self.stats.max_late_s = max(self.stats.max_late_s, behind * self.dt_s)
+        for _ in range(behind):  # the commands in force, as a real airframe flies them
+            self.state = model.step(self.state, self.command, self.params, self.dt_s)
+            self.sim_time_s = round(self.sim_time_s + self.dt_s, 9)
+        self._rows = self._build_rows()
 
     def snapshot(self) -> Snapshot:
         s = self.state

@@ -13,6 +13,7 @@ import logging
 import math
 import selectors
 import socket
+import struct
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -28,7 +29,7 @@ from agents.mavlink.modes import (
     flavour_of_autopilot,
 )
 from agents.mavlink.signing import signing_timestamp
-from agents.mavlink.timemap import BootClockMap
+from agents.mavlink.timemap import VehicleClock
 from agents.mavlink.wire import MAVLinkMessage, decode_datagram, encode, new_codec, sign_outgoing
 
 log = logging.getLogger(__name__)
@@ -40,6 +41,9 @@ MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID = 18, 8
 HEARTBEAT_PERIOD_S = 1.0
 MAV_SEVERITY_WARNING = 4
 STATUSTEXT_KEPT = 20
+TIMESYNC_PERIOD_S = 0.25
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux; Python does not export it
+_TIMESPEC = struct.Struct("qq")
 
 
 @dataclass(frozen=True)
@@ -106,7 +110,10 @@ class MavlinkAdapter:
         self._last_rx_s = -math.inf
         self._last_hb_tx_s = -math.inf
         self._link_reported_ok = False
-        self._timemap = BootClockMap()
+        self.vclock = VehicleClock(f"vehicle {cfg.target_sysid or '?'}")
+        self._last_ts_tx_s = -math.inf
+        self._poll_s = -math.inf
+        self._kernel_stamps = False
         self._t0 = clock()
         self.sock: socket.socket | None = None
         self._selector: selectors.BaseSelector | None = None
@@ -121,6 +128,11 @@ class MavlinkAdapter:
             raise MavlinkError(f"cannot bind {self.cfg.local_host}:{self.cfg.local_port}: "
                                f"{exc.strerror}") from exc
         sock.setblocking(False)
+        try:  # kernel receive stamps: what waited in the buffer is stamped with its arrival
+            sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+            self._kernel_stamps = True
+        except OSError:
+            self._kernel_stamps = False
         self.sock = sock
         self._selector = selectors.DefaultSelector()
         self._selector.register(sock, selectors.EVENT_READ)
@@ -148,9 +160,10 @@ class MavlinkAdapter:
     def poll(self) -> VehicleState:
         """Drain the socket, keep our heartbeat going, update the link flag; never blocks."""
         now = self.clock()
+        self._poll_s = now
         while self.sock is not None:
             try:
-                data, addr = self.sock.recvfrom(65535)
+                data, anc, _flags, addr = self.sock.recvmsg(65535, socket.CMSG_SPACE(16))
             except (BlockingIOError, InterruptedError):
                 break
             except OSError:
@@ -158,9 +171,10 @@ class MavlinkAdapter:
                 break
             decoded = decode_datagram(self.mav, data)
             self.counters["bad_packets"] += decoded.bad
+            received = self._arrival(anc)
             for msg in decoded.messages:
                 try:
-                    self.handle(msg, addr, now)
+                    self.handle(msg, addr, received)
                 except Exception:  # a hostile or odd packet must not stop the follower
                     self.counters["handler_errors"] += 1
                     if self.counters["handler_errors"] <= 5:
@@ -170,7 +184,23 @@ class MavlinkAdapter:
             self._last_hb_tx_s = now
             self._send(self.mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER,
                                                  MAV_AUTOPILOT_INVALID, 0, 0, 4))
+        if now - self._last_ts_tx_s >= TIMESYNC_PERIOD_S and self.sysid is not None:
+            self._last_ts_tx_s = now
+            self._send(self.mav.timesync_encode(0, self.vclock.request(self.clock())))
         return self._update_link(now)
+
+    def _arrival(self, anc: list[tuple[int, int, bytes]]) -> float:
+        """Agent-clock arrival time of a datagram: now, less how long the kernel held it.
+
+        Both clocks are read here, back to back: a `now` read before a descheduling
+        would turn the time we were away into a wrong age of every datagram.
+        """
+        wall, now = time.time(), self.clock()
+        for level, kind, data in anc:
+            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
+                sec, nsec = _TIMESPEC.unpack_from(data)
+                return now - min(1.0e6, max(0.0, wall - (sec + nsec * 1e-9)))
+        return now
 
     def wait_readable(self, timeout_s: float) -> None:
         """Block until a datagram is queued or timeout_s passes (start-up helpers only)."""
@@ -209,6 +239,8 @@ class MavlinkAdapter:
             return
         if kind == "LOCAL_POSITION_NED":
             self._local_position(msg, now)
+        elif kind == "TIMESYNC":
+            self._timesync(msg, now)
         elif kind == "COMMAND_ACK":
             self.acks[msg.command] = msg.result
         elif kind == "STATUSTEXT":
@@ -256,10 +288,25 @@ class MavlinkAdapter:
             self.counters["ignored_nonfinite"] += 1
             return
         enu = ned_to_enu(ned).tolist()
-        self._last_rx_s = now
-        stamp = self._timemap.stamp(msg.time_boot_ms * 1e-3, now)
+        # The link is judged by when we read telemetry (as before arrival stamps): only
+        # the sample's own stamp needs its true arrival time.
+        self._last_rx_s = max(now, self._poll_s)
+        stamp = self.vclock.map.stamp(msg.time_boot_ms * 1e-3, now)
         self._state = VehicleState(tuple(enu[0]), tuple(enu[1]), stamp,
                                    self._armed, self._mode, True)
+
+    # ---- clock --------------------------------------------------------------------------
+    def _timesync(self, msg: MAVLinkMessage, now: float) -> None:
+        """Answer the vehicle's requests (our clock, ns); fold replies to ours into the map."""
+        if msg.tc1 == 0:
+            self._send(self.mav.timesync_encode(round(self.clock() * 1e9), msg.ts1))
+            self.counters["timesync_answered"] += 1
+        else:
+            self.vclock.reply(msg.tc1, msg.ts1, now)
+
+    def clock_counters(self) -> dict[str, int]:
+        """How the vehicle's clock is mapped: TIMESYNC locked (1/0), re-locks, reboots."""
+        return self.vclock.counters()
 
     # ---- send ---------------------------------------------------------------------------
     def send_velocity_enu(self, vel_m_s: tuple[float, float, float] | np.ndarray,

@@ -145,9 +145,6 @@ class PlainClient:
         return next(r for c, r in self.acks if c == cmd)
 
 
-PENDING_ELSEWHERE = frozenset({"TIMESYNC", "SYSTEM_TIME"})  # answered once issue #9 lands
-
-
 def message_outcomes(output: str) -> dict[str, int]:
     """The simulator's closing "sim messages:" line as {"TYPE:outcome": count}."""
     for line in output.splitlines():
@@ -161,6 +158,6 @@ def assert_all_answered(output: str) -> dict[str, int]:
     """Every message a client sent was answered, handled or ignored by design; none failed."""
     outcomes = message_outcomes(output)
     bad = {k: v for k, v in outcomes.items()
-           if k.endswith((":unhandled", ":failed")) and k.split(":")[0] not in PENDING_ELSEWHERE}
+           if k.endswith((":unhandled", ":failed"))}
     assert not bad, f"messages left unanswered or failed: {bad}"
     return outcomes

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import math
+import socket
+import time
 
 import pytest
 
 from agents.errors import LinkLostError, MavlinkError
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.modes import encode_custom_mode
+from agents.mavlink.offboard import OffboardKeeper
 from agents.mavlink.timemap import BootClockMap
 from agents.mavlink.wire import decode_datagram, new_codec
 
@@ -145,3 +148,87 @@ def test_statustext_kept_and_a_failing_handler_is_contained() -> None:
         assert ad.counters["handler_errors"] == 1
     finally:
         ad.close()
+
+
+def open_pair() -> tuple[MavlinkAdapter, FakeClock, socket.socket]:
+    """An open adapter whose vehicle is a plain socket on loopback."""
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    vehicle.bind(("127.0.0.1", 0))
+    vehicle.settimeout(1.0)
+    clock = FakeClock()
+    ad = MavlinkAdapter(AdapterConfig(local_port=0, remote_port=vehicle.getsockname()[1],
+                                      target_sysid=1), clock=clock).open()
+    return ad, clock, vehicle
+
+
+def next_of(sock: socket.socket, kind: str):
+    while True:
+        for m in decode_datagram(new_codec(99, 0), sock.recv(1000)).messages:
+            if m.get_type() == kind:
+                return m
+
+
+def test_timesync_requests_answered_and_replies_lock_the_clock_map() -> None:
+    ad, clock, vehicle = open_pair()
+    try:
+        px4 = new_codec(1, 1)
+        feed(ad, lambda mav: mav.timesync_encode(0, 555), clock.t)  # the vehicle asks us
+        reply = next_of(vehicle, "TIMESYNC")
+        assert reply.ts1 == 555 and reply.tc1 == round(clock.t * 1e9)
+        boot_offset_s = 90.0  # agent time - vehicle boot time
+        for k in range(4):
+            clock.t += 0.25
+            ad.poll()  # sends our request
+            request = next_of(vehicle, "TIMESYNC")
+            assert request.tc1 == 0
+            vehicle_ns = request.ts1 - round(boot_offset_s * 1e9) + 1_000_000  # 1 ms there
+            clock.t += 0.002
+            answer = px4.timesync_encode(vehicle_ns, request.ts1)
+            for m in decode_datagram(new_codec(99, 0), answer.pack(px4)).messages:
+                ad.handle(m, ADDR, clock.t)
+            if k == 0:  # a duplicated reply is not a second sample
+                ad.handle(m, ADDR, clock.t)
+        assert ad.clock_counters()["timesync_unmatched"] == 1
+        assert ad.clock_counters()["timesync_locked"] == 1
+        feed(ad, local_pos(round((clock.t - boot_offset_s) * 1000)), clock.t + 0.3)
+        assert ad.state.stamp_s == pytest.approx(clock.t, abs=1e-3)  # late, yet not re-stamped
+    finally:
+        ad.close()
+        vehicle.close()
+
+
+def test_queued_datagrams_are_stamped_with_their_arrival() -> None:
+    ad, clock, vehicle = open_pair()
+    try:
+        px4 = new_codec(1, 1)
+        vehicle.sendto(px4.local_position_ned_encode(1000, 0, 0, 0, 0, 0, 0).pack(px4),
+                       ad.sock.getsockname())
+        time.sleep(0.2)  # the datagram waits in our socket (we are "paused")
+        ad.poll()
+        assert clock.t - 0.5 < ad.state.stamp_s <= clock.t - 0.15
+    finally:
+        ad.close()
+        vehicle.close()
+
+
+def test_offboard_is_requested_again_after_the_failsafe_hold_only() -> None:
+    ad, clock = make()
+    sent: list[tuple[int, tuple[float, ...]]] = []
+    ad.send_command = lambda cmd, params, confirmation=0: sent.append((cmd, params))  # type: ignore[method-assign]
+    keeper = OffboardKeeper(ad, retry_s=0.5)
+    feed(ad, heartbeat("OFFBOARD"), clock.t)
+    feed(ad, local_pos(1000), clock.t)
+    keeper.check(clock.t)
+    assert sent == []
+    feed(ad, heartbeat("HOLD"), clock.t)  # setpoint-loss failsafe
+    keeper.check(clock.t)
+    keeper.check(clock.t + 0.1)  # not before retry_s
+    assert [c for c, _ in sent] == [176]
+    keeper.check(clock.t + 0.6)
+    assert len(sent) == 2
+    feed(ad, heartbeat("OFFBOARD"), clock.t)
+    keeper.check(clock.t + 0.7)
+    assert keeper.recoveries == 1 and len(sent) == 2
+    feed(ad, heartbeat("LAND"), clock.t)  # somebody else's choice: left alone
+    keeper.check(clock.t + 2.0)
+    assert len(sent) == 2

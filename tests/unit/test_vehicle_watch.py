@@ -15,8 +15,13 @@ def test_flying_is_never_lost() -> None:
     assert not any(w.lost(FLYING, "px4", 0.1 * k) for k in range(100))
 
 
-def test_failsafe_hold_reboot_and_silence_are_lost_after_the_grace() -> None:
-    for state in (replace(FLYING, mode="HOLD"), replace(FLYING, armed=False),
+def test_failsafe_hold_is_left_to_the_offboard_keeper() -> None:
+    w = VehicleWatch(0.0)
+    assert not any(w.lost(replace(FLYING, mode="HOLD"), "px4", 0.1 * k) for k in range(10))
+
+
+def test_other_modes_reboot_and_silence_are_lost_after_the_grace() -> None:
+    for state in (replace(FLYING, mode="LAND"), replace(FLYING, armed=False),
                   replace(FLYING, link_ok=False)):
         w = VehicleWatch()
         assert not w.lost(state, "px4", 10.0)

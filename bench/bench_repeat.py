@@ -1,0 +1,98 @@
+"""Repeatability (issue 9): the main job N times, against the lock-step run at 50 Hz.
+
+Runs `enclose run --duration D` with the defaults N times (real processes on loopback),
+then `enclose simulate --dt 0.02 --duration D` once, and prints every run's metrics,
+the distribution (min / median / max) and the issue's checks: every run inside the
+paper's bounds, worst estimator error <= 1.5x the lock-step one, command jump < 0.5 m/s.
+Simulator overruns and catch-ups come from launch.json (the simulator's last status).
+
+Run (idle machine, about 24 min with the defaults):
+    python bench/bench_repeat.py [--runs 10] [--duration 120] [--out runs/bench-repeat]
+        [-- extra enclose run arguments, e.g. --estimator paper]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+KEYS = ("estimator_error_m", "radius_error_m", "angle_error", "settle_time_s",
+        "command_jump_m_s")
+EPS_M, EPS_DELTA = 0.0999, 0.0199
+
+
+def metrics(out: Path) -> dict[str, Any]:
+    return json.loads((out / "metrics.json").read_text())
+
+
+def swarm_run(out: Path, duration_s: float, extra: list[str]) -> dict[str, Any]:
+    shutil.rmtree(out, ignore_errors=True)
+    argv = [sys.executable, "-m", "deploy.cli", "run", "--duration", str(duration_s),
+            "--out", str(out), *extra]
+    code = subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                          check=False).returncode
+    result = {k: metrics(out).get(k) for k in KEYS} if (out / "metrics.json").exists() else {}
+    sim: dict[str, Any] = {}
+    if (out / "launch.json").exists():
+        sim = json.loads((out / "launch.json").read_text())["status"].get("sim-0", {})
+    return {"exit_code": code, **result,
+            **{k: sim.get(k) for k in ("overruns", "catch_ups", "caught_up_ticks", "failsafes")}}
+
+
+def lockstep(out: Path, duration_s: float) -> dict[str, Any]:
+    shutil.rmtree(out, ignore_errors=True)
+    subprocess.run([sys.executable, "-m", "deploy.cli", "simulate", "--dt", "0.02",
+                    "--duration", str(duration_s), "--out", str(out), "--no-progress"],
+                   stdout=subprocess.DEVNULL, check=True)
+    return {k: metrics(out).get(k) for k in KEYS}
+
+
+def inside(r: dict[str, Any]) -> bool:
+    return (r.get("exit_code") == 0 and (r.get("estimator_error_m") or 1.0) < EPS_M
+            and (r.get("radius_error_m") or 1.0) < EPS_M
+            and (r.get("angle_error") or 1.0) < EPS_DELTA)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--runs", type=int, default=10)
+    parser.add_argument("--duration", type=float, default=120.0)
+    parser.add_argument("--out", type=Path, default=Path("runs/bench-repeat"))
+    parser.add_argument("extra", nargs="*", help="more `enclose run` arguments (after --)")
+    args = parser.parse_args()
+    ref = lockstep((args.out / "lockstep-50hz").resolve(), args.duration)
+    cols = [*KEYS, "overruns", "catch_ups", "caught_up_ticks", "failsafes"]
+    print("| run | exit | " + " | ".join(cols) + " |")
+    print("|---|---|" + "---|" * len(cols), flush=True)
+    runs = []
+    for k in range(args.runs):
+        r = swarm_run((args.out / f"run-{k + 1}").resolve(), args.duration, args.extra)
+        runs.append(r)
+        print(f"| {k + 1} | {r['exit_code']} | " +
+              " | ".join(f"{r.get(c):.4g}" if isinstance(r.get(c), float) else str(r.get(c))
+                         for c in cols) + " |", flush=True)
+    print("| lock-step 50 Hz | | " + " | ".join(f"{ref[c]:.4g}" if isinstance(ref.get(c), float)
+                                               else str(ref.get(c)) for c in KEYS) + " |")
+    print("\n| metric | min | median | max |\n|---|---|---|---|")
+    for c in KEYS:
+        vals = np.array([r[c] for r in runs if isinstance(r.get(c), float)])
+        if vals.size:
+            print(f"| {c} | {vals.min():.4g} | {np.median(vals):.4g} | {vals.max():.4g} |")
+    worst = max((r.get("estimator_error_m") or np.inf) for r in runs)
+    jump = max((r.get("command_jump_m_s") or np.inf) for r in runs)
+    print(f"\nall {len(runs)} runs inside the paper's bounds: {all(inside(r) for r in runs)}")
+    print(f"worst estimator error {worst:.4g} m = {worst / ref['estimator_error_m']:.2f}x the "
+          f"lock-step run at 50 Hz ({ref['estimator_error_m']:.4g} m); target <= 1.5x")
+    print(f"largest command jump {jump:.3g} m/s; target < 0.5 m/s")
+
+
+if __name__ == "__main__":
+    main()

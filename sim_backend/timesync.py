@@ -1,0 +1,88 @@
+"""A simulated autopilot's clock services: TIMESYNC and SYSTEM_TIME, as PX4 keeps them.
+
+- A TIMESYNC request (tc1 == 0) is answered at once with tc1 = the vehicle's boot clock
+  in ns and ts1 mirrored (PX4's `Timesync::handle_message`: hrt_absolute_time() * 1000).
+  Clients map the vehicle's time_boot_ms onto their own clock from these replies.
+- The vehicle originates a request every `period_s` (ts1 = its boot clock, ns), as PX4's
+  TIMESYNC stream does; a reply carrying one of its recent ts1 gives the round trip to its
+  partner, counted (the simulated vehicle needs no offset: nothing it does is stamped by
+  its partners' clocks).
+- It streams SYSTEM_TIME (Unix time, boot ms).  A received SYSTEM_TIME changes nothing:
+  PX4 takes it only while its own clock is before 2009, and the simulator's never is.
+"""
+
+from __future__ import annotations
+
+import socket
+from collections import Counter, deque
+from collections.abc import Callable
+from typing import Protocol
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+from agents.mavlink.wire import encode
+
+Addr = tuple[str, int]
+Handler = Callable[[mavlink2.MAVLink_message, Addr], str]  # returns the outcome
+REMEMBERED_REQUESTS = 8
+
+
+class HasHandlers(Protocol):
+    handlers: dict[str, Handler]
+
+
+class ClockService:
+    """TIMESYNC and SYSTEM_TIME of one vehicle; `boot_s` is its boot clock in seconds."""
+
+    def __init__(self, mav: mavlink2.MAVLink, sock: socket.socket, boot_s: Callable[[], float],
+                 unix_s: Callable[[], float], counters: Counter[str],
+                 period_s: float = 1.0) -> None:
+        self.mav, self.sock = mav, sock
+        self.boot_s, self.unix_s = boot_s, unix_s
+        self.counters = counters
+        self.period_s = period_s
+        self.last_rtt_s: float | None = None
+        self._next_s = 0.0
+        self._requests: deque[int] = deque(maxlen=REMEMBERED_REQUESTS)
+
+    def attach(self, endpoint: HasHandlers) -> ClockService:
+        endpoint.handlers["TIMESYNC"] = self.on_timesync
+        endpoint.handlers["SYSTEM_TIME"] = self.on_system_time
+        return self
+
+    def on_timesync(self, msg: mavlink2.MAVLink_message, addr: Addr) -> str:
+        now_ns = max(1, round(self.boot_s() * 1e9))  # tc1 = 0 would read as a request
+        if msg.tc1 == 0:
+            self.counters["timesync_answered"] += 1
+            self._send(encode(self.mav, self.mav.timesync_encode(now_ns, msg.ts1)), addr)
+            return "answered"
+        if msg.ts1 in self._requests:
+            self.counters["timesync_replies"] += 1
+            self.last_rtt_s = (now_ns - msg.ts1) * 1e-9
+            return "handled"
+        self.counters["timesync_ignored"] += 1  # a reply to a request we did not send
+        return "ignored"
+
+    def on_system_time(self, msg: mavlink2.MAVLink_message, addr: Addr) -> str:
+        self.counters["system_time_ignored"] += 1
+        return "ignored"
+
+    def due(self, dest: Addr) -> None:
+        """Send our TIMESYNC request and SYSTEM_TIME to `dest` when the period has passed."""
+        boot_s = self.boot_s()
+        if boot_s < self._next_s:
+            return
+        self._next_s = boot_s + self.period_s
+        ts1 = round(boot_s * 1e9)
+        self._requests.append(ts1)
+        data = encode(self.mav, self.mav.timesync_encode(0, ts1))
+        data += encode(self.mav, self.mav.system_time_encode(round(self.unix_s() * 1e6),
+                                                             round(boot_s * 1e3) & 0xFFFFFFFF))
+        self._send(data, dest)
+
+    def _send(self, data: bytes, addr: Addr) -> None:
+        try:
+            self.sock.sendto(data, addr)
+            self.counters["tx_datagrams"] += 1
+        except OSError:
+            self.counters["tx_errors"] += 1
