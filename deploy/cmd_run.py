@@ -121,6 +121,7 @@ class Launch:
         flags = [parse_fault_flag(f, scenario.n, scenario.m) for f in args.fault]
         self.faults = (*scenario.faults, *(f for f in flags if f is not None))
         self.injector: FaultRunner | None = None
+        self.control_stamper: Stamper | None = None
 
     def common(self) -> list[str]:
         scen = self.args.scenario
@@ -242,9 +243,7 @@ class Launch:
                 bus.publish(
                     self.keys.control(),
                     encode(
-                        RunControl(
-                            Stamper("launcher-0", bus.now_s).header(), "stop", bus.now_s(), 0.0
-                        )
+                        RunControl(self._stamper(bus).header(), "stop", bus.now_s(), 0.0)
                     ),
                 )
                 self.finish()
@@ -260,8 +259,11 @@ class Launch:
 
     def fly(self, bus: Bus) -> None:
         start = bus.now_s() + START_DELAY_S
-        header = Stamper("launcher-0", bus.now_s).header()
-        word = RunControl(header, "start", start, self.duration_s)
+        stamper = self._stamper(bus)
+
+        def word() -> bytes:  # repeats keep the start stamp and carry their own seq
+            return encode(RunControl(stamper.header(), "start", start, self.duration_s))
+
         t0 = time.monotonic() + START_DELAY_S
         self.watchdog = Watchdog(self.sup, self.policy, t0, self._before_restart)
         self.injector = FaultRunner(
@@ -269,18 +271,24 @@ class Launch:
             self._before_restart,
         )
         next_report = next_word = start
-        bus.publish(self.keys.control(), encode(word))
+        bus.publish(self.keys.control(), word())
         while bus.now_s() < start + self.duration_s:
             self.injector.check()
             self.watchdog.check()
             self.board.collect()
             if bus.now_s() >= next_word:  # same start stamp: a repeat changes nothing
                 next_word += START_REPEAT_S
-                bus.publish(self.keys.control(), encode(word))
+                bus.publish(self.keys.control(), word())
             if bus.now_s() >= next_report:
                 next_report += PROGRESS_PERIOD_S
                 show_progress(self.out, bus.now_s() - start, self.duration_s)
             time.sleep(0.05)
+
+    def _stamper(self, bus: Bus) -> Stamper:
+        """The launcher's one sequence of control words (repeats are not stale)."""
+        if self.control_stamper is None:
+            self.control_stamper = Stamper("launcher-0", bus.now_s)
+        return self.control_stamper
 
     def _before_restart(self, child: Child) -> None:
         """A restarted recorder starts a new MCAP: keep the dead one's beside it."""
