@@ -146,7 +146,7 @@ class Simulator:
         if self.cfg.signing_key is not None:
             endpoint.verifier = SignatureVerifier(self.cfg.signing_key)
         self._selector.register(sock, selectors.EVENT_READ, i)
-        self.clocks.append(ClockService(endpoint.mav, sock, self.boot_time_s, time.time,
+        self.clocks.append(ClockService(endpoint.mav, endpoint.send_to, self.boot_time_s, time.time,
                                         self.counters).attach(endpoint))
         return endpoint
 

@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import socket
 from collections import Counter, deque
 from collections.abc import Callable
 from typing import Protocol
@@ -34,10 +33,10 @@ class HasHandlers(Protocol):
 class ClockService:
     """TIMESYNC and SYSTEM_TIME of one vehicle; `boot_s` is its boot clock in seconds."""
 
-    def __init__(self, mav: mavlink2.MAVLink, sock: socket.socket, boot_s: Callable[[], float],
-                 unix_s: Callable[[], float], counters: Counter[str],
-                 period_s: float = 1.0) -> None:
-        self.mav, self.sock = mav, sock
+    def __init__(self, mav: mavlink2.MAVLink, send: Callable[[bytes, Addr], None],
+                 boot_s: Callable[[], float], unix_s: Callable[[], float],
+                 counters: Counter[str], period_s: float = 1.0) -> None:
+        self.mav, self._send = mav, send  # the endpoint's send (counts tx and its errors)
         self.boot_s, self.unix_s = boot_s, unix_s
         self.counters = counters
         self.period_s = period_s
@@ -79,10 +78,3 @@ class ClockService:
         data += encode(self.mav, self.mav.system_time_encode(round(self.unix_s() * 1e6),
                                                              round(boot_s * 1e3) & 0xFFFFFFFF))
         self._send(data, dest)
-
-    def _send(self, data: bytes, addr: Addr) -> None:
-        try:
-            self.sock.sendto(data, addr)
-            self.counters["tx_datagrams"] += 1
-        except OSError:
-            self.counters["tx_errors"] += 1
