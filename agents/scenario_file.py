@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Iterable
 from fractions import Fraction
 from importlib import resources
 from pathlib import Path
@@ -97,6 +98,13 @@ def table_of(doc: Table, key: str) -> Table:
     if not isinstance(raw, dict):
         raise ScenarioError(key, "must be a table")
     return raw
+
+
+def known_keys(t: Table, allowed: Iterable[str], where: str) -> None:
+    """A misspelt setting is an error, not a silently used default."""
+    unknown = sorted(set(t) - set(allowed))
+    if unknown:
+        raise ScenarioError(f"{where}.{unknown[0]}", f"is not a known {where} setting")
 
 
 def follower_numbers(raw: Any, where: str, n: int) -> tuple[int, ...]:
@@ -241,6 +249,7 @@ def _successor(t: Table, f_pos: np.ndarray, center: np.ndarray, n: int) -> tuple
 
 def _gains(t: Table) -> Gains:
     d = Gains()
+    known_keys(t, d.__dataclass_fields__, "gains")
     names = [k for k in d.__dataclass_fields__ if k != "step_fraction"]
     fraction = number(t, "step_fraction", "gains", d.step_fraction)
     if not 0.0 <= fraction <= 1.0:
@@ -254,6 +263,7 @@ def _gains(t: Table) -> Gains:
 
 def _run(t: Table) -> RunConfig:
     d = RunConfig()
+    known_keys(t, d.__dataclass_fields__, "run")
     steady = t.get("steady_from_s")
     return RunConfig(
         duration_s=positive(t, "duration_s", "run", d.duration_s),
@@ -268,6 +278,7 @@ def _run(t: Table) -> RunConfig:
 
 def _vehicle(t: Table) -> VehicleConfig:
     d = VehicleConfig()
+    known_keys(t, d.__dataclass_fields__, "vehicle")
     flavour = t.get("flavour", d.flavour)
     if flavour not in ("px4", "ardupilot"):
         raise ScenarioError("vehicle.flavour", f"must be 'px4' or 'ardupilot', got {flavour!r}")
@@ -278,6 +289,7 @@ def _vehicle(t: Table) -> VehicleConfig:
 
 def _home(t: Table) -> HomeConfig:
     d = HomeConfig()
+    known_keys(t, d.__dataclass_fields__, "home")
     home = HomeConfig(**{k: number(t, k, "home", getattr(d, k)) for k in d.__dataclass_fields__})
     if not -90.0 <= home.lat_deg <= 90.0:
         raise ScenarioError("home.lat_deg", f"must be within [-90, 90], got {home.lat_deg}")

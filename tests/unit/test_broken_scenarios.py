@@ -33,6 +33,8 @@ BROKEN = [
                         "angles_deg = [72.0, 72.0, 72.0, 72.0]"), "angles"),
     ("order repeats", edit("order = [1, 2, 3, 4]", "order = [1, 1, 3, 4]"), "order"),
     ("gain negative", edit("k_e = 6.0", "k_e = -6.0"), "k_e"),
+    ("gain misspelt", edit("k_e = 6.0", "k_e = 6.0\nk_q = 1.0"), "gains.k_q"),
+    ("run setting misspelt", edit("rate_hz = 50.0", "rate_hz = 50.0\nrate = 10.0"), "run.rate"),
     ("alpha text", edit('alpha1 = "7/3"', 'alpha1 = "seven"'), "alpha1"),
     ("edge unknown follower", edit("[4, 1]]", "[4, 9]]"), "edges"),
     ("edge malformed", edit("[4, 1]]", "[4]]"), "edges"),
