@@ -116,8 +116,9 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         watch, keeper = VehicleWatch(), OffboardKeeper(mav)
 
         def extra() -> dict[str, int]:
+            signing = {k: v for k, v in mav.counters.items() if k.startswith("signing_")}
             return {"overruns": ticker.overruns, "offboard_requests": keeper.requests,
-                    **mav.clock_counters(), **node.counters()}
+                    **mav.clock_counters(), **signing, **node.counters()}
 
         try:
             while not stop.raised and bus.now_s() < node.stop_s:

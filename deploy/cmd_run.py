@@ -206,11 +206,13 @@ class Launch:
     def execute(self) -> int:
         self.out.mkdir(parents=True, exist_ok=True)
         log.info(
-            "run directory %s; swarm %s; Zenoh rendezvous %s; vehicles on UDP 127.0.0.1:%d+",
+            "run directory %s; swarm %s; Zenoh rendezvous %s; vehicles on UDP 127.0.0.1:%d+; "
+            "agents on UDP 127.0.0.1:%d+",
             self.out,
             self.keys.swarm,
             self.endpoint,
             self.vehicle_base,
+            self.adapter_base,
         )
         t0 = time.monotonic()
         interrupted = False

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from agents.mavlink.signing import SignatureVerifier
 from agents.mavlink.wire import MAVLinkMessage as Msg
-from agents.mavlink.wire import decode_datagram, encode, frame_bytes, new_codec
+from agents.mavlink.wire import decode_datagram, encode, new_codec, sign_outgoing, signature_ok
 from agents.scenario import HomeConfig
 from sim_backend import commands, protocols
 from sim_backend import telemetry as tm
@@ -65,7 +65,10 @@ class VehicleEndpoint:
         self.home = home
         self.counters = counters
         self.messages: Counter[str] = Counter() if messages is None else messages
-        self.mav = new_codec(sysid, 1)
+        self.mav = new_codec(sysid, 1)  # packs what we send (signs it when keyed)
+        # Parses what we receive: never keyed, because pymavlink's own check moves a
+        # stream's timestamp before it verifies (agents.mavlink.signing).
+        self.rx_codec = new_codec(sysid, 1)
         self.peers: dict[Addr, float] = {}
         self.missions = protocols.MissionStore()
         # Services that own a message type (sim_backend.timesync: TIMESYNC, SYSTEM_TIME).
@@ -89,31 +92,26 @@ class VehicleEndpoint:
         self.verifier: SignatureVerifier | None = None
         protocols.apply_params(self)
 
+    def enforce_signing(self, key: bytes, link_id: int = 0) -> None:
+        """Behave as a PX4 vehicle with a signing key: drop what is not signed with it, and
+        sign everything sent, so that forged telemetry is told apart at the agent too."""
+        self.verifier = SignatureVerifier(key)
+        sign_outgoing(self.mav, key, link_id, self.verifier.now_ticks())
+
     # ---- receive ------------------------------------------------------------------------
     def on_datagram(self, data: bytes, addr: Addr, now_s: float, row: tm.Row) -> None:
         """The one entry point for a received UDP datagram; never raises."""
         self.counters["rx_datagrams"] += 1
-        decoded = decode_datagram(self.mav, data)
+        decoded = decode_datagram(self.rx_codec, data)
         if decoded.bad:
             self.counters["bad_packets"] += decoded.bad
-        messages = [m for m in decoded.messages if self._signed_ok(m)]
+        messages = [m for m in decoded.messages
+                    if signature_ok(self.verifier, m, self.counters)]
         if messages:
             self._remember(addr, now_s)
         rx = Rx(addr, now_s, row)
         for msg in messages:
             self.dispatch(msg, rx)
-
-    def _signed_ok(self, msg: Msg) -> bool:
-        if self.verifier is None:
-            return True
-        try:
-            reason = self.verifier.check(frame_bytes(msg), msg.get_msgId(), msg.get_srcSystem(),
-                                         msg.get_srcComponent())
-        except Exception:  # same boundary as dispatch: a frame must not stop the vehicle
-            reason = "error"
-        if reason is not None:
-            self.counters[f"signing_rejected_{reason}"] += 1
-        return reason is None
 
     def dispatch(self, msg: Msg, rx: Rx) -> str:
         """Handle one message inside its own error boundary; returns and counts its outcome."""

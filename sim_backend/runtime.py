@@ -28,7 +28,6 @@ import numpy as np
 from agents.errors import SimulatorError
 from agents.frames import enu_to_ned
 from agents.mavlink.modes import FLAVOURS
-from agents.mavlink.signing import SignatureVerifier
 from agents.scenario import HomeConfig, Scenario, VehicleConfig
 from sim_backend import model
 from sim_backend.autopilot import Autopilot
@@ -144,7 +143,7 @@ class Simulator:
                                    self.cfg.telemetry_hz, self.counters, index=i, tick_s=self.dt_s,
                                    messages=self.messages)
         if self.cfg.signing_key is not None:
-            endpoint.verifier = SignatureVerifier(self.cfg.signing_key)
+            endpoint.enforce_signing(self.cfg.signing_key)
         self._selector.register(sock, selectors.EVENT_READ, i)
         self.clocks.append(ClockService(endpoint.mav, endpoint.send_to, self.boot_time_s, time.time,
                                         self.counters).attach(endpoint))

@@ -28,9 +28,16 @@ from agents.mavlink.modes import (
     decode_custom_mode,
     flavour_of_autopilot,
 )
-from agents.mavlink.signing import signing_timestamp
+from agents.mavlink.signing import SignatureVerifier, signing_timestamp
 from agents.mavlink.timemap import VehicleClock
-from agents.mavlink.wire import MAVLinkMessage, decode_datagram, encode, new_codec, sign_outgoing
+from agents.mavlink.wire import (
+    MAVLinkMessage,
+    decode_datagram,
+    encode,
+    new_codec,
+    sign_outgoing,
+    signature_ok,
+)
 
 log = logging.getLogger(__name__)
 Addr = tuple[str, int]
@@ -73,7 +80,9 @@ class AdapterConfig:
     own_sysid: int = 245
     own_compid: int = 191
     link_timeout_s: float = 0.5
-    signing_key: bytes | None = None  # MAVLink 2 signing of everything we send
+    # MAVLink 2 signing of everything we send, and required of everything we receive
+    # (a vehicle with a key signs all it sends): forged telemetry is dropped and counted.
+    signing_key: bytes | None = None
     signing_link_id: int = 0
 
     @classmethod
@@ -93,7 +102,9 @@ class MavlinkAdapter:
         self.counters: Counter[str] = Counter()
         self.mav = new_codec(cfg.own_sysid, cfg.own_compid)
         self.tx = self.mav  # the codec that packs what we send: a signing one when keyed
+        self.verifier: SignatureVerifier | None = None
         if cfg.signing_key is not None:
+            self.verifier = SignatureVerifier(cfg.signing_key, allowed_unsigned=frozenset())
             self.tx = new_codec(cfg.own_sysid, cfg.own_compid)
             sign_outgoing(self.tx, cfg.signing_key, cfg.signing_link_id,
                           signing_timestamp(time.time()))
@@ -173,6 +184,8 @@ class MavlinkAdapter:
             self.counters["bad_packets"] += decoded.bad
             received = self._arrival(anc)
             for msg in decoded.messages:
+                if not signature_ok(self.verifier, msg, self.counters):
+                    continue
                 try:
                     self.handle(msg, addr, received)
                 except Exception:  # a hostile or odd packet must not stop the follower

@@ -7,12 +7,17 @@ then never corrupt the next datagram.
 
 from __future__ import annotations
 
+import hashlib
 import struct
+import time
+from collections import Counter
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.dialects.v20.common import MAVLink_message as MAVLinkMessage
 from pymavlink.dialects.v20.common import mcrf4xx
+
+from agents.mavlink.signing import SignatureVerifier, signing_timestamp
 
 
 def new_codec(sysid: int, compid: int) -> mavlink2.MAVLink:
@@ -32,6 +37,31 @@ def sign_outgoing(mav: mavlink2.MAVLink, key: bytes, link_id: int, timestamp: in
     mav.signing.link_id = link_id & 0xFF
     mav.signing.timestamp = timestamp
     mav.signing.sign_outgoing = True
+
+
+def _advance_signing_clock(mav: mavlink2.MAVLink) -> None:
+    """Keep a signing stream's timestamp on the wall clock, as the spec asks of a system
+    that has one.  pymavlink only adds 1 per packet, so a long-lived stream falls minutes
+    behind real time and a receiver that restarts rejects it as a stale new stream."""
+    if mav.signing.sign_outgoing:
+        mav.signing.timestamp = max(mav.signing.timestamp, signing_timestamp(time.time()))
+
+
+def signature_ok(verifier: SignatureVerifier | None, msg: MAVLinkMessage,
+                 counters: Counter[str]) -> bool:
+    """Whether a received message passes `verifier` (always, when there is none); a
+    rejection is counted as signing_rejected_<reason>.  Never raises: a frame must not
+    stop the receiver."""
+    if verifier is None:
+        return True
+    try:
+        reason = verifier.check(frame_bytes(msg), msg.get_msgId(), msg.get_srcSystem(),
+                                msg.get_srcComponent())
+    except Exception:  # hostile bytes: counted below
+        reason = "error"
+    if reason is not None:
+        counters[f"signing_rejected_{reason}"] += 1
+    return reason is None
 
 
 def frame_bytes(msg: MAVLinkMessage) -> bytes:
@@ -74,6 +104,7 @@ _HEADER_V2 = struct.Struct("<BBBBBBBHB")
 
 def encode(mav: mavlink2.MAVLink, msg: MAVLinkMessage) -> bytes:
     """Pack as the next packet of `mav`'s stream (pymavlink's pack() leaves seq alone)."""
+    _advance_signing_clock(mav)
     data: bytes = msg.pack(mav)
     mav.seq = (mav.seq + 1) & 0xFF
     return data
@@ -95,9 +126,21 @@ def encode_payload(mav: mavlink2.MAVLink, msg_id: int, crc_extra: int, payload: 
     Also for messages this pymavlink's dialect lacks (PROTOCOL_VERSION, id 300).
     """
     payload = payload.rstrip(b"\x00") or payload[:1]
-    header = _HEADER_V2.pack(0xFD, len(payload), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent,
+    signed = mav.signing.sign_outgoing
+    header = _HEADER_V2.pack(0xFD, len(payload), int(signed), 0, mav.seq, mav.srcSystem,
+                             mav.srcComponent,
                              msg_id & 0xFFFF, msg_id >> 16)
     mav.seq = (mav.seq + 1) & 0xFF
     body = header + payload
     crc = mcrf4xx(body[1:] + bytes((crc_extra,)), 0xFFFF)
-    return body + crc.to_bytes(2, "little")
+    frame = body + crc.to_bytes(2, "little")
+    return frame + _signature_block(mav, frame) if signed else frame
+
+
+def _signature_block(mav: mavlink2.MAVLink, frame: bytes) -> bytes:
+    """Link id, timestamp and signature of `frame`, as pymavlink's pack() appends them."""
+    _advance_signing_clock(mav)
+    stamped = struct.pack("<BQ", mav.signing.link_id, mav.signing.timestamp)[:7]
+    mav.signing.timestamp += 1
+    digest = hashlib.sha256(mav.signing.secret_key + frame + stamped).digest()[:6]
+    return stamped + digest

@@ -1,10 +1,12 @@
 """A hostile process for the security tests (issue #12's attack), run as its own OS process.
 
-    python -m tests.integration.rogue --vehicle-port P --vehicles N --endpoint E --swarm S \
-        --followers N --fuzz-identity FILE --fuzz-count K --seconds T --out report.json
+    python -m tests.integration.rogue --vehicle-port P --agent-port A --vehicles N \
+        --endpoint E --swarm S --followers N --fuzz-identity FILE --fuzz-count K \
+        --seconds T --out report.json
 
 - MAVLink: unsigned COMMAND_LONG force-disarm and NAV_LAND to every vehicle port every 0.2 s;
-  counts what it sent and every COMMAND_ACK it got back.
+  counts what it sent and every COMMAND_ACK it got back.  Forged telemetry to every agent's
+  port in the vehicle's name (HEARTBEAT disarmed, LOCAL_POSITION_NED 700 m away), as often.
 - Zenoh without credentials: a plain peer connecting to the swarm's endpoint, publishing
   forged follower states on every follower key at 50 Hz; records whether it ever linked.
 - Zenoh with follower j's certificate (`--fuzz-identity`): K random and mutated payloads on
@@ -91,6 +93,17 @@ def attack_mavlink(sock: socket.socket, ports: list[int], report: dict[str, int]
         report["mavlink_acks"] += len(acks)
 
 
+def forge_telemetry(sock: socket.socket, ports: list[int], report: dict[str, int]) -> None:
+    """Unsigned telemetry in each vehicle's name (sysid k + 1, component 1) to its agent."""
+    for k, port in enumerate(ports):
+        mav = new_codec(k + 1, 1)
+        frames = (mav.heartbeat_encode(2, 12, 0, 0, 3).pack(mav),  # PX4 quadrotor, disarmed
+                  mav.local_position_ned_encode(0, 500.0, -500.0, -10.0, 5.0, 5.0, 0.0).pack(mav))
+        for frame in frames:
+            sock.sendto(frame, ("127.0.0.1", port))
+            report["telemetry_forged_sent"] += 1
+
+
 def wait_running(progress: Path, timeout_s: float = 90.0) -> None:
     """Until the recorder says the experiment runs (the attack is to hit a flying swarm)."""
     deadline = time.monotonic() + timeout_s
@@ -105,11 +118,13 @@ def wait_running(progress: Path, timeout_s: float = 90.0) -> None:
 def run(args: argparse.Namespace) -> dict[str, int]:
     keys, rng = SwarmKeys(args.swarm), random.Random(12)
     report = dict.fromkeys(("mavlink_unsigned_sent", "mavlink_acks", "plain_published",
-                            "plain_linked", "fuzz_sent", "fuzz_out_of_rights_sent"), 0)
+                            "plain_linked", "fuzz_sent", "fuzz_out_of_rights_sent",
+                            "telemetry_forged_sent"), 0)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
     sock.setblocking(False)
     ports = [args.vehicle_port + k for k in range(args.vehicles)]
+    agent_ports = [args.agent_port + k for k in range(args.vehicles)]
     ident = Identity.load(args.fuzz_identity)
     j = int(ident.name.rsplit("-", 1)[1])
     with ZenohBus(ZenohConfig(connect=(args.endpoint,))) as plain, \
@@ -123,6 +138,7 @@ def run(args: argparse.Namespace) -> dict[str, int]:
                 next_attack += 0.2
                 if "mav" in PARTS:
                     attack_mavlink(sock, ports, report)
+                    forge_telemetry(sock, agent_ports, report)
                 for i in range(args.followers):
                     plain.publish(keys.follower_state(i), encode(forged_state(i, 0)))
                     report["plain_published"] += 1
@@ -142,6 +158,7 @@ def run(args: argparse.Namespace) -> dict[str, int]:
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser()
     p.add_argument("--vehicle-port", type=int, required=True)
+    p.add_argument("--agent-port", type=int, required=True)
     p.add_argument("--vehicles", type=int, required=True)
     p.add_argument("--endpoint", required=True)
     p.add_argument("--swarm", required=True)

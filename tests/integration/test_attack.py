@@ -29,7 +29,8 @@ pytestmark = pytest.mark.integration
 DURATION_S = 24.0
 FUZZ_COUNT = int(os.environ.get("ROGUE_FUZZ", "10000"))
 ATTACK_S = DURATION_S - 4.0  # from the start on: it ends while the swarm still runs
-STARTED = re.compile(r"swarm (\S+); Zenoh rendezvous (\S+); vehicles on UDP 127\.0\.0\.1:(\d+)")
+STARTED = re.compile(r"swarm (\S+); Zenoh rendezvous (\S+); vehicles on UDP 127\.0\.0\.1:(\d+)\+; "
+                     r"agents on UDP 127\.0\.0\.1:(\d+)")
 
 
 def drops(counters: dict[str, int]) -> int:
@@ -52,11 +53,13 @@ def test_attack_changes_nothing_and_every_hostile_input_is_counted(tmp_path: Pat
         else:
             pytest.fail("".join(lines))
         swarm, endpoint, vehicle_port = m.group(1), m.group(2), int(m.group(3))
+        agent_port = int(m.group(4))
         ident = out / "credentials" / "follower-0.json"
         report_path = tmp_path / "rogue.json"
         rogue = subprocess.run(
             [sys.executable, "-m", "tests.integration.rogue", "--vehicle-port",
-             str(vehicle_port), "--vehicles", "6", "--endpoint", endpoint, "--swarm", swarm,
+             str(vehicle_port), "--agent-port", str(agent_port), "--vehicles", "6",
+             "--endpoint", endpoint, "--swarm", swarm,
              "--followers", "4", "--fuzz-identity", str(ident), "--fuzz-count",
              str(FUZZ_COUNT), "--seconds", str(ATTACK_S), "--out", str(report_path),
              "--progress", str(out / "progress.json")],
@@ -73,6 +76,11 @@ def test_attack_changes_nothing_and_every_hostile_input_is_counted(tmp_path: Pat
     # MAVLink: every unsigned command refused and counted; none acknowledged.
     assert rep["mavlink_unsigned_sent"] > 400 and rep["mavlink_acks"] == 0
     assert status["sim-0"]["signing_rejected_unsigned"] == rep["mavlink_unsigned_sent"]
+    # Forged telemetry: every agent refused all of it (the vehicles sign what they send).
+    agents = [f"follower-{i}" for i in range(4)] + [f"target-{j}" for j in range(2)]
+    forged = [status[a].get("signing_rejected_unsigned", 0) for a in agents]
+    assert rep["telemetry_forged_sent"] > 400
+    assert sum(forged) == rep["telemetry_forged_sent"] and min(forged) > 0, forged
     # Zenoh without credentials never linked; nothing of it, nor of the insider's forgeries
     # beyond its rights, was recorded.
     assert rep["plain_published"] > 100 and rep["plain_linked"] == 0

@@ -144,3 +144,55 @@ def test_vehicle_with_a_key_drops_unsigned_commands_and_obeys_signed_ones(
 
 def test_timestamp_units() -> None:
     assert signing_timestamp(1420070400.0 + 1.0) == TICKS_PER_S
+
+
+def test_fast_path_signs_as_pymavlink_does() -> None:
+    """The simulator's hand-packed position messages carry the same signature block."""
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    from agents.mavlink.wire import encode, encode_fields
+    a, b = signer(sysid=1), signer(sysid=1)
+    fields = (1234, 1.0, -2.0, -3.5, 0.25, 0.0, -0.5)
+    cls = mavlink2.MAVLink_local_position_ned_message
+    fast = encode_fields(b, cls, *fields)
+    assert fast == encode(a, cls(*fields))
+    assert verdict(SignatureVerifier(KEY, clock=lambda: NOW_S), fast, cls.id) is None
+
+
+def test_signing_stream_keeps_to_the_wall_clock() -> None:
+    """pymavlink adds 1 tick per packet; a stream keyed an hour ago must still be taken as
+    a fresh stream by a receiver that (re)starts now."""
+    import time
+
+    from agents.mavlink.wire import encode
+    now = time.time()
+    mav = signer(stamp_s=now - 3600.0)
+    frame = encode(mav, mav.command_long_encode(1, 1, ARM_DISARM, 0, 0, 0, 0, 0, 0, 0, 0))
+    assert int.from_bytes(frame[-12:-6], "little") >= signing_timestamp(now)
+    assert SignatureVerifier(KEY).check(frame, 76, 245, 191) is None
+
+
+def test_keyed_adapter_takes_the_vehicles_signed_telemetry_and_drops_forgeries(
+        signed_sim: Simulator) -> None:
+    import time
+
+    from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
+    from sim_backend import telemetry as tm
+    ep, row = signed_sim.endpoints[0], signed_sim._rows[0]
+    forger = new_codec(1, 1)  # the vehicle's own ids, no key
+    forged = forger.local_position_ned_encode(0, 500.0, -500.0, -10.0, 0, 0, 0).pack(forger)
+    signed = ep.build(tm.MSG_LOCAL_POSITION_NED, row)
+    assert signed is not None
+    with MavlinkAdapter(AdapterConfig(local_port=0, target_sysid=1, signing_key=KEY)) as ad, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        assert ad.sock is not None
+        for frame in (forged, signed):
+            tx.sendto(frame, ad.sock.getsockname())
+        deadline = time.monotonic() + 5.0
+        while ad.counters["signing_rejected_unsigned"] == 0 or not ad.state.link_ok:
+            assert time.monotonic() < deadline, ad.counters
+            ad.wait_readable(0.05)
+            ad.poll()
+    assert ad.counters["signing_rejected_unsigned"] == 1
+    north, east, down = row.pos
+    assert ad.state.pos_enu_m == pytest.approx((east, north, -down))
