@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -18,16 +19,17 @@ from agents.liveness import MembershipWatch
 from agents.scenario import Scenario
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.links import FINAL_STATES, link_report
-from deploy.recording.mcap_log import McapLog
+from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog
 from deploy.recording.outputs import write_final_outputs
 from deploy.recording.progress import PROGRESS_FILE, live_errors, write_json_atomic
+from deploy.recording.resume import newest_part, read_back
 from deploy.rundir import RunInfo
 from transport.bus import Bus, Congestion
 from transport.checks import RECORDER_LIMITS
 from transport.codec import encode
 from transport.decoder import Decoder
 from transport.keys import SwarmKeys
-from transport.messages import ProcessStatus, Stamper
+from transport.messages import Message, ProcessStatus, Stamper
 
 log = logging.getLogger(__name__)
 
@@ -43,7 +45,8 @@ class Recorder:
 
     def __init__(self, bus: Bus, swarm: str, scenario: Scenario, run_dir: Path,
                  index: int = 0, period_s: float = 1.0,
-                 final_status_wait_s: float = FINAL_STATUS_WAIT_S) -> None:
+                 final_status_wait_s: float = FINAL_STATUS_WAIT_S,
+                 chunk_bytes: int = DEFAULT_CHUNK_BYTES) -> None:
         self.bus, self.scenario, self.run_dir = bus, scenario, run_dir
         self.keys = SwarmKeys(swarm)
         self.index = index
@@ -51,7 +54,7 @@ class Recorder:
         self.final_status_wait_s = final_status_wait_s
         self.follower_status: dict[int, ProcessStatus] = {}  # latest, per follower index
         run_dir.mkdir(parents=True, exist_ok=True)
-        self.mcap = McapLog(run_dir / MCAP_FILE,
+        self.mcap = McapLog(run_dir / MCAP_FILE, chunk_size=chunk_bytes,
                             metadata={"swarm": swarm, "scenario": scenario.name})
         self.decoder = Decoder(limits=RECORDER_LIMITS)  # implausible messages dropped, counted
         self.asm = RunAssembler(scenario.n, scenario.m)
@@ -61,6 +64,9 @@ class Recorder:
         self._stamper = Stamper(f"{ROLE}-{index}", bus.now_s)
         self._status = bus.declare_publisher(self.keys.status(ROLE, index), Congestion.DROP)
         self._sub = bus.subscribe(self.keys.everything(), QUEUE_CAPACITY)
+        # After the subscription: what arrives while we read back waits in its queue.
+        self.carried: Counter[str] = Counter()
+        self._carry_on()
         self._token = bus.declare_token(self.keys.alive(ROLE, index))
         # Followers in and out, as they see it themselves (agents.liveness): the phases
         # of the run's metrics and the marks on its figures.
@@ -79,16 +85,28 @@ class Recorder:
             self.membership.append((self.bus.now_s(), members))
         inbound = self.decoder.drain(self._sub)
         for item in inbound:
-            self.mcap.write(item.received.key, item.message, item.received.recv_stamp_s)
-            self.asm.add(item.message)
-            msg = item.message
-            if isinstance(msg, ProcessStatus) and msg.role == "follower":
-                self.follower_status[msg.index] = msg
+            self._record(item.received.key, item.message, item.received.recv_stamp_s)
         if self.asm.start is not None and self.state == "linked":
             self._info = RunInfo.from_scenario(self.scenario, "networked",
                                                self.asm.start.duration_s)
             self._set_state("running")
         return len(inbound)
+
+    def _record(self, key: str, msg: Message, recv_stamp_s: float) -> None:
+        self.mcap.write(key, msg, recv_stamp_s)
+        self.asm.add(msg)
+        if isinstance(msg, ProcessStatus) and msg.role == "follower":
+            self.follower_status[msg.index] = msg
+
+    def _carry_on(self) -> None:
+        """A restarted recorder: take over what the dead one recorded (deploy.recording.resume)."""
+        part = newest_part(self.run_dir)
+        if part is None:
+            return
+        for item in read_back(part, self.carried):
+            self._record(item.key, item.message, item.recv_stamp_s)
+            self.carried["messages"] += 1
+        log.info("carried on from %s: %s", part.name, dict(self.carried))
 
     def tick(self) -> None:
         """Once a period: flush the MCAP, publish status, write progress.json."""
@@ -178,6 +196,8 @@ class Recorder:
                 "stop_reason": self.stop_reason,
                 "wall_s": self.bus.now_s() - self._started_wall_s,
                 "mcap_file": MCAP_FILE,
+                # Read back from a dead predecessor's MCAP (deploy.recording.resume).
+                "carried_on": dict(self.carried),
             },
             "links": link_report(self.follower_status, self.asm.state_counts()),
         }

@@ -127,3 +127,42 @@ def test_membership_changes_become_phases_and_marks(paper: Scenario, tmp_path: P
     first, second = membership["phases"]
     assert first["members"] == [0, 1, 2, 3] and second["members"] == [0, 1, 2]
     assert first["reform_s"] == 0.0  # the synthetic ring is the planned one throughout
+
+
+@pytest.mark.timeout(60)
+def test_a_restarted_recorder_carries_on_the_runs_outputs(paper: Scenario, tmp_path: Path) -> None:
+    """Recorder A dies half way (its MCAP flushed, never finished; the launcher renames it);
+    recorder B reads it back, so the outputs cover the whole run, not just B's half."""
+    hub, keys = MemoryHub(), SwarmKeys("resume")
+    run = SynthRun(paper, keys, START_S, duration_s=2.0)
+    samples = list(run.samples())
+    half = len(samples) // 2
+    control = Stamper("launcher-0")
+    with MemoryBus(hub, "swarm") as sbus:
+        with MemoryBus(hub, "recorder-a") as abus:
+            dead = Recorder(abus, "resume", paper, tmp_path, chunk_bytes=2048)
+            sbus.publish(keys.control(), encode(run.control(control, "start")))
+            for key, msg in samples[:half]:
+                sbus.publish(key, encode(msg))
+            dead.step()
+            dead.mcap.flush()  # what its loop does each second; then SIGKILL: no finish()
+        (tmp_path / MCAP_FILE).rename(tmp_path / "recording-part1.mcap")
+        with MemoryBus(hub, "recorder-b") as bbus:
+            recorder = Recorder(bbus, "resume", paper, tmp_path)
+            for key, msg in samples[half:]:
+                sbus.publish(key, encode(msg))
+            sbus.publish(keys.control(), encode(run.control(control, "stop")))
+            assert recorder.run(lambda: False, poll_s=0.0) == "control_stop"
+            assert recorder.finish()
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    carried = metrics["recorder"]["carried_on"]
+    # A got the start word and half the samples; at most the chunk it was building is lost
+    # (2 KiB: a handful of messages), and its file ends without a summary.
+    assert half + 1 - 10 <= carried["messages"] <= half + 1, carried
+    assert carried["truncated_tail"] == 1
+    assert metrics["samples"] >= 101 - 5
+    series = (tmp_path / "series.csv").read_text().splitlines()
+    assert float(series[1].split(",")[0]) < 0.05  # starts with A's first second
+    recorded = sum(topics(tmp_path / MCAP_FILE).values())
+    # + the stop word, + the recorder's own status messages
+    assert recorded >= carried["messages"] + len(samples) - half + 1
