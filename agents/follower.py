@@ -44,6 +44,10 @@ from transport.messages import FollowerState, RunControl, Stamper, TargetObserva
 log = logging.getLogger("enclose.follower")
 ALTITUDE_GAIN_PER_S = 1.0
 AGE_WINDOW = 20_000
+# Only a peer's newest state is used, so its queue need only outlast a tick or a short
+# pause; kept small so that a flood on one peer's key (a process holding that peer's
+# credentials) costs each tick at most this many decodes and never delays the others.
+PEER_QUEUE = 8
 
 
 def peer_view(msg: FollowerState, receiver: int) -> PeerView:
@@ -99,7 +103,7 @@ class FollowerNode:
         for j in set(self.peer_subs) - peers:
             self.peer_subs.pop(j).close()
         for j in sorted(peers - set(self.peer_subs)):
-            self.peer_subs[j] = self.bus.subscribe(self.keys.follower_state(j))
+            self.peer_subs[j] = self.bus.subscribe(self.keys.follower_state(j), PEER_QUEUE)
 
     def regroup(self, now_s: float) -> None:
         """Re-form around the followers alive now (agents.liveness, agents.membership)."""

@@ -263,7 +263,10 @@ class ImpairedBus(ClosingContext):
         self.inner.publish(key, payload)
 
     def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY) -> ImpairedSubscription:
-        return ImpairedSubscription(self, self.inner.subscribe(key_expr, capacity), capacity)
+        # What the impairment holds back is in flight, not queued at the receiver: a small
+        # receive queue (agents.follower.PEER_QUEUE) must not cap the emulated delay.
+        held = max(capacity, DEFAULT_CAPACITY)
+        return ImpairedSubscription(self, self.inner.subscribe(key_expr, capacity), held)
 
     def declare_token(self, key: str) -> Token:
         return self.inner.declare_token(key)
