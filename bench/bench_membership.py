@@ -11,13 +11,16 @@ Cases:
   ring16x3  ring16, followers 2, 7 and 12 SIGKILLed at once, --restart never
 
 Run: python bench/bench_membership.py [--cases leave,join] [--duration 100] [--at 30]
-(the lead runs it in full; each case takes its duration plus ~20 s of start-up).
+[--repeats 3] (each run takes its duration plus ~20 s of start-up).  With several repeats
+the last table gives, per case and phase after the fault, the median re-form time and its
+range over the runs (one run is not a result: re-forming depends on machine load).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import subprocess
 import sys
 import time
@@ -71,18 +74,47 @@ def show(result: dict[str, Any]) -> None:
               f"{'never' if reform is None else f'{reform:.2f}':>9} {' '.join(cells)}")
 
 
+def changed_phases(result: dict[str, Any]) -> list[dict[str, Any]]:
+    """The phases after the first, skipping the ms-long ones while members saw a change."""
+    return [p for p in result["phases"] if p["to_s"] - p["from_s"] >= 0.5][1:]
+
+
+def summarise(results: dict[str, list[dict[str, Any]]]) -> None:
+    print(f"\n{'case':<10} {'phase':>5} {'members':<28} {'runs':>4} {'never':>5} "
+          f"{'median_s':>8} {'min_s':>6} {'max_s':>6}")
+    for name, runs in results.items():
+        by_phase: dict[int, list[float | None]] = {}
+        members: dict[int, str] = {}
+        for run in runs:
+            for k, phase in enumerate(changed_phases(run)):
+                by_phase.setdefault(k, []).append(phase.get("reform_s"))
+                members.setdefault(k, str(phase["members"]))
+        for k, values in sorted(by_phase.items()):
+            done = [v for v in values if v is not None]
+            stats = (f"{statistics.median(done):8.2f} {min(done):6.2f} {max(done):6.2f}"
+                     if done else f"{'-':>8} {'-':>6} {'-':>6}")
+            print(f"{name:<10} {k + 1:>5} {members[k]:<28} {len(values):>4} "
+                  f"{len(values) - len(done):>5} {stats}")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--cases", default="leave,join,kill,sim,ring16x3")
     parser.add_argument("--duration", type=float, default=100.0)
     parser.add_argument("--at", type=float, default=30.0, help="experiment time of the faults")
+    parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--out", type=Path, default=Path("runs/bench-membership"))
     args = parser.parse_args()
     table = cases(args.at)
+    results: dict[str, list[dict[str, Any]]] = {}
     for name in args.cases.split(","):
         scenario, extra = table[name]
-        show(run_case(name, scenario, extra, args.duration, args.out))
+        for k in range(args.repeats):
+            result = run_case(name, scenario, extra, args.duration, args.out / f"{k}")
+            show(result)
+            results.setdefault(name, []).append(result)
+    summarise(results)
     return 0
 
 

@@ -6,10 +6,10 @@ without credentials, and -- holding follower 0's own certificate -- throws rando
 mutated payloads at follower 0's state key and forged states at follower 1's.
 Nothing changes: the paper's bounds hold, and every hostile input is refused and counted.
 
-The insider's fuzz is 10^4 payloads (about 500 per second over 18 s).  10^5 in the same
-time (5000 per second) is a denial of service by a process that holds a swarm certificate:
-measured here, receive rings overflowed (legit states lost) and the formation broke on
-2 loaded cores.  ROGUE_FUZZ=100000 runs it anyway.
+The insider's fuzz is 10^5 payloads (about 5500 per second over 18 s; ROGUE_FUZZ sets
+another count).  With a follower's queue per peer as large as the recorder's, this flood
+broke the formation on 2 cores (estimator error 0.12 m, angle error 0.067: every neighbour
+decoded every payload each tick); with a queue of 8 per peer it holds (0.016 m, 0.0015).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from tests.integration.runs import spawned
 
 pytestmark = pytest.mark.integration
 DURATION_S = 24.0
-FUZZ_COUNT = int(os.environ.get("ROGUE_FUZZ", "10000"))
+FUZZ_COUNT = int(os.environ.get("ROGUE_FUZZ", "100000"))
 ATTACK_S = DURATION_S - 4.0  # from the start on: it ends while the swarm still runs
 STARTED = re.compile(r"swarm (\S+); Zenoh rendezvous (\S+); vehicles on UDP 127\.0\.0\.1:(\d+)\+; "
                      r"agents on UDP 127\.0\.0\.1:(\d+)")
@@ -88,10 +88,11 @@ def test_attack_changes_nothing_and_every_hostile_input_is_counted(tmp_path: Pat
     # No forged (seq 0) state got in; the launcher's repeated start words and its stop
     # carry one sequence, so nothing legitimate is stale either.
     assert recorder["decoder"]["seq_stale"] == 0
-    # The insider's fuzz: all of it reached the recorder and was refused there; each
-    # follower listening to follower 0 refused all of it too.
+    # The insider's fuzz: all of it reached the recorder and was refused there.  Each
+    # follower listening to follower 0 refused what it read; its queue for follower 0 holds
+    # 8 (agents.follower.PEER_QUEUE), so the flood's overflow was discarded unread.
     assert rep["fuzz_sent"] == FUZZ_COUNT
     assert drops(recorder["decoder"]) == FUZZ_COUNT
     listeners = [c for name, c in status.items() if name.startswith("follower-")
                  and name != "follower-0" and c.get("rx_f0", 0) > 0]
-    assert listeners and all(drops(c) == FUZZ_COUNT for c in listeners), listeners
+    assert listeners and all(0 < drops(c) <= FUZZ_COUNT for c in listeners), listeners
