@@ -13,11 +13,10 @@ import logging
 import math
 import selectors
 import socket
-import struct
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -29,7 +28,8 @@ from agents.mavlink.modes import (
     flavour_of_autopilot,
 )
 from agents.mavlink.signing import SignatureVerifier, signing_timestamp
-from agents.mavlink.timemap import VehicleClock
+from agents.mavlink.timemap import SO_TIMESTAMPNS, VehicleClock, kernel_arrival_s
+from agents.mavlink.vehicle_types import NO_STATE, AdapterConfig, VehicleState
 from agents.mavlink.wire import (
     MAVLinkMessage,
     decode_datagram,
@@ -49,48 +49,6 @@ HEARTBEAT_PERIOD_S = 1.0
 MAV_SEVERITY_WARNING = 4
 STATUSTEXT_KEPT = 20
 TIMESYNC_PERIOD_S = 0.25
-SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux; Python does not export it
-_TIMESPEC = struct.Struct("qq")
-
-
-@dataclass(frozen=True)
-class VehicleState:
-    """Latest known state; position/velocity in ENU, stamp on the agent's clock."""
-
-    pos_enu_m: tuple[float, float, float]
-    vel_enu_m_s: tuple[float, float, float]
-    stamp_s: float
-    armed: bool
-    mode: str
-    link_ok: bool
-
-
-NO_STATE = VehicleState((math.nan,) * 3, (math.nan,) * 3, -math.inf, False, "UNKNOWN", False)
-
-
-@dataclass(frozen=True)
-class AdapterConfig:
-    """Where to listen and whom to talk to; remote is learned from HEARTBEATs when None."""
-
-    local_port: int
-    remote_port: int | None = None
-    local_host: str = "127.0.0.1"
-    remote_host: str = "127.0.0.1"
-    target_sysid: int | None = None
-    own_sysid: int = 245
-    own_compid: int = 191
-    link_timeout_s: float = 0.5
-    # MAVLink 2 signing of everything we send, and required of everything we receive
-    # (a vehicle with a key signs all it sends): forged telemetry is dropped and counted.
-    signing_key: bytes | None = None
-    signing_link_id: int = 0
-
-    @classmethod
-    def px4_sitl(cls, index: int, local_base: int = 14540, vehicle_base: int = 14580,
-                 host: str = "127.0.0.1") -> AdapterConfig:
-        """Vehicle `index` on PX4 SITL's port convention (sysid index+1)."""
-        return cls(local_port=local_base + index, remote_port=vehicle_base + index,
-                   local_host=host, remote_host=host, target_sysid=index + 1)
 
 
 class MavlinkAdapter:
@@ -182,7 +140,7 @@ class MavlinkAdapter:
                 break
             decoded = decode_datagram(self.mav, data)
             self.counters["bad_packets"] += decoded.bad
-            received = self._arrival(anc)
+            received = kernel_arrival_s(anc, time.time(), self.clock())
             for msg in decoded.messages:
                 if not signature_ok(self.verifier, msg, self.counters):
                     continue
@@ -201,19 +159,6 @@ class MavlinkAdapter:
             self._last_ts_tx_s = now
             self._send(self.mav.timesync_encode(0, self.vclock.request(self.clock())))
         return self._update_link(now)
-
-    def _arrival(self, anc: list[tuple[int, int, bytes]]) -> float:
-        """Agent-clock arrival time of a datagram: now, less how long the kernel held it.
-
-        Both clocks are read here, back to back: a `now` read before a descheduling
-        would turn the time we were away into a wrong age of every datagram.
-        """
-        wall, now = time.time(), self.clock()
-        for level, kind, data in anc:
-            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
-                sec, nsec = _TIMESPEC.unpack_from(data)
-                return now - min(1.0e6, max(0.0, wall - (sec + nsec * 1e-9)))
-        return now
 
     def wait_readable(self, timeout_s: float) -> None:
         """Block until a datagram is queued or timeout_s passes (start-up helpers only)."""

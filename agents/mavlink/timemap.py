@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import logging
 import math
+import socket
+import struct
 from collections import deque
 
 from agents.mavlink.timesync import TimesyncEstimator, TimesyncParams
@@ -24,6 +26,23 @@ log = logging.getLogger(__name__)
 REBOOT_JUMP_S = 1.0
 WINDOW_S = 2.0
 PENDING_REQUESTS = 16  # our TIMESYNC requests whose replies are still accepted
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux; Python does not export it
+_TIMESPEC = struct.Struct("qq")
+
+
+def kernel_arrival_s(ancillary: list[tuple[int, int, bytes]], wall_s: float,
+                     now_s: float) -> float:
+    """Agent-clock arrival time of a datagram: `now_s`, less how long the kernel held it
+    (its SO_TIMESTAMPNS wall-clock stamp against `wall_s`); `now_s` without a stamp.
+
+    The caller reads both clocks back to back, after recvmsg: a `now` read before a
+    descheduling would turn the time we were away into a wrong age of every datagram.
+    """
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
+            sec, nsec = _TIMESPEC.unpack_from(data)
+            return now_s - min(1.0e6, max(0.0, wall_s - (sec + nsec * 1e-9)))
+    return now_s
 
 
 class WindowedMinOffset:

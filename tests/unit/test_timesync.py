@@ -168,3 +168,23 @@ def test_hostile_timesync_replies_never_break_the_estimate(
         assert math.isfinite(est.offset_at(0.0)) and abs(est.skew) <= 1e-3
         stamp = tmap.stamp(vehicle_ns * 1e-9, rx_ns * 1e-9)
         assert math.isfinite(stamp) and stamp <= rx_ns * 1e-9
+
+
+def test_kernel_arrival_stamp_ages_a_datagram_by_its_time_in_the_buffer() -> None:
+    import socket
+    import struct
+
+    import pytest
+
+    from agents.mavlink.timemap import SO_TIMESTAMPNS, kernel_arrival_s
+
+    def stamp(wall_s: float) -> list[tuple[int, int, bytes]]:
+        sec = int(wall_s)
+        return [(socket.SOL_SOCKET, SO_TIMESTAMPNS,
+                 struct.pack("qq", sec, round((wall_s - sec) * 1e9)))]
+
+    wall, now = 1_800_000_000.5, 100.0
+    assert kernel_arrival_s(stamp(wall - 0.3), wall, now) == pytest.approx(now - 0.3, abs=1e-6)
+    assert kernel_arrival_s(stamp(wall + 5.0), wall, now) == now  # a stamp ahead: not future
+    assert kernel_arrival_s([], wall, now) == now  # no stamp: read now
+    assert kernel_arrival_s([(socket.SOL_SOCKET, SO_TIMESTAMPNS, b"\x00")], wall, now) == now
