@@ -1,7 +1,7 @@
 """A restarted recorder carries on the run's outputs from what its predecessor recorded.
 
 The launcher keeps a dead recorder's MCAP beside the run as `recording-part<k>.mcap`
-(deploy.cmd_run).  Its complete chunks are readable even though the file was never
+(deploy.launch).  Its complete chunks are readable even though the file was never
 finished (mcap_log flushes each second); the new recorder reads the newest part back into
 its own recording and its assembler, so that `recording.mcap`, `series.csv` and the metrics
 cover the whole run but for the seconds the recorder was down.  Since every recorder copies

@@ -1,0 +1,288 @@
+"""One `enclose run` on this machine: start the swarm's processes, link, fly, stop, report.
+
+`deploy.cmd_run` parses the command line and hands over to `Launch.execute`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+from agents.errors import DeployError
+from agents.network_args import network_overrides
+from agents.scenario import Scenario
+from agents.scenario_faults import parse_fault_flag
+from deploy.faults import FaultRunner
+from deploy.ports import mavlink_bases, rendezvous_endpoint
+from deploy.restarts import EXIT_SOMETHING_DIED, RestartPolicy, Watchdog
+from deploy.run_monitor import StatusBoard, show_progress
+from deploy.run_secrets import RunSecrets
+from deploy.supervisor import Child, Supervisor
+from transport.bus import Bus
+from transport.codec import encode
+from transport.keys import SwarmKeys
+from transport.messages import RunControl, Stamper
+from transport.zenoh_bus import ZenohBus
+from transport.zenoh_config import ZenohConfig
+
+log = logging.getLogger("enclose.run")
+START_DELAY_S = 1.0
+PROGRESS_PERIOD_S = 2.0
+START_REPEAT_S = 1.0  # the start word again, for processes (re)started after it
+
+
+class Launch:
+    """One run: wiring of all processes, the start word, progress, and an orderly stop."""
+
+    def __init__(
+        self, scenario: Scenario, args: argparse.Namespace, out: Path, swarm: str, duration_s: float
+    ) -> None:
+        self.scenario, self.args, self.out, self.duration_s = scenario, args, out, duration_s
+        self.keys = SwarmKeys(swarm)
+        self.sup = Supervisor(out / "logs")
+        self.vehicle_base, self.adapter_base = mavlink_bases(scenario.n + scenario.m)
+        blocks = [
+            range(b, b + scenario.n + scenario.m) for b in (self.vehicle_base, self.adapter_base)
+        ]
+        self.endpoint = rendezvous_endpoint(
+            scenario.network.link, avoid=blocks, secure=not args.insecure
+        )
+        self.secrets = RunSecrets(None)
+        self.timings: dict[str, float] = {}
+        self.board = StatusBoard()
+        self.policy = RestartPolicy(args.restart, args.max_restarts)
+        self.watchdog: Watchdog | None = None
+        flags = [parse_fault_flag(f, scenario.n, scenario.m) for f in args.fault]
+        self.faults = (*scenario.faults, *(f for f in flags if f is not None))
+        self.injector: FaultRunner | None = None
+        self.control_stamper: Stamper | None = None
+
+    def common(self) -> list[str]:
+        scen = self.args.scenario
+        scen = str(Path(scen).resolve()) if scen and scen.endswith(".toml") else (scen or "paper")
+        extra = ["--zenoh-config", self.args.zenoh_config] if self.args.zenoh_config else []
+        extra += network_overrides(self.args)
+        return ["--scenario", scen, "--swarm", self.keys.swarm, *extra]
+
+    def start_all(self) -> None:
+        c, s = self.common(), self.scenario
+        mav = [
+            "--mav-local-base",
+            str(self.adapter_base),
+            "--mav-vehicle-base",
+            str(self.vehicle_base),
+        ]
+        self.sup.start(
+            "sim",
+            "deploy.swarm_sim",
+            [
+                *c,
+                "--listen",
+                self.endpoint,
+                "--base-port",
+                str(self.vehicle_base),
+                "--send-base-port",
+                str(self.adapter_base),
+                "--noise-std-m",
+                str(self.args.noise_std_m),
+                *self.secrets.args_for("sim"),
+            ],
+        )
+        joins = [*c, "--connect", self.endpoint]
+        sec = self.secrets.args_for
+        self.sup.start(
+            "recorder", "deploy.recorder", [*joins, "--out", str(self.out), *sec("recorder")]
+        )
+        for i in range(s.n):
+            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
+            self.sup.start(f"follower-{i}", "agents.follower", argv)
+        for j in range(s.m):
+            argv = [*joins, *mav, "--index", str(j), *sec(f"target-{j}")]
+            self.sup.start(f"target-{j}", "agents.target", argv)
+
+    def expected_tokens(self) -> set[str]:
+        k, s = self.keys, self.scenario
+        return (
+            {k.alive("sim", 0), k.alive("recorder", 0)}
+            | {k.alive("follower", i) for i in range(s.n)}
+            | {k.alive("target", j) for j in range(s.m)}
+        )
+
+    def wait_linked(self, bus: Bus, t0: float) -> None:
+        watch = bus.watch_alive(self.keys.all_alive())
+        expected, shown = self.expected_tokens(), -1
+        deadline = t0 + self.args.link_timeout
+        while True:
+            alive = watch.poll() & expected
+            if alive == expected:
+                return
+            self._check_children()
+            if len(alive) != shown:
+                shown = len(alive)
+                log.info("linked %d/%d processes", shown, len(expected))
+            if time.monotonic() > deadline:
+                missing = sorted(
+                    k.rsplit("/", 2)[-2] + "-" + k.rsplit("/", 1)[-1] for k in expected - alive
+                )
+                raise DeployError(
+                    f"not linked after {self.args.link_timeout:.0f} s: {', '.join(missing)}"
+                )
+            time.sleep(0.05)
+
+    def _check_children(self) -> None:
+        dead = self.sup.dead()
+        if dead:
+            c = dead[0]
+            raise DeployError(
+                f"{c.name} exited with code {c.exit_code}; last lines of {c.log_path}:\n{c.tail()}"
+            )
+
+    def execute(self) -> int:
+        self.out.mkdir(parents=True, exist_ok=True)
+        log.info(
+            "run directory %s; swarm %s; Zenoh rendezvous %s; vehicles on UDP 127.0.0.1:%d+; "
+            "agents on UDP 127.0.0.1:%d+",
+            self.out,
+            self.keys.swarm,
+            self.endpoint,
+            self.vehicle_base,
+            self.adapter_base,
+        )
+        t0 = time.monotonic()
+        interrupted = False
+        s = self.scenario
+        self.secrets = RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure)
+        try:
+            self.start_all()
+            with ZenohBus(
+                ZenohConfig(
+                    connect=(self.endpoint,),
+                    user_config_path=self.args.zenoh_config,
+                    link=self.scenario.network.link,
+                    identity=self.secrets.identity("launcher"),
+                )
+            ) as bus:
+                self.board.subscription = bus.subscribe(self.keys.all_status())
+                self.wait_linked(bus, t0)
+                self.timings["link_s"] = time.monotonic() - t0
+                self.timings["linked_wall_s"] = time.time()
+                log.info(
+                    "all %d processes linked in %.1f s",
+                    len(self.expected_tokens()),
+                    self.timings["link_s"],
+                )
+                try:
+                    self.fly(bus)
+                except KeyboardInterrupt:
+                    interrupted = True
+                    log.warning("interrupted: stopping the run, keeping what was recorded")
+                bus.publish(
+                    self.keys.control(),
+                    encode(
+                        RunControl(self._stamper(bus).header(), "stop", bus.now_s(), 0.0)
+                    ),
+                )
+                self.finish()
+        except KeyboardInterrupt:
+            interrupted = True
+            log.warning("interrupted before the start")
+        finally:
+            if self.injector is not None:
+                self.injector.resume_all()
+            self.sup.stop_all()
+            (self.out / "launch.json").write_text(json.dumps(self.report(), indent=2) + "\n")
+        return self.exit_code(interrupted)
+
+    def fly(self, bus: Bus) -> None:
+        start = bus.now_s() + START_DELAY_S
+        stamper = self._stamper(bus)
+
+        def word() -> bytes:  # repeats keep the start stamp and carry their own seq
+            return encode(RunControl(stamper.header(), "start", start, self.duration_s))
+
+        t0 = time.monotonic() + START_DELAY_S
+        self.watchdog = Watchdog(self.sup, self.policy, t0, self._before_restart)
+        self.injector = FaultRunner(
+            self.sup, self.faults, t0, self.watchdog.events, self.watchdog.pending,
+            self._before_restart,
+        )
+        next_report = next_word = start
+        bus.publish(self.keys.control(), word())
+        while bus.now_s() < start + self.duration_s:
+            self.injector.check()
+            self.watchdog.check()
+            self.board.collect()
+            if bus.now_s() >= next_word:  # same start stamp: a repeat changes nothing
+                next_word += START_REPEAT_S
+                bus.publish(self.keys.control(), word())
+            if bus.now_s() >= next_report:
+                next_report += PROGRESS_PERIOD_S
+                show_progress(self.out, bus.now_s() - start, self.duration_s)
+            time.sleep(0.05)
+
+    def _stamper(self, bus: Bus) -> Stamper:
+        """The launcher's one sequence of control words (repeats are not stale)."""
+        if self.control_stamper is None:
+            self.control_stamper = Stamper("launcher-0", bus.now_s)
+        return self.control_stamper
+
+    def _before_restart(self, child: Child) -> None:
+        """A restarted recorder starts a new MCAP: keep the dead one's beside it."""
+        mcap = self.out / "recording.mcap"
+        if child.name == "recorder" and mcap.exists():
+            mcap.rename(self.out / f"recording-part{child.restarts + 1}.mcap")
+
+    def finish(self) -> None:
+        """Movers end on the stop word; the recorder then writes its outputs; the sim last."""
+        movers = [c for c in self.sup.children if c.name.startswith(("follower", "target"))]
+        if not self.sup.wait(movers, 10.0):
+            self.sup.terminate(movers)
+        deadline = time.monotonic() + 1.0  # their final status may still be on the wire
+        while time.monotonic() < deadline and not all(
+            self.board.state_of(c.name) == "done" for c in movers
+        ):
+            self.board.collect()
+            time.sleep(0.02)
+        recorder = [c for c in self.sup.children if c.name == "recorder"]
+        if not self.sup.wait(recorder, 120.0):
+            log.error("recorder did not finish writing in 120 s; stopping it")
+            self.sup.terminate(recorder)
+        self.sup.terminate([c for c in self.sup.children if c.name == "sim"])
+
+    def report(self) -> dict[str, Any]:
+        return {
+            "swarm": self.keys.swarm,
+            "zenoh_endpoint": self.endpoint,
+            "vehicle_base_port": self.vehicle_base,
+            "adapter_base_port": self.adapter_base,
+            "duration_s": self.duration_s,
+            **self.timings,
+            "processes": {
+                c.name: {"pid": c.pid, "exit_code": c.poll(), "restarts": c.restarts}
+                for c in self.sup.children
+            },
+            "restart_policy": self.policy.as_dict(),
+            "faults": [f.__dict__ for f in self.faults],
+            "events": [] if self.watchdog is None else self.watchdog.events,
+            "status": self.board.as_dict(),
+        }
+
+    def exit_code(self, interrupted: bool) -> int:
+        """130 interrupted; 1 a process failed at the end; EXIT_SOMETHING_DIED (3) a process
+        died during the run (launch.json "events") but the run went to its end; else 0."""
+        dog = self.watchdog
+        failed = [c for c in self.sup.dead() if dog is None or not dog.handled(c)]
+        for c in failed:
+            log.error("%s exited with code %s (log: %s)", c.name, c.exit_code, c.log_path)
+        metrics = self.out / "metrics.json"
+        if metrics.exists():
+            print(metrics.read_text())
+        if interrupted:
+            return 130
+        if failed:
+            return 1
+        return EXIT_SOMETHING_DIED if dog is not None and dog.deaths else 0
