@@ -70,6 +70,25 @@ def unavailable() -> str | None:
     return None
 
 
+def install_tools() -> None:
+    """Install iproute2 and nftables on first use of --netns (the main job does not need
+    them, so set-up does not install them); as root with apt-get only, else a clear error."""
+    missing = [pkg for tool, pkg in (("ip", "iproute2"), ("nft", "nftables"))
+               if shutil.which(tool) is None]
+    if not missing or os.geteuid() != 0 or shutil.which("apt-get") is None:
+        return  # `unavailable` then says what is wrong
+    log.warning("--netns needs %s: installing (apt-get, once)", " and ".join(missing))
+    try:
+        done = subprocess.run(["apt-get", "install", "-y", "-q", *missing], capture_output=True,
+                              text=True, timeout=600, check=False,
+                              env={**os.environ, "DEBIAN_FRONTEND": "noninteractive"})
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise DeployError(f"--netns: installing {' '.join(missing)} failed: {exc}") from exc
+    if done.returncode != 0:
+        raise DeployError(f"--netns: apt-get install {' '.join(missing)} failed: "
+                          f"{done.stderr.strip()[-300:]}")
+
+
 def probe() -> str | None:
     """Like `unavailable`, but also creates and removes a namespace with the table."""
     reason = unavailable()
@@ -189,6 +208,7 @@ def _fresh_name() -> str:
 def lossy_namespace(loss: float, name: str | None = None) -> Iterator[Namespace]:
     """A fresh namespace with `lo` up and `loss` of its loopback packets dropped;
     removed on exit, also when the body raises or is interrupted."""
+    install_tools()
     reason = unavailable()
     if reason is not None:
         raise DeployError(f"--netns {reason}")

@@ -3,7 +3,7 @@
 set -uo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$repo"
-bash deploy/bootstrap.sh || exit 1
+bash deploy/bootstrap.sh --dev || exit 1
 bin="$repo/.venv/bin"
 "$bin/ruff" check . || exit 1
 "$bin/mypy" || exit 1
