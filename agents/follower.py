@@ -24,8 +24,12 @@ from agents.follower_logic import (
     link_flows,
     observe_target,
     ready,
-    reference,
+)
+from agents.follower_membership import (
+    join_running,
     regroup,
+    standing_estimate,
+    with_missing,
 )
 from agents.liveness import MembershipWatch
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
@@ -48,6 +52,9 @@ AGE_WINDOW = 20_000
 # pause; kept small so that a flood on one peer's key (a process holding that peer's
 # credentials) costs each tick at most this many decodes and never delays the others.
 PEER_QUEUE = 8
+# A follower first running this long after the start joins a running swarm
+# (agents.follower_membership.join_running); at the start all begin together from p~.
+JOIN_AFTER_S = 1.0
 
 
 def peer_view(msg: FollowerState, receiver: int) -> PeerView:
@@ -72,7 +79,8 @@ class FollowerNode:
     """All of one follower's state; `tick` is the loop body, the only place with side effects."""
 
     def __init__(
-        self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter, swarm: str
+        self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter, swarm: str,
+        joining: bool = False,
     ) -> None:
         self.scenario = scenario
         self.setup = FollowerSetup.from_scenario(scenario, index)
@@ -97,6 +105,9 @@ class FollowerNode:
         self.start_s: float | None = None
         self.stop_s = math.inf
         self.ages_s: deque[float] = deque(maxlen=AGE_WINDOW)
+        # Started into a running swarm (restarted, or back after a leave): publish nothing
+        # until our first estimate continues the neighbours' (agents.follower_membership).
+        self.joining = joining
 
     def _follow(self, peers: set[int]) -> None:
         """Subscribe to exactly the states of `peers` (neighbours and successor)."""
@@ -164,21 +175,30 @@ class FollowerNode:
         )
         r, dr, u = None, np.zeros(2), np.zeros(2)
         running = self.start_s is not None and now_s >= self.start_s
-        if running and ready(self.memory, self.setup, self.peers):
+        late = self.start_s is not None and now_s > self.start_s + JOIN_AFTER_S
+        if running and (self.joining or late):
+            self.memory = join_running(self.memory, self.setup, self.peers, now_s)
+        if running and (self.memory.last_r is not None or
+                        ready(self.memory, self.setup, self.peers)):
             # The estimator needs no vehicle: it keeps running (and its estimate is what
             # we publish) while our vehicle's telemetry is missing; only the command waits.
-            self.memory, out = follower_tick(self.memory, self.setup, own, self.peers, now_s)
+            views = with_missing(self.peers, self.setup, self.memory, now_s)
+            self.memory, out = follower_tick(self.memory, self.setup, own, views, now_s)
             r, dr, u = out.r_m, out.dr_m_s, out.u_m_s
             self.status.counters["stale_inputs"] += len(out.stale)
-            self.ages_s.extend(now_s - self.peers[j].r.stamp_s for j in self.setup.neighbours)
+            self.ages_s.extend(now_s - self.peers[j].r.stamp_s for j in self.setup.neighbours
+                               if j in self.peers)
         elif running:
             self.status.counters["ticks_not_ready"] += 1
         if not state.link_ok:
             self.status.counters["ticks_without_vehicle"] += 1
             u = np.zeros(2)  # hover until our vehicle is heard again
-        if r is None:  # not flying the law yet: publish r = p~ so that neighbours get ready
-            r = reference(self.memory, self.setup, now_s)[0]
+        if r is None:  # not flying the law (yet, or for a moment after a change)
+            r = standing_estimate(self.memory, self.setup, now_s)
         self._command(state, u)
+        if self.joining and self.memory.last_r is None:
+            self.status.counters["ticks_joining"] += 1  # p~ would throw the running ring
+            return
         self._publish(now_s, state, r, dr, u)
 
     def _command(self, state: VehicleState, u: np.ndarray) -> None:
@@ -236,7 +256,7 @@ def run(args: argparse.Namespace) -> int:
 
     def make(bus: Bus, mav: MavlinkAdapter) -> FollowerNode:
         impaired = ImpairedBus(bus, scenario.network, receiver=args.index)  # [network] links
-        return FollowerNode(scenario, args.index, impaired, mav, args.swarm)
+        return FollowerNode(scenario, args.index, impaired, mav, args.swarm, args.join)
 
     return fly(args, scenario, "follower", args.index, args.index, make)
 
@@ -245,6 +265,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="enclose-follower", description=__doc__)
     add_bus_arguments(parser)
     parser.add_argument("--index", type=int, required=True, help="follower number, 0-based")
+    parser.add_argument("--join", action="store_true",
+                        help="the swarm is already running (a restart): start from the "
+                             "neighbours' estimate, not from p~")
     add_vehicle_arguments(parser)
     return process_main(parser, argv, run, lambda a: f"follower-{a.index}")
 

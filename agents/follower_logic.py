@@ -37,6 +37,7 @@ from agents.core.estimator import (
     link_balance,
 )
 from agents.core.params import control_gains, estimator_params
+from agents.estimate_carry import REBASE_TAU_S, next_carry
 from agents.membership import membership
 from agents.scenario import Scenario
 
@@ -134,6 +135,11 @@ class FollowerMemory:
     targets: dict[int, Sample] = field(default_factory=dict)
     link_sums_m: FloatArray | None = None  # robust: (d, 2) own running sum per neighbour
     link_rates_m_s: FloatArray | None = None  # robust: (d, 2) the flows of the last tick
+    # Continuity across membership changes (agents.estimate_carry): the last r_i we
+    # computed, the carry added to it, and whether the next tick starts a new carry.
+    last_r: Sample | None = None
+    carry_m: FloatArray = field(default_factory=lambda: np.zeros(2))
+    rebase_pending: bool = False
 
 
 @dataclass(frozen=True)
@@ -176,8 +182,8 @@ def _stale(
 ) -> tuple[str, ...]:
     old = [
         f"target{j}"
-        for j in setup.observed
-        if now_s - memory.targets[j].stamp_s > setup.stale_after_s
+        for j in setup.observed  # a target newly ours may not be heard yet: missing
+        if j not in memory.targets or now_s - memory.targets[j].stamp_s > setup.stale_after_s
     ]
     for j in sorted(set(setup.neighbours) | {setup.successor}):
         if now_s - peers[j].r.stamp_s > setup.stale_after_s:
@@ -231,23 +237,28 @@ def _estimate(
     ages = np.array([memory.peer_age_s[j] for j in setup.neighbours])
     fractions = setup.nbr_fractions * setup.period_s / np.maximum(ages, setup.period_s)
     args = (fractions, setup.estimator, setup.period_s)
+    resume = None
+    if memory.rebase_pending and memory.last_r is not None:
+        resume = memory.last_r.held(now_s, setup.hold_after_s)
+    tau = REBASE_TAU_S
     if not setup.robust:
         phi = memory.phi_m + dt * memory.phi_rate_m_s
-        phi_rate = (live * consensus_flows(phi + p_tilde, r_nbrs, *args)).sum(axis=0)
-        memory = replace(memory, phi_m=phi, phi_rate_m_s=phi_rate)
-        return memory, phi + p_tilde, phi_rate + p_tilde_rate
+        carry = next_carry(memory.carry_m, phi + p_tilde, resume, dt)
+        phi_rate = (live * consensus_flows(phi + p_tilde + carry, r_nbrs, *args)).sum(axis=0)
+        memory = replace(memory, phi_m=phi, phi_rate_m_s=phi_rate, carry_m=carry)
+        return memory, phi + p_tilde + carry, phi_rate + p_tilde_rate - carry / tau
     d = len(setup.neighbours)
     sums = np.zeros((d, 2)) if memory.link_sums_m is None else memory.link_sums_m
     rates = np.zeros((d, 2)) if memory.link_rates_m_s is None else memory.link_rates_m_s
     sums = sums + dt * rates
     their_sums, their_rates = _their_flows(setup, peers, now_s)
     phi = link_balance(sums, their_sums)
-    flows = live * consensus_flows(phi + p_tilde, r_nbrs, *args)
+    carry = next_carry(memory.carry_m, phi + p_tilde, resume, dt)
+    flows = live * consensus_flows(phi + p_tilde + carry, r_nbrs, *args)
     phi_rate = link_balance(flows, their_rates)
-    memory = replace(
-        memory, phi_m=phi, phi_rate_m_s=phi_rate, link_sums_m=sums, link_rates_m_s=flows
-    )
-    return memory, phi + p_tilde, phi_rate + p_tilde_rate
+    memory = replace(memory, phi_m=phi, phi_rate_m_s=phi_rate, link_sums_m=sums,
+                     link_rates_m_s=flows, carry_m=carry)
+    return memory, phi + p_tilde + carry, phi_rate + p_tilde_rate - carry / tau
 
 
 def _smoothed_ages(
@@ -274,7 +285,8 @@ def follower_tick(
     peers: dict[int, PeerView],
     now_s: float,
 ) -> tuple[FollowerMemory, TickOutput]:
-    """One control cycle at `now_s`; call only when `ready`."""
+    """One control cycle at `now_s`; call when `ready`, or after the first cycle with
+    the peers not heard yet stood in for (agents.follower_membership.with_missing)."""
     last = memory.last_tick_s
     dt = 0.0 if last is None else min(max(now_s - last, 0.0), setup.max_gap_s)
     memory = replace(memory, peer_age_s=_smoothed_ages(memory, setup, peers, now_s, dt))
@@ -297,7 +309,10 @@ def follower_tick(
         setup.period_s,
         memory.peer_age_s[setup.successor],
     )
-    new_memory = replace(new_memory, last_tick_s=now_s)
+    # A target newly ours is not heard yet: p~_i lacks it, so r_i stays carried until it is.
+    pending = memory.rebase_pending and not all(j in memory.targets for j in setup.observed)
+    new_memory = replace(new_memory, last_tick_s=now_s, last_r=Sample(r, dr, now_s),
+                         rebase_pending=pending)
     u = out.u_m_s[0].copy()
     z, delta = float(out.z_m[0]), float(out.delta[0])
     if not (np.all(np.isfinite(u)) and math.isfinite(z)):
@@ -315,26 +330,3 @@ def link_flows(
         (j, float(s[0]), float(s[1]), float(f[0]), float(f[1]))
         for j, s, f in zip(setup.neighbours, memory.link_sums_m, memory.link_rates_m_s, strict=True)
     )
-
-
-def regroup(memory: FollowerMemory, old: FollowerSetup, new: FollowerSetup) -> FollowerMemory:
-    """The memory carried across a membership change from `old` to `new` links.
-
-    A kept link keeps its running sum; a dropped link's sum is dropped (its other end
-    drops its own, or is gone), a new link starts at zero: every link still counts
-    0.5 (S_ij - S_ji) at one end and the opposite at the other, so sum(Phi) stays 0
-    (robust estimator).  The paper's Phi has no per-link parts and is kept whole.
-    Tracks of targets no longer observed and ages of departed peers are dropped.
-    """
-    peers = set(new.neighbours) | {new.successor}
-    ages = {j: a for j, a in memory.peer_age_s.items() if j in peers}
-    targets = {j: s for j, s in memory.targets.items() if j in new.observed}
-    memory = replace(memory, peer_age_s=ages, targets=targets)
-    if memory.link_sums_m is None or memory.link_rates_m_s is None:
-        return memory
-    sums, rates = np.zeros((len(new.neighbours), 2)), np.zeros((len(new.neighbours), 2))
-    for k, j in enumerate(new.neighbours):
-        if j in old.neighbours:
-            sums[k] = memory.link_sums_m[old.neighbours.index(j)]
-            rates[k] = memory.link_rates_m_s[old.neighbours.index(j)]
-    return replace(memory, link_sums_m=sums, link_rates_m_s=rates)

@@ -231,10 +231,13 @@ class Launch:
         return self.control_stamper
 
     def _before_restart(self, child: Child) -> None:
-        """A restarted recorder starts a new MCAP: keep the dead one's beside it."""
+        """A restarted recorder starts a new MCAP: keep the dead one's beside it.  A
+        restarted follower joins a running swarm (agents.follower --join)."""
         mcap = self.out / "recording.mcap"
         if child.name == "recorder" and mcap.exists():
             mcap.rename(self.out / f"recording-part{child.restarts + 1}.mcap")
+        if child.name.startswith("follower-") and "--join" not in child.argv:
+            child.argv.append("--join")
 
     def finish(self) -> None:
         """Movers end on the stop word; the recorder then writes its outputs; the sim last."""
