@@ -120,12 +120,23 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
             return {"overruns": ticker.overruns, "offboard_requests": keeper.requests,
                     **mav.clock_counters(), **signing, **node.counters()}
 
+        def heartbeat() -> None:
+            if node.status.due():
+                node.status.publish(extra=extra())
+
         try:
             while not stop.raised and bus.now_s() < node.stop_s:
                 now = ticker.wait()
                 if watch.lost(mav.state, mav.flavour, now):
                     node.status.counters["vehicle_restarts"] += 1
-                    if not _start_again(mav, scenario.vehicle.altitude_m, stop, role, index):
+                    # Still a member while re-arming (status heard: agents.liveness).
+                    mav.on_wait = heartbeat
+                    try:
+                        again = _start_again(mav, scenario.vehicle.altitude_m, stop, role,
+                                             index)
+                    finally:
+                        mav.on_wait = None
+                    if not again:
                         break
                     watch.since_s = None
                     continue

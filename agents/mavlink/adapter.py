@@ -86,6 +86,9 @@ class MavlinkAdapter:
         self._t0 = clock()
         self.sock: socket.socket | None = None
         self._selector: selectors.BaseSelector | None = None
+        # Called while a blocking start-up helper waits: a process re-arming its vehicle
+        # mid-run keeps its status heartbeat going (agents.vehicle_loop).
+        self.on_wait: Callable[[], None] | None = None
 
     # ---- lifecycle ----------------------------------------------------------------------
     def open(self) -> MavlinkAdapter:
@@ -162,6 +165,8 @@ class MavlinkAdapter:
 
     def wait_readable(self, timeout_s: float) -> None:
         """Block until a datagram is queued or timeout_s passes (start-up helpers only)."""
+        if self.on_wait is not None:
+            self.on_wait()
         if self._selector is not None:
             self._selector.select(max(0.0, timeout_s))
 

@@ -232,3 +232,15 @@ def test_offboard_is_requested_again_after_the_failsafe_hold_only() -> None:
     feed(ad, heartbeat("LAND"), clock.t)  # somebody else's choice: left alone
     keeper.check(clock.t + 2.0)
     assert len(sent) == 2
+
+
+def test_a_blocking_wait_calls_the_on_wait_hook() -> None:
+    """While start-up helpers block (re-arming mid-run), the process keeps its heartbeat."""
+    calls: list[int] = []
+    with MavlinkAdapter(AdapterConfig(local_port=0)) as ad:
+        ad.on_wait = lambda: calls.append(1)
+        ad.wait_readable(0.0)
+        ad.wait_readable(0.0)
+        ad.on_wait = None
+        ad.wait_readable(0.0)
+    assert len(calls) == 2
