@@ -110,7 +110,11 @@ class FollowerNode:
         self.joining = joining
 
     def _follow(self, peers: set[int]) -> None:
-        """Subscribe to exactly the states of `peers` (neighbours and successor)."""
+        """Subscribe to exactly the states of `peers` (neighbours and successor).
+
+        Never to our own: alone in the member set (before the others' tokens arrived, at
+        start-up) the ring makes us our own successor."""
+        peers = peers - {self.index}
         for j in set(self.peer_subs) - peers:
             self.peer_subs.pop(j).close()
         for j in sorted(peers - set(self.peer_subs)):

@@ -126,3 +126,21 @@ def test_a_returning_peer_numbering_from_zero_is_neither_stale_nor_duplicate() -
     assert all(dec.decode(rec(k)) is not None for k in range(3))
     counters = dec.counters()
     assert counters["rx_f3"] == 9 and counters["rx_dup_f3"] == 0 and counters["seq_stale"] == 0
+
+
+def test_a_follower_alone_at_start_up_never_follows_its_own_state() -> None:
+    """Before the others' tokens arrive the ring is {0}: its own successor.  It must not
+    subscribe to its own key (a link f0->f0 in the run's link report, seen in CI)."""
+    hub = MemoryHub()
+    bus = MemoryBus(hub, "f0")
+    bus.declare_token(KEYS.alive("follower", 0))
+    node = FollowerNode(load_scenario("paper"), 0, bus, cast(MavlinkAdapter, FakeVehicle()), "t")
+    node.tick(bus.now_s())
+    assert node.members == {0} and node.setup.successor == 0
+    assert 0 not in node.peer_subs
+    others = {i: MemoryBus(hub, f"f{i}") for i in (1, 2, 3)}
+    for i, b in others.items():
+        b.declare_token(KEYS.alive("follower", i))
+    node.tick(bus.now_s())
+    assert node.members == {0, 1, 2, 3} and set(node.peer_subs) == {1, 3}
+    node.close()
