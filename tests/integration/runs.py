@@ -46,10 +46,12 @@ def spawned(argv: Sequence[str], root: Path) -> Iterator[subprocess.Popen[str]]:
                 os.kill(pid, signal.SIGKILL)
 
 
-def wait_for(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
-    """Poll `condition` until it holds; fail naming `what` after `timeout_s`."""
+def wait_for(condition: Callable[[], bool], timeout_s: float, what: str,
+             period_s: float = 0.1) -> None:
+    """Poll `condition` every `period_s` until it holds; fail naming `what` after
+    `timeout_s`.  The integration tests' one way to wait: never a fixed sleep."""
     deadline = time.monotonic() + timeout_s
     while not condition():
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.1)
+        time.sleep(period_s)

@@ -12,22 +12,19 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import pytest
 
+from tests.integration import runs
 from tests.integration.sim_process import assert_all_answered, start_sim
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
 
 
-def wait_for(ok: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not ok():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.05)
+# runs.wait_for, polled faster: client state moves at telemetry rate.
+wait_for = partial(runs.wait_for, period_s=0.05)
 
 
 def test_mavsdk_arms_takes_off_flies_offboard_and_lands() -> None:

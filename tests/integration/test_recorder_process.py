@@ -8,13 +8,14 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
 
 from agents.scenario_file import load_scenario
+from tests.integration import runs
 from tests.integration.test_transport_zenoh import free_port
 from tests.recorder_synth import SynthRun
 from transport.bus import wait_until_alive
@@ -28,12 +29,8 @@ pytestmark = pytest.mark.integration
 REPO = Path(__file__).resolve().parents[2]
 
 
-def wait_for(cond: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.005)
+# runs.wait_for, polled faster: the recorder answers within milliseconds.
+wait_for = partial(runs.wait_for, period_s=0.005)
 
 
 def start_recorder(swarm: str, out: Path, endpoint: str) -> subprocess.Popen[bytes]:

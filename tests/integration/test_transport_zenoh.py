@@ -10,12 +10,14 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 
 import msgpack
 import pytest
 
+from tests.integration import runs
 from transport.bus import Bus, wait_until_alive
 from transport.codec import encode
 from transport.decoder import Decoder
@@ -34,12 +36,8 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def wait_for(cond: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.002)
+# runs.wait_for, polled faster: round trips on loopback take a fraction of a millisecond.
+wait_for = partial(runs.wait_for, period_s=0.002)
 
 
 @contextlib.contextmanager
