@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import re
+import socket
 import struct
 
 from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.dialects.v20.common import mcrf4xx
 
+from agents.mavlink.wire import MAVLinkMessage, decode_datagram, new_codec
 from sim_backend.endpoint import HANDLERS, IGNORED
 
 HEADER = struct.Struct("<BBBBBBBHB")
@@ -46,3 +48,14 @@ def target_offset(cls: type) -> int | None:
     codes = re.findall(r"(\d*)([a-zA-Z?])", cls.unpacker.format.lstrip("<"))
     sizes = [struct.calcsize("<" + n + c) for n, c in codes]
     return sum(sizes[:names.index("target_system")])
+
+
+def queued_datagrams(client: socket.socket) -> list[list[MAVLinkMessage]]:
+    """The messages of every datagram queued on a non-blocking socket, one list each."""
+    out = []
+    while True:
+        try:
+            data, _ = client.recvfrom(65535)
+        except BlockingIOError:
+            return out
+        out.append(list(decode_datagram(new_codec(250, 0), data).messages))

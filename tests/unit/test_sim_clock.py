@@ -12,10 +12,11 @@ from collections.abc import Iterator
 
 import pytest
 
-from agents.mavlink.wire import decode_datagram, new_codec
+from agents.mavlink.wire import new_codec
 from agents.scenario import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 from sim_backend.setpoint import decode_setpoint
+from tests.mavlink_fuzz import queued_datagrams
 
 
 class FakeClock:
@@ -51,16 +52,6 @@ def rig() -> Iterator[tuple[Simulator, FakeClock, socket.socket]]:
         client.close()
 
 
-def datagrams(client: socket.socket) -> list[list]:
-    out = []
-    while True:
-        try:
-            data, _ = client.recvfrom(65535)
-        except BlockingIOError:
-            return out
-        out.append(list(decode_datagram(new_codec(250, 0), data).messages))
-
-
 def stall_at(sim: Simulator, clock: FakeClock, tick: int, stall_s: float) -> None:
     def hook(t: float, _state: object) -> None:
         if round(t / sim.dt_s) == tick:
@@ -76,7 +67,7 @@ def test_a_stall_is_caught_up_in_sub_steps_without_a_telemetry_burst(rig) -> Non
     assert sim.sim_time_s == pytest.approx(clock.t - start, abs=sim.dt_s + 1e-9)
     assert stats.catch_ups == 1 and stats.caught_up_ticks == 24 and stats.resyncs == 0
     assert stats.overruns == 1 and stats.ticks == 40
-    grams = datagrams(client)
+    grams = queued_datagrams(client)
     positions = [m for g in grams for m in g if m.get_type() == "LOCAL_POSITION_NED"]
     assert len(positions) == 40  # one per real tick, none for the 24 sub-steps
     assert len(grams) <= 40 + 2  # + this second's TIMESYNC request and SYSTEM_TIME
@@ -131,7 +122,8 @@ def test_timesync_requests_are_answered_with_the_boot_clock_in_ns(rig) -> None:
                   ("127.0.0.1", sim.listen_ports()[0]))
     stall_at(sim, clock, 2, 0.3)
     sim.run(lambda: False, max_ticks=5)
-    msgs = [m for g in datagrams(client) for m in g if m.get_type() in ("TIMESYNC", "SYSTEM_TIME")]
+    msgs = [m for g in queued_datagrams(client) for m in g
+            if m.get_type() in ("TIMESYNC", "SYSTEM_TIME")]
     replies = [m for m in msgs if m.get_type() == "TIMESYNC" and m.tc1 != 0]
     assert [m.ts1 for m in replies] == [123456789]
     assert 0 <= replies[0].tc1 <= 2 * sim.dt_s * 1e9

@@ -16,10 +16,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agents.mavlink.wire import decode_datagram, new_codec
+from agents.mavlink.wire import new_codec
 from agents.scenario import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
-from tests.mavlink_fuzz import HANDLED_CLASSES, payload_size, raw_frame, target_offset
+from tests.mavlink_fuzz import (
+    HANDLED_CLASSES,
+    payload_size,
+    queued_datagrams,
+    raw_frame,
+    target_offset,
+)
 
 SETTINGS = settings(max_examples=150, deadline=None,
                     suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -46,19 +52,9 @@ def sim(request: pytest.FixtureRequest) -> Iterator[Simulator]:
 
 def deliver(sim: Simulator, data: bytes) -> list:
     client = sim.test_client  # type: ignore[attr-defined]
-    while True:  # drop telemetry streamed to us since the last example
-        try:
-            client.recvfrom(65535)
-        except BlockingIOError:
-            break
+    queued_datagrams(client)  # drop telemetry streamed to us since the last example
     sim.endpoints[0].on_datagram(data, client.getsockname(), sim.sim_time_s, sim._rows[0])
-    out = []
-    while True:
-        try:
-            reply, _ = client.recvfrom(65535)
-        except BlockingIOError:
-            return out
-        out += decode_datagram(new_codec(250, 0), reply).messages
+    return [msg for datagram in queued_datagrams(client) for msg in datagram]
 
 
 def check_healthy(sim: Simulator) -> None:
