@@ -82,8 +82,10 @@ def join_running(memory: FollowerMemory, setup: FollowerSetup, peers: dict[int, 
                  now_s: float) -> FollowerMemory:
     """A follower (re)joining a running swarm: its first estimate continues the mean of its
     heard neighbours' estimates (unchanged if none is heard yet, or it has run before)."""
+    if memory.last_r is not None:  # every tick once it has run: nothing to build
+        return memory
     heard = [peers[j].r for j in setup.neighbours if j in peers]
-    if memory.last_r is not None or not heard:
+    if not heard:
         return memory
     value = np.mean([s.held(now_s, setup.hold_after_s) for s in heard], axis=0)
     rate = np.mean([s.held_rate(now_s, setup.hold_after_s) for s in heard], axis=0)
