@@ -121,9 +121,14 @@ class FollowerNode:
             self.peer_subs[j] = self.bus.subscribe(self.keys.follower_state(j), PEER_QUEUE)
 
     def regroup(self, now_s: float) -> None:
-        """Re-form around the followers alive now (agents.liveness, agents.membership)."""
+        """Re-form around the followers alive now (agents.liveness, agents.membership).
+
+        Not before the start word: the launcher sends it only once every follower is
+        linked, so until then the planned ring is the member set.  The tokens seen before
+        (followers finish take-off one after another) are partial sets whose links would
+        only show up as spurious links in the run's report."""
         members = self.liveness.members(now_s) | {self.index}
-        if members == self.members:
+        if self.start_s is None or members == self.members:
             return
         new = FollowerSetup.from_scenario(self.scenario, self.index, members)
         self.memory = regroup(self.memory, self.setup, new)

@@ -77,6 +77,7 @@ def test_watch_and_follower_node_reform_when_a_follower_leaves_and_returns() -> 
     bus = MemoryBus(hub, "f0")
     bus.declare_token(KEYS.alive("follower", 0))
     node = FollowerNode(load_scenario("paper"), 0, bus, cast(MavlinkAdapter, FakeVehicle()), "t")
+    node.start_s = bus.now_s() + 1e6  # the start word was heard (membership applies)
     node.tick(bus.now_s())
     assert node.members == {0, 1, 2, 3} and node.setup.neighbours == (1, 3)
     tokens[3].close()  # index 3 is killed: 0's ring neighbours are now 1 and 2
@@ -128,13 +129,18 @@ def test_a_returning_peer_numbering_from_zero_is_neither_stale_nor_duplicate() -
     assert counters["rx_f3"] == 9 and counters["rx_dup_f3"] == 0 and counters["seq_stale"] == 0
 
 
-def test_a_follower_alone_at_start_up_never_follows_its_own_state() -> None:
-    """Before the others' tokens arrive the ring is {0}: its own successor.  It must not
-    subscribe to its own key (a link f0->f0 in the run's link report, seen in CI)."""
+def test_before_the_start_word_the_planned_ring_stands_and_alone_means_no_self_link() -> None:
+    """Followers finish take-off one after another, so the tokens seen before the start
+    word are partial sets (in CI: links f0->f0, f0->f2 in the run's link report).  Before
+    the start the planned ring stands; after it, a follower alone in the member set is its
+    own successor but never subscribes to its own key."""
     hub = MemoryHub()
     bus = MemoryBus(hub, "f0")
     bus.declare_token(KEYS.alive("follower", 0))
     node = FollowerNode(load_scenario("paper"), 0, bus, cast(MavlinkAdapter, FakeVehicle()), "t")
+    node.tick(bus.now_s())  # only its own token so far
+    assert node.members == {0, 1, 2, 3} and set(node.peer_subs) == {1, 3}
+    node.start_s = bus.now_s() + 1e6  # the start word was heard (membership applies)
     node.tick(bus.now_s())
     assert node.members == {0} and node.setup.successor == 0
     assert 0 not in node.peer_subs
