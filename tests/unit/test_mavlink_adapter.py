@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import socket
 import time
+from collections.abc import Iterator
 
 import pytest
 
@@ -12,7 +13,7 @@ from agents.errors import LinkLostError, MavlinkError
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.modes import encode_custom_mode
 from agents.mavlink.offboard import OffboardKeeper
-from agents.mavlink.timemap import BootClockMap
+from agents.mavlink.timemap import SO_TIMESTAMPNS, BootClockMap, kernel_arrival_s
 from agents.mavlink.wire import decode_datagram, new_codec
 
 ADDR = ("127.0.0.1", 14580)
@@ -197,6 +198,33 @@ def test_timesync_requests_answered_and_replies_lock_the_clock_map() -> None:
         vehicle.close()
 
 
+@pytest.fixture
+def kernel_stamping() -> Iterator[None]:
+    """Hold receive timestamping on, and wait until the kernel really stamps on arrival.
+
+    Linux turns stamping on through a deferred work item when the first socket asks for it;
+    until that runs, a datagram is stamped when it is read. On a loaded machine that took
+    long enough to fail the test below, which is about the adapter, not the kernel."""
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    probe.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    probe.setblocking(False)
+    deadline = time.monotonic() + 20.0
+    try:
+        while time.monotonic() < deadline:
+            probe.sendto(b"x", probe.getsockname())
+            time.sleep(0.02)  # the age a stamp taken on arrival must show
+            _data, anc, _flags, _addr = probe.recvmsg(16, socket.CMSG_SPACE(16))
+            if kernel_arrival_s(anc, time.time(), 0.0) < -0.01:
+                break
+        else:
+            pytest.fail("the kernel did not start stamping datagrams on arrival within 20 s")
+        yield
+    finally:
+        probe.close()
+
+
+@pytest.mark.usefixtures("kernel_stamping")
 def test_queued_datagrams_are_stamped_with_their_arrival() -> None:
     ad, clock, vehicle = open_pair()
     try:
