@@ -11,9 +11,11 @@ does -- nothing of the project's own code is used.
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import struct
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,18 +34,21 @@ class Received:
     payload: bytes
 
 
+@contextlib.contextmanager
+def foxglove_client(url: str, open_timeout_s: float = 10.0) -> Iterator[FoxgloveClient]:
+    with connect(url, subprotocols=[SUBPROTOCOL],  # type: ignore[list-item]
+                 open_timeout=open_timeout_s, max_size=None) as ws:
+        yield FoxgloveClient(ws)
+
+
 class FoxgloveClient:
     """One connection; channels as advertised, by topic."""
 
-    def __init__(self, url: str, open_timeout_s: float = 10.0) -> None:
-        self.ws: ClientConnection = connect(url, subprotocols=[SUBPROTOCOL],  # type: ignore[list-item]
-                                            open_timeout=open_timeout_s, max_size=None)
+    def __init__(self, ws: ClientConnection) -> None:
+        self.ws = ws
         self.server_info: dict[str, Any] = {}
         self.channels: dict[str, dict[str, Any]] = {}
         self._subs: dict[int, str] = {}
-
-    def close(self) -> None:
-        self.ws.close()
 
     def _handle_text(self, text: str) -> None:
         op = json.loads(text)
@@ -98,8 +103,14 @@ class FoxgloveClient:
         """The message class the advertised protobuf schema of `topic` describes."""
         channel = self.channels[topic]
         assert channel["encoding"] == "protobuf" and channel["schemaEncoding"] == "protobuf"
-        files = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(channel["schema"]))
-        pool = descriptor_pool.DescriptorPool()
-        for proto in files.file:
-            pool.Add(proto)
-        return message_factory.GetMessageClass(pool.FindMessageTypeByName(channel["schemaName"]))
+        return protobuf_class(channel["schemaName"], base64.b64decode(channel["schema"]))
+
+
+def protobuf_class(name: str, file_descriptor_set: bytes) -> Any:
+    """The class of message `name` from a serialised FileDescriptorSet (MCAP's and the
+    protocol's protobuf schema data)."""
+    files = descriptor_pb2.FileDescriptorSet.FromString(file_descriptor_set)
+    pool = descriptor_pool.DescriptorPool()
+    for proto in files.file:
+        pool.Add(proto)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
