@@ -31,6 +31,7 @@ from deploy.recording.view import (
     LINKS_TOPIC,
     LOG_TOPIC,
     SCENE_TOPIC,
+    SCHEMAS,
     STATUS_TOPIC,
     LiveView,
     errors_now,
@@ -241,3 +242,28 @@ def test_launcher_options_url_and_port_pinning(tmp_path: Path) -> None:
     live_args.pin_live_port(argv, "ws://127.0.0.1:8770")
     assert argv[3] == "8770"
     assert live_args.read_live_url(tmp_path / "none", wait_s=0.0) is None
+
+
+LAYOUT = Path(__file__).resolve().parents[2] / "docs" / "foxglove-layout.json"
+
+
+def _panel_paths(config: dict[str, Any]) -> list[str]:
+    paths = [p["value"] for p in config.get("paths", [])]
+    paths += [config[k] for k in ("topicPath", "topicToRender") if config.get(k)]
+    paths += list(config.get("topics", {}))
+    return paths
+
+
+@pytest.mark.timeout(30)
+def test_shipped_layout_shows_only_what_the_view_publishes() -> None:
+    layout = json.loads(LAYOUT.read_text())
+    panels = layout["configById"]
+    errors_fields = json.loads(SCHEMAS[ERRORS_TOPIC].data)["properties"]
+    for panel_id, config in panels.items():
+        for path in _panel_paths(config):
+            topic, _, field = path.partition(".")
+            assert topic in SCHEMAS, (panel_id, path)
+            if topic == ERRORS_TOPIC:
+                assert field in errors_fields, (panel_id, path)
+    used = set(json.dumps(layout["layout"]).replace('"', " ").split())
+    assert set(panels) <= used  # every panel is placed
