@@ -13,6 +13,7 @@ from agents.errors import DeployError
 from agents.network_args import add_network_arguments, apply_network_arguments
 from agents.scenario_file import load_scenario
 from deploy.launch import Launch
+from deploy.live_args import add_live_arguments
 from deploy.netns import add_netns_arguments, netns_requested, run_in_namespace
 from deploy.restarts import add_supervision_arguments
 
@@ -41,6 +42,7 @@ def register(sub: Any) -> None:
         action="store_true",
         help="no Zenoh authentication/access control and no MAVLink signing (not recommended)",
     )
+    add_live_arguments(p)
     add_supervision_arguments(p)
     add_network_arguments(p)
     add_netns_arguments(p)

@@ -17,6 +17,7 @@ from agents.network_args import network_overrides
 from agents.scenario import Scenario
 from agents.scenario_faults import parse_fault_flag
 from deploy.faults import FaultRunner
+from deploy.live_args import announce_live_url, pin_live_port, recorder_live_argv
 from deploy.ports import mavlink_bases, rendezvous_endpoint
 from deploy.restarts import EXIT_SOMETHING_DIED, RestartPolicy, Watchdog
 from deploy.run_monitor import StatusBoard, show_progress
@@ -60,6 +61,7 @@ class Launch:
         self.faults = (*scenario.faults, *(f for f in flags if f is not None))
         self.injector: FaultRunner | None = None
         self.control_stamper: Stamper | None = None
+        self.live_url: str | None = None
 
     def common(self) -> list[str]:
         scen = self.args.scenario
@@ -95,7 +97,8 @@ class Launch:
         joins = [*c, "--connect", self.endpoint]
         sec = self.secrets.args_for
         self.sup.start(
-            "recorder", "deploy.recorder", [*joins, "--out", str(self.out), *sec("recorder")]
+            "recorder", "deploy.recorder",
+            [*joins, "--out", str(self.out), *sec("recorder"), *recorder_live_argv(self.args)],
         )
         for i in range(s.n):
             argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
@@ -175,6 +178,7 @@ class Launch:
                     len(self.expected_tokens()),
                     self.timings["link_s"],
                 )
+                self.live_url = announce_live_url(self.args, self.out)
                 try:
                     self.fly(bus)
                 except KeyboardInterrupt:
@@ -236,6 +240,8 @@ class Launch:
         mcap = self.out / "recording.mcap"
         if child.name == "recorder" and mcap.exists():
             mcap.rename(self.out / f"recording-part{child.restarts + 1}.mcap")
+        if child.name == "recorder":
+            pin_live_port(child.argv, self.live_url)
         if child.name.startswith("follower-") and "--join" not in child.argv:
             child.argv.append("--join")
 
@@ -263,6 +269,7 @@ class Launch:
             "vehicle_base_port": self.vehicle_base,
             "adapter_base_port": self.adapter_base,
             "duration_s": self.duration_s,
+            "live_url": self.live_url,
             **self.timings,
             "processes": {
                 c.name: {"pid": c.pid, "exit_code": c.poll(), "restarts": c.restarts}

@@ -1,13 +1,16 @@
 """The swarm's recorder process: bus + ground truth in, MCAP + metrics + figures out.
 
     python -m deploy.recorder --scenario paper --swarm NAME --out RUN_DIR \
-        --connect tcp/127.0.0.1:PORT [--listen tcp/127.0.0.1:PORT]
+        --connect tcp/127.0.0.1:PORT [--listen tcp/127.0.0.1:PORT] [--live-port 8765]
 
 Declares liveliness token `alive/recorder/0`, publishes `status/recorder/0` about once a
 second ("linked", then "running" once the launcher's RunControl "start" is heard), records
 every key of the swarm to `RUN_DIR/recording.mcap` and writes `RUN_DIR/progress.json` each
-second.  On RunControl "stop", SIGTERM or SIGINT it closes the MCAP and writes series.csv,
-metrics.json, run.json and the figures (`enclose report RUN_DIR` redraws them).
+second.  With --live-port it serves the live view (Foxglove WebSocket, deploy.recording.
+live_server) on --live-host (127.0.0.1) at that port or the next free one, and names its URL
+in progress.json ("live_url"); the view's channels are in the MCAP either way.  On
+RunControl "stop", SIGTERM or SIGINT it closes the MCAP and writes series.csv, metrics.json,
+run.json and the figures (`enclose report RUN_DIR` redraws them).
 Exit 0 on a clean stop with metrics; 1 if the run gave no usable truth (metrics.json then has
 an "error" field; the MCAP is kept); 2 on a configuration or transport error at start.
 """
@@ -22,6 +25,7 @@ from pathlib import Path
 
 from agents.errors import EncloseError
 from agents.process import add_bus_arguments, load_run_scenario, open_bus, stop_on_signals
+from deploy.recording.live_server import DEFAULT_HOST, LiveServer
 from deploy.recording.loop import Recorder
 
 log = logging.getLogger("deploy.recorder")
@@ -33,8 +37,28 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     add_bus_arguments(parser)
     parser.add_argument("--out", type=Path, required=True, help="run directory")
     parser.add_argument("--index", type=int, default=0, help="recorder index (default 0)")
+    parser.add_argument("--live-port", type=int, default=None, metavar="PORT",
+                        help="serve the live view from this port (or the next free one); "
+                        "0: any free port; default: no live server")
+    parser.add_argument("--live-host", default=DEFAULT_HOST,
+                        help="address the live view listens on (default 127.0.0.1: this "
+                        "machine only; the view has no authentication)")
     parser.add_argument("-v", "--verbose", action="store_true")
     return parser.parse_args(argv)
+
+
+def start_live(args: argparse.Namespace) -> LiveServer | None:
+    """The live server, or None: asked for none, or none could start (the recording matters
+    more than the view, so that is a warning, not an exit)."""
+    if args.live_port is None:
+        return None
+    try:
+        live = LiveServer(args.live_host, args.live_port)
+    except EncloseError as exc:
+        log.warning("no live view: %s", exc)
+        return None
+    log.info("live view on %s (Foxglove: Open connection -> %s)", live.url, live.url)
+    return live
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -44,7 +68,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         scenario = load_run_scenario(args)
         with stop_on_signals() as stop, open_bus(args) as bus:
-            recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index)
+            live = start_live(args)
+            recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index, live=live)
             try:
                 recorder.run(lambda: stop.raised)
             except Exception:  # a bug in the loop must still leave a finished MCAP behind

@@ -19,10 +19,12 @@ from agents.liveness import MembershipWatch
 from agents.scenario import Scenario
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.links import FINAL_STATES, link_report
-from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog
+from deploy.recording.live_server import LiveServer
+from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
 from deploy.recording.outputs import write_final_outputs
 from deploy.recording.progress import PROGRESS_FILE, live_errors, write_json_atomic
 from deploy.recording.resume import newest_part, read_back
+from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
 from deploy.rundir import RunInfo
 from transport.bus import Bus, Congestion
 from transport.checks import RECORDER_LIMITS
@@ -46,7 +48,8 @@ class Recorder:
     def __init__(self, bus: Bus, swarm: str, scenario: Scenario, run_dir: Path,
                  index: int = 0, period_s: float = 1.0,
                  final_status_wait_s: float = FINAL_STATUS_WAIT_S,
-                 chunk_bytes: int = DEFAULT_CHUNK_BYTES) -> None:
+                 chunk_bytes: int = DEFAULT_CHUNK_BYTES, live: LiveServer | None = None,
+                 scene_hz: float | None = DEFAULT_SCENE_HZ) -> None:
         self.bus, self.scenario, self.run_dir = bus, scenario, run_dir
         self.keys = SwarmKeys(swarm)
         self.index = index
@@ -61,12 +64,19 @@ class Recorder:
         self.state = "starting"
         self.stop_reason = ""
         self._info = RunInfo.from_scenario(scenario, "networked", scenario.run.duration_s)
+        # The live view's frames go into the MCAP always (replay looks as live did) and to
+        # the WebSocket server when there is one; scene_hz None turns the view off.
+        self.live = live
+        self.view = None if scene_hz is None else LiveView(self._info, scene_hz)
+        self.view_errors = 0
         self._stamper = Stamper(f"{ROLE}-{index}", bus.now_s)
         self._status = bus.declare_publisher(self.keys.status(ROLE, index), Congestion.DROP)
         self._sub = bus.subscribe(self.keys.everything(), QUEUE_CAPACITY)
         # After the subscription: what arrives while we read back waits in its queue.
         self.carried: Counter[str] = Counter()
         self._carry_on()
+        # progress.json names the live URL before anyone sees us linked (deploy.launch).
+        write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
         self._token = bus.declare_token(self.keys.alive(ROLE, index))
         # Followers in and out, as they see it themselves (agents.liveness): the phases
         # of the run's metrics and the marks on its figures.
@@ -86,6 +96,9 @@ class Recorder:
         inbound = self.decoder.drain(self._sub)
         for item in inbound:
             self._record(item.received.key, item.message, item.received.recv_stamp_s)
+            self._view_add(item.message, item.received.recv_stamp_s)
+        if inbound and self.view is not None:
+            self._show(self.view.frames)
         if self.asm.start is not None and self.state == "linked":
             self._info = RunInfo.from_scenario(self.scenario, "networked",
                                                self.asm.start.duration_s)
@@ -98,12 +111,41 @@ class Recorder:
         if isinstance(msg, ProcessStatus) and msg.role == "follower":
             self.follower_status[msg.index] = msg
 
+    def _view_add(self, msg: Message, recv_stamp_s: float) -> None:
+        if self.view is None:
+            return
+        try:
+            self.view.add(msg, recv_stamp_s)
+        except Exception:  # the view must never cost the recording
+            self._view_failed()
+
+    def _show(self, make: Callable[[], list[RawFrame]]) -> None:
+        """The view's frames into the MCAP and to the live server, if any."""
+        try:
+            frames = make()
+        except Exception:
+            self._view_failed()
+            return
+        for frame in frames:
+            self.mcap.write_raw(frame)
+            if self.live is not None:
+                self.live.publish(frame)
+
+    def _view_failed(self) -> None:
+        if not self.view_errors:
+            log.exception("live view failed (counted in view_errors; recording goes on)")
+        self.view_errors += 1
+
     def _carry_on(self) -> None:
         """A restarted recorder: take over what the dead one recorded (deploy.recording.resume)."""
         part = newest_part(self.run_dir)
         if part is None:
             return
         for item in read_back(part, self.carried):
+            if isinstance(item, RawFrame):  # the dead one's live view, as it was
+                self.mcap.write_raw(item)
+                self.carried["view_frames"] += 1
+                continue
             self._record(item.key, item.message, item.recv_stamp_s)
             self.carried["messages"] += 1
         log.info("carried on from %s: %s", part.name, dict(self.carried))
@@ -114,6 +156,10 @@ class Recorder:
         if now < self._next_tick_s:
             return
         self._next_tick_s = now + self.period_s
+        view = self.view
+        if view is not None:
+            members = self.membership[-1][1] if self.membership else None
+            self._show(lambda: view.tick_frames(now, members))
         self.mcap.flush()
         self._publish_status()
         write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
@@ -170,6 +216,8 @@ class Recorder:
     def finish(self) -> bool:
         """Close the MCAP first (it must survive), then write outputs; True if metrics exist."""
         self._set_state("stopping")
+        if self.live is not None:
+            self.live.stop()
         self.mcap.close()
         try:
             metrics = write_final_outputs(self.run_dir, self.scenario, self.asm, self.counters(),
@@ -198,6 +246,9 @@ class Recorder:
                 "mcap_file": MCAP_FILE,
                 # Read back from a dead predecessor's MCAP (deploy.recording.resume).
                 "carried_on": dict(self.carried),
+                "live": {"url": self.live_url, "frames_sent": self.live_frames_sent,
+                         "frames_per_topic": dict(sorted(self.mcap.frames.items())),
+                         "view_errors": self.view_errors},
             },
             "links": link_report(self.follower_status, self.asm.state_counts()),
         }
@@ -213,7 +264,16 @@ class Recorder:
             "messages_total": sum(self.mcap.messages.values()),
             "dropped_total": self.decoder.dropped_total,
             "wall_stamp_s": self.bus.now_s(),
+            "live_url": self.live_url,
         }
+
+    @property
+    def live_url(self) -> str | None:
+        return None if self.live is None else self.live.url
+
+    @property
+    def live_frames_sent(self) -> int:
+        return 0 if self.live is None else self.live.frames_sent
 
     def _status_counters(self) -> dict[str, int]:
         out = self.decoder.counters()

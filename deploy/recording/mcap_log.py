@@ -15,6 +15,7 @@ import types
 import typing
 from collections import Counter
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
@@ -106,6 +107,26 @@ def message_json(msg: Message) -> bytes:
     return json.dumps(body, separators=(",", ":"), default=_mapping_as_dict).encode()
 
 
+@dataclass(frozen=True)
+class RawSchema:
+    """A channel schema given as bytes (the live view's, e.g. foxglove.SceneUpdate)."""
+
+    name: str
+    encoding: str  # schema encoding: "protobuf" | "jsonschema"
+    data: bytes
+    message_encoding: str  # "protobuf" | "json"
+
+
+@dataclass(frozen=True)
+class RawFrame:
+    """An already encoded message of a `RawSchema` channel."""
+
+    topic: str
+    schema: RawSchema
+    data: bytes
+    log_time_ns: int
+
+
 def schema_name(cls: type) -> str:
     return f"enclose.{cls.__name__}"
 
@@ -117,11 +138,13 @@ class McapLog:
                  metadata: Mapping[str, str] | None = None) -> None:
         self.path = path
         self.messages: Counter[str] = Counter()  # per key
+        self.frames: Counter[str] = Counter()  # live-view frames, per topic
         self._stream: IO[bytes] = open(path, "wb")  # noqa: SIM115  # closed in close()
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=_compression())
         self._writer.start(profile="", library="enclose-recorder")
         self._schemas: dict[type, int] = {}
         self._channels: dict[str, int] = {}
+        self._raw_schemas: dict[RawSchema, int] = {}
         self.closed = False
         if metadata:
             self._writer.add_metadata("enclose", dict(metadata))
@@ -148,6 +171,21 @@ class McapLog:
             sequence=msg.header.seq & 0xFFFFFFFF,
         )
         self.messages[key] += 1
+
+    def write_raw(self, frame: RawFrame) -> None:
+        """A message already encoded (the live view's frames: same bytes as live)."""
+        channel = self._channels.get(frame.topic)
+        if channel is None:
+            s = frame.schema
+            schema = self._raw_schemas.get(s)
+            if schema is None:
+                schema = self._writer.register_schema(s.name, s.encoding, s.data)
+                self._raw_schemas[s] = schema
+            channel = self._writer.register_channel(frame.topic, s.message_encoding, schema)
+            self._channels[frame.topic] = channel
+        self._writer.add_message(channel_id=channel, log_time=frame.log_time_ns,
+                                 data=frame.data, publish_time=frame.log_time_ns)
+        self.frames[frame.topic] += 1
 
     def flush(self) -> None:
         """Push finished chunks to the OS, so they survive a crash of this process."""

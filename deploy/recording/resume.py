@@ -23,7 +23,7 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 
 from agents.errors import CodecError
-from deploy.recording.mcap_log import schema_name
+from deploy.recording.mcap_log import RawFrame, RawSchema, schema_name
 from transport.codec import CODEC_VERSION, SCHEMAS, decode
 from transport.messages import Message as BusMessage
 
@@ -59,18 +59,20 @@ def message_from_json(cls: type, data: bytes) -> BusMessage:
     return decode(bytes(msgpack.packb(wire, use_bin_type=True)))
 
 
-def read_back(path: Path, skipped: Counter[str]) -> Iterator[Recorded]:
-    """Every message of a (possibly unfinished) recording, in file order; what cannot be
-    read back is counted in `skipped` by reason, and a truncated tail ends the reading."""
-    channels: dict[int, tuple[str, type | None]] = {}
-    schemas: dict[int, type | None] = {}
+def read_back(path: Path, skipped: Counter[str]) -> Iterator[Recorded | RawFrame]:
+    """Every message of a (possibly unfinished) recording, in file order: bus messages as
+    `Recorded`, the live view's frames (channels of other schemas) as `RawFrame`s, bytes
+    untouched.  What cannot be read back is counted in `skipped` by reason, and a truncated
+    tail ends the reading."""
+    channels: dict[int, tuple[str, type | RawSchema | None]] = {}
+    schemas: dict[int, Schema] = {}
     with path.open("rb") as stream:
         try:
             for record in StreamReader(stream).records:
                 if isinstance(record, Schema):
-                    schemas[record.id] = _CLASSES.get(record.name)
+                    schemas[record.id] = record
                 elif isinstance(record, Channel):
-                    channels[record.id] = (record.topic, schemas.get(record.schema_id))
+                    channels[record.id] = (record.topic, _kind(record, schemas))
                 elif isinstance(record, Message):
                     item = _recorded(record, channels, skipped)
                     if item is not None:
@@ -80,9 +82,22 @@ def read_back(path: Path, skipped: Counter[str]) -> Iterator[Recorded]:
             log.debug("%s ends early: %s", path, exc)
 
 
-def _recorded(record: Message, channels: dict[int, tuple[str, type | None]],
-              skipped: Counter[str]) -> Recorded | None:
+def _kind(channel: Channel, schemas: dict[int, Schema]) -> type | RawSchema | None:
+    """The bus message class of a channel, or the raw schema of a live-view channel."""
+    schema = schemas.get(channel.schema_id)
+    if schema is None:
+        return None
+    cls = _CLASSES.get(schema.name)
+    if cls is not None:
+        return cls
+    return RawSchema(schema.name, schema.encoding, bytes(schema.data), channel.message_encoding)
+
+
+def _recorded(record: Message, channels: dict[int, tuple[str, type | RawSchema | None]],
+              skipped: Counter[str]) -> Recorded | RawFrame | None:
     topic, cls = channels.get(record.channel_id, ("", None))
+    if isinstance(cls, RawSchema):
+        return RawFrame(topic, cls, bytes(record.data), record.log_time)
     if cls is None:
         skipped["unknown_channel"] += 1
         return None

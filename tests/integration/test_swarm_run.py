@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import json
 import os
 import signal
 import subprocess
 import sys
+import threading
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
+from mcap.reader import make_reader
 
+from tests.foxglove_client import Received, foxglove_client
 from tests.integration.runs import pid_alive, spawned, wait_for
 
 pytestmark = pytest.mark.integration
@@ -34,12 +39,108 @@ def assert_all_exited(out: Path) -> dict[str, int]:
     return {name: proc["exit_code"] for name, proc in launch["processes"].items()}
 
 
+SCENE = "/scene"
+LIVE_TOPICS = {SCENE, "/errors", "/links", "/status", "/log"}
+
+
+def live_url(out: Path) -> str | None:
+    try:
+        url = json.loads((out / "progress.json").read_text()).get("live_url")
+    except (OSError, ValueError):
+        return None
+    return url if isinstance(url, str) else None
+
+
+class LiveWatcher(threading.Thread):
+    """A Foxglove client on the run's live view, beside the run: waits for the URL, takes
+    the advertised channels, subscribes to the scene and keeps `count` scene messages."""
+
+    def __init__(self, out: Path, count: int = 20) -> None:
+        super().__init__(daemon=True)
+        self.out, self.count = out, count
+        self.channels: dict[str, dict[str, object]] = {}
+        self.scenes: list[Received] = []
+        self.decoded: list[object] = []
+        self.error: BaseException | None = None
+
+    def run(self) -> None:
+        try:
+            wait_for(lambda: live_url(self.out) is not None, 150.0, "the live URL")
+            with foxglove_client(str(live_url(self.out))) as client:
+                client.wait_channels(LIVE_TOPICS, 60.0)
+                self.channels = dict(client.channels)
+                client.subscribe([SCENE])
+                self.scenes = client.receive(self.count, 30.0)
+                scene_cls = client.protobuf_class(SCENE)
+                self.decoded = [scene_cls.FromString(r.payload) for r in self.scenes]
+        except BaseException as exc:  # reported by the test, in its own thread
+            self.error = exc
+
+
+def recorded_truth(mcap: Path) -> dict[float, list[list[float]]]:
+    """Follower positions of every recorded TruthSnapshot, by sender stamp."""
+    out = {}
+    with mcap.open("rb") as f:
+        for _schema, _channel, message in make_reader(f).iter_messages(
+                topics=None, log_time_order=False):
+            if _channel.topic.endswith("/truth"):
+                body = json.loads(message.data)
+                out[body["header"]["stamp_s"]] = body["follower_pos_m"]
+    return out
+
+
+def recorded_frames(mcap: Path, topic: str) -> tuple[str, set[bytes]]:
+    """The schema name and the payloads of a live-view channel in the recording."""
+    name, payloads = "", set()
+    with mcap.open("rb") as f:
+        for schema, _channel, message in make_reader(f).iter_messages(topics=[topic]):
+            name = f"{schema.name}/{schema.encoding}" if schema else ""
+            payloads.add(bytes(message.data))
+    return name, payloads
+
+
+def check_live_view(watcher: LiveWatcher, out: Path) -> None:
+    """The scene a real client decoded shows the simulator's vehicles where they were, and
+    the recording holds the same bytes under the same schema (replay looks like live)."""
+    watcher.join(30.0)
+    assert watcher.error is None, repr(watcher.error)
+    assert set(watcher.channels) >= LIVE_TOPICS
+    scene = watcher.channels[SCENE]
+    assert (scene["schemaName"], scene["encoding"]) == ("foxglove.SceneUpdate", "protobuf")
+    assert len(watcher.decoded) == watcher.count
+    truth = recorded_truth(out / "recording.mcap")
+    stamps = sorted(truth)
+    matched = 0
+    for update in watcher.decoded:
+        entities: list[Any] = list(update.entities)  # type: ignore[attr-defined]
+        vehicles = {e.id: e for e in entities if e.id.startswith("follower-")}
+        assert len(vehicles) == 4
+        stamp = vehicles["follower-0"].timestamp
+        stamp_s = stamp.seconds + stamp.nanos * 1e-9  # google.protobuf.Timestamp
+        k = bisect.bisect_left(stamps, stamp_s - 2e-6)  # ns in protobuf, float s in JSON
+        if k == len(stamps) or abs(stamps[k] - stamp_s) > 2e-6:
+            continue
+        true_pos = truth[stamps[k]]
+        matched += 1
+        for i, expected in enumerate(true_pos):
+            p = vehicles[f"follower-{i}"].spheres[0].pose.position
+            assert [p.x, p.y, p.z] == pytest.approx(expected, abs=1e-6), (i, stamp)
+    assert matched >= watcher.count - 2, f"{matched} of {watcher.count} scenes matched a truth"
+    name, payloads = recorded_frames(out / "recording.mcap", SCENE)
+    assert name == "foxglove.SceneUpdate/protobuf"
+    assert {r.payload for r in watcher.scenes} <= payloads
+
+
 @pytest.mark.timeout(240)
 def test_paper_case_forms_the_formation_and_every_process_exits_cleanly(tmp_path: Path) -> None:
     out = tmp_path / "run"
+    watcher = LiveWatcher(out)  # the live view, watched by a real Foxglove client meanwhile
     with launched(out, "--duration", "24") as proc:
+        watcher.start()
         output, _ = proc.communicate(timeout=200)
     assert proc.returncode == 0, output
+    check_live_view(watcher, out)
+    assert json.loads((out / "launch.json").read_text())["live_url"].startswith("ws://127.0.0.1:")
     codes = assert_all_exited(out)
     assert set(codes) == {"sim", "recorder", "follower-0", "follower-1", "follower-2",
                           "follower-3", "target-0", "target-1"}

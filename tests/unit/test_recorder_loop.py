@@ -156,10 +156,12 @@ def test_a_restarted_recorder_carries_on_the_runs_outputs(paper: Scenario, tmp_p
             assert recorder.finish()
     metrics = json.loads((tmp_path / "metrics.json").read_text())
     carried = metrics["recorder"]["carried_on"]
-    # A got the start word and half the samples; at most the chunk it was building is lost
-    # (2 KiB: a handful of messages), and its file ends without a summary.
-    assert half + 1 - 10 <= carried["messages"] <= half + 1, carried
+    # A got the start word, half the samples and its own "linked" status; at most the chunk
+    # it was building is lost (2 KiB: a handful of messages), and its file ends without a
+    # summary.  Its live view's frames are carried too, bytes untouched.
+    assert half + 2 - 10 <= carried["messages"] <= half + 2, carried
     assert carried["truncated_tail"] == 1
+    assert carried["view_frames"] >= 1
     assert metrics["samples"] >= 101 - 5
     series = (tmp_path / "series.csv").read_text().splitlines()
     assert float(series[1].split(",")[0]) < 0.05  # starts with A's first second

@@ -1,0 +1,167 @@
+"""The swarm as a Foxglove 3D scene (`foxglove.SceneUpdate`), from decoded bus messages (pure).
+
+Frame "world" is the run's local ENU frame, metres, z up.  Entities (ids stable across
+updates, so each update replaces the last):
+- `follower-<i>`: a sphere at the vehicle's true position (simulator truth) and its label;
+- `target-<j>`: a cube at the target's true position, on the ground (z = 0);
+- `estimate-<i>`: follower i's estimate r_i of the targets' centre, on the ground;
+- `centre`: the true centre (mean of the targets), on the ground;
+- `circle`: the desired circle (radius rho_d) around the true centre, at the vehicles'
+  mean altitude, where the formation should fly;
+- `links`: one segment per ring link, receiver to sender, coloured by its health.
+Indices are 0-based, as in process names.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from foxglove import messages as fm
+
+from transport.messages import FollowerState, TruthSnapshot
+
+FRAME_ID = "world"
+CIRCLE_SEGMENTS = 72
+VEHICLE_SIZE_M = 1.0
+TARGET_SIZE_M = 0.8
+ESTIMATE_SIZE_M = 0.4
+LINE_THICKNESS_PX = 3.0
+LINK_SIDE_OFFSET_M = 0.25
+
+_IDENTITY = fm.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+FOLLOWER_RGBA = (0.20, 0.55, 1.00, 1.0)
+TARGET_RGBA = (1.00, 0.45, 0.10, 1.0)
+ESTIMATE_RGBA = (0.60, 0.30, 0.90, 0.9)
+CIRCLE_RGBA = (0.60, 0.60, 0.60, 0.8)
+HEALTH_RGBA = {
+    "good": (0.10, 0.80, 0.20, 1.0),
+    "degraded": (1.00, 0.75, 0.00, 1.0),
+    "bad": (0.90, 0.10, 0.10, 1.0),
+}
+
+
+@dataclass(frozen=True)
+class LinkView:
+    """One directed ring link as drawn: `sender` -> `receiver` (follower indices)."""
+
+    sender: int
+    receiver: int
+    health: str  # a key of HEALTH_RGBA
+
+
+def timestamp(stamp_s: float) -> fm.Timestamp:
+    sec = math.floor(stamp_s)
+    return fm.Timestamp(sec=max(0, sec), nsec=min(999_999_999, round((stamp_s - sec) * 1e9)))
+
+
+def _color(rgba: tuple[float, float, float, float]) -> fm.Color:
+    r, g, b, a = rgba
+    return fm.Color(r=r, g=g, b=b, a=a)
+
+
+def _point(x: float, y: float, z: float) -> fm.Point3:
+    return fm.Point3(x=x, y=y, z=z)
+
+
+def _pose(x: float, y: float, z: float) -> fm.Pose:
+    return fm.Pose(position=fm.Vector3(x=x, y=y, z=z), orientation=_IDENTITY)
+
+
+def _size(s: float) -> fm.Vector3:
+    return fm.Vector3(x=s, y=s, z=s)
+
+
+def _entity(entity_id: str, stamp: fm.Timestamp, **primitives: Any) -> fm.SceneEntity:
+    return fm.SceneEntity(id=entity_id, frame_id=FRAME_ID, timestamp=stamp,
+                          frame_locked=False, **primitives)
+
+
+def _label(text: str, x: float, y: float, z: float) -> fm.TextPrimitive:
+    return fm.TextPrimitive(pose=_pose(x, y, z + 1.0), billboard=True, font_size=14.0,
+                            scale_invariant=True, color=_color((1.0, 1.0, 1.0, 1.0)), text=text)
+
+
+def centre_m(truth: TruthSnapshot) -> tuple[float, float]:
+    """The true centre of the targets (the paper's leaders' average position)."""
+    m = len(truth.target_pos_m)
+    return (sum(p[0] for p in truth.target_pos_m) / m, sum(p[1] for p in truth.target_pos_m) / m)
+
+
+def circle_points(cx: float, cy: float, radius_m: float, z: float) -> list[fm.Point3]:
+    """A closed polygon (first point repeated) approximating the circle."""
+    step = 2.0 * math.pi / CIRCLE_SEGMENTS
+    return [_point(cx + radius_m * math.cos(k * step), cy + radius_m * math.sin(k * step), z)
+            for k in range(CIRCLE_SEGMENTS + 1)]
+
+
+def _vehicles(truth: TruthSnapshot, stamp: fm.Timestamp) -> list[fm.SceneEntity]:
+    out = []
+    for i, (x, y, z) in enumerate(truth.follower_pos_m):
+        out.append(_entity(f"follower-{i}", stamp, spheres=[fm.SpherePrimitive(
+            pose=_pose(x, y, z), size=_size(VEHICLE_SIZE_M), color=_color(FOLLOWER_RGBA))],
+            texts=[_label(f"f{i}", x, y, z)]))
+    for j, (x, y) in enumerate(truth.target_pos_m):
+        out.append(_entity(f"target-{j}", stamp, cubes=[fm.CubePrimitive(
+            pose=_pose(x, y, 0.0), size=_size(TARGET_SIZE_M), color=_color(TARGET_RGBA))],
+            texts=[_label(f"t{j}", x, y, 0.0)]))
+    return out
+
+
+def _estimates(states: Mapping[int, FollowerState], stamp: fm.Timestamp) -> list[fm.SceneEntity]:
+    return [_entity(f"estimate-{i}", stamp, spheres=[fm.SpherePrimitive(
+        pose=_pose(s.r_m[0], s.r_m[1], 0.0), size=_size(ESTIMATE_SIZE_M),
+        color=_color(ESTIMATE_RGBA))]) for i, s in sorted(states.items())]
+
+
+def _side_offset(a: tuple[float, float, float],
+                 b: tuple[float, float, float]) -> tuple[float, float]:
+    """A shift to the left of a -> b: the two directions of a link are drawn side by side."""
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    norm = math.hypot(dx, dy)
+    if norm == 0.0:
+        return 0.0, 0.0
+    return -dy / norm * LINK_SIDE_OFFSET_M, dx / norm * LINK_SIDE_OFFSET_M
+
+
+def _links(truth: TruthSnapshot, links: Sequence[LinkView],
+           stamp: fm.Timestamp) -> fm.SceneEntity:
+    points, colors = [], []
+    n = len(truth.follower_pos_m)
+    for link in links:
+        if not (0 <= link.sender < n and 0 <= link.receiver < n):
+            continue
+        rgba = _color(HEALTH_RGBA.get(link.health, HEALTH_RGBA["bad"]))
+        a, b = truth.follower_pos_m[link.receiver], truth.follower_pos_m[link.sender]
+        ox, oy = _side_offset(a, b)
+        for x, y, z in (a, b):
+            points.append(_point(x + ox, y + oy, z))
+            colors.append(rgba)
+    line = fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineList, pose=_pose(0.0, 0.0, 0.0),
+                            thickness=LINE_THICKNESS_PX, scale_invariant=True, points=points,
+                            color=_color(HEALTH_RGBA["good"]), colors=colors)
+    return _entity("links", stamp, lines=[line] if points else [])
+
+
+def scene_update(truth: TruthSnapshot, states: Mapping[int, FollowerState],
+                 links: Sequence[LinkView], rho_d_m: float) -> fm.SceneUpdate:
+    """The whole scene at the truth's instant (its sender stamp)."""
+    stamp = timestamp(truth.header.stamp_s)
+    cx, cy = centre_m(truth)
+    zs = [p[2] for p in truth.follower_pos_m]
+    altitude_m = sum(zs) / len(zs) if zs else 0.0
+    circle = fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip, pose=_pose(0.0, 0.0, 0.0),
+                              thickness=1.5, scale_invariant=True,
+                              points=circle_points(cx, cy, rho_d_m, altitude_m),
+                              color=_color(CIRCLE_RGBA))
+    entities = [
+        *_vehicles(truth, stamp),
+        *_estimates(states, stamp),
+        _entity("centre", stamp, spheres=[fm.SpherePrimitive(
+            pose=_pose(cx, cy, 0.0), size=_size(ESTIMATE_SIZE_M), color=_color(TARGET_RGBA))]),
+        _entity("circle", stamp, lines=[circle]),
+        _links(truth, links, stamp),
+    ]
+    return fm.SceneUpdate(entities=entities)
