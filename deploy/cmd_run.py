@@ -15,6 +15,7 @@ from agents.scenario_file import load_scenario
 from deploy.launch import Launch
 from deploy.netns import add_netns_arguments, netns_requested, run_in_namespace
 from deploy.restarts import add_supervision_arguments
+from deploy.verdict import add_json_argument
 
 
 def register(sub: Any) -> None:
@@ -41,6 +42,7 @@ def register(sub: Any) -> None:
         action="store_true",
         help="no Zenoh authentication/access control and no MAVLink signing (not recommended)",
     )
+    add_json_argument(p)
     add_supervision_arguments(p)
     add_network_arguments(p)
     add_netns_arguments(p)

@@ -241,6 +241,8 @@ def inner_argv(args: argparse.Namespace, out: Path, swarm: str, duration_s: floa
         argv += ["--zenoh-config", str(Path(args.zenoh_config).resolve())]
     if getattr(args, "insecure", False):
         argv.append("--insecure")
+    if getattr(args, "json", False):
+        argv.append("--json")
     return argv + network_overrides(args)
 
 
