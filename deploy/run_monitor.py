@@ -67,8 +67,10 @@ def health_of(child: Child, paused: Collection[str], pending: Collection[str]) -
 
 def process_views(children: Sequence[Child], board: StatusBoard, paused: Collection[str],
                   pending: Collection[str]) -> tuple[ProcessView, ...]:
-    return tuple(ProcessView(c.name, health_of(c, paused, pending), board.state_of(c.name),
-                             c.restarts) for c in children)
+    # Statuses are keyed role-index: "sim-0" and "recorder-0" for the children "sim", "recorder".
+    return tuple(ProcessView(c.name, health_of(c, paused, pending),
+                             board.state_of(c.name) or board.state_of(f"{c.name}-0"), c.restarts)
+                 for c in children)
 
 
 def event_text(e: dict[str, Any]) -> str:

@@ -161,3 +161,21 @@ def test_json_goes_alone_to_stdout_for_scripts(
     announce(run, "enclose run paper", as_json=False)
     out, _ = capsys.readouterr()
     assert out.startswith("enclose run paper: INSIDE") and ESC not in out
+
+
+def test_process_health_and_state_as_the_board_shows_them(tmp_path: Path) -> None:
+    from deploy.run_monitor import StatusBoard, process_views
+    from deploy.supervisor import Child
+    from transport.messages import Header, ProcessStatus
+
+    kids = [Child(n, [], tmp_path / f"{n}.log") for n in ("sim", "follower-0", "follower-1",
+                                                         "follower-2", "target-0")]
+    kids[2].exit_code, kids[3].exit_code, kids[4].exit_code = -9, 0, -9
+    board = StatusBoard()
+    for role, i, state in (("sim", 0, "running"), ("follower", 0, "running")):
+        board.latest[f"{role}-{i}"] = ProcessStatus(Header(role, 0, 1.0), role, i, state, {})
+    views = process_views(kids, board, paused={"follower-0"}, pending={"target-0"})
+    assert [(v.name, v.health, v.state) for v in views] == [
+        ("sim", "up", "running"), ("follower-0", "paused", "running"),
+        ("follower-1", "killed (9)", ""), ("follower-2", "exited 0", ""),
+        ("target-0", "restarting", "")]
