@@ -28,7 +28,7 @@ ERRORS = (
     ("max_abs_e_delta", "angle |e_delta|", "", "delta"),
 )
 MAX_ROWS = 10  # more processes than this: followers as one row, plus any not healthy
-REDRAW_S = 0.5
+REDRAW_S = 1.0  # progress.json changes once a second: redrawing faster shows nothing new
 
 
 @dataclass(frozen=True)
