@@ -258,18 +258,7 @@ def error_against(
             # distinct markers and dashes: equal results must not hide a line
             ax.errorbar(x, ys, yerr=yerr, marker="os^v"[k % 4], ls=("-", "--", ":")[k % 3],
                         lw=1.5, ms=8 - 2 * (k % 3), capsize=4, label=f"estimator: {name}")
-        bound = bound_of(spec, metric)
-        if bound is not None:
-            ax.axhline(bound, color="k", ls="--", lw=1, label=f"paper's bound {bound:g}")
-        ax.set_yscale("log")
-        ax.yaxis.set_major_formatter(PLAIN)
-        ax.yaxis.set_minor_formatter(SPARSE)
-        ax.set_xticks(x, [point_text(pt) for pt in xs])
-        ax.set_xlabel("/".join(xkeys))
-        ax.set_ylabel(STYLE[metric][0])
-        ax.set_title(metric)
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8)
+        _error_axis(ax, spec, metric, x, [point_text(pt) for pt in xs], "/".join(xkeys))
     held_at = ", ".join(f"{'/'.join(k)}={point_text(p)}" for k, p in held)
     fig.suptitle(
         f"errors against {'/'.join(xkeys)}; mean over {spec.repeats} seed(s), bars: min-max; "
@@ -280,3 +269,19 @@ def error_against(
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return bars
+
+
+def _error_axis(ax: Axes, spec: SweepSpec, metric: str, x: list[float], ticks: list[str],
+                xlabel: str) -> None:
+    bound = bound_of(spec, metric)
+    if bound is not None:
+        ax.axhline(bound, color="k", ls="--", lw=1, label=f"paper's bound {bound:g}")
+    ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(PLAIN)
+    ax.yaxis.set_minor_formatter(SPARSE)
+    ax.set_xticks(x, ticks)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(STYLE[metric][0])
+    ax.set_title(metric)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
