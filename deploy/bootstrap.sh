@@ -32,9 +32,17 @@ if [ ! -f "$stamp" ] || [ "$repo/pyproject.toml" -nt "$stamp" ]; then
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$target" >&2
   touch "$stamp"
 fi
-# The --netns tests need `ip` and `nft`; install them once if we may (they skip without).
-if [ "$dev" -eq 1 ] && [ "$(id -u)" -eq 0 ] && ! { command -v ip && command -v nft; } >/dev/null 2>&1; then
-  echo "bootstrap: installing iproute2 and nftables for the --netns tests" >&2
-  DEBIAN_FRONTEND=noninteractive apt-get install -y -q iproute2 nftables >/dev/null 2>&1 \
-    || echo "bootstrap: could not install iproute2/nftables; --netns tests will skip" >&2
+# The --netns tests need `ip` and `nft`, the terminal test `tmux`; install them once if we
+# may (those tests skip without).
+if [ "$dev" -eq 1 ] && [ "$(id -u)" -eq 0 ]; then
+  missing=""
+  command -v ip >/dev/null 2>&1 || missing="$missing iproute2"
+  command -v nft >/dev/null 2>&1 || missing="$missing nftables"
+  command -v tmux >/dev/null 2>&1 || missing="$missing tmux"
+  if [ -n "$missing" ]; then
+    echo "bootstrap: installing$missing for the --netns and terminal tests" >&2
+    # shellcheck disable=SC2086
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -q $missing >/dev/null 2>&1 \
+      || echo "bootstrap: could not install$missing; the tests that need them will skip" >&2
+  fi
 fi

@@ -16,6 +16,7 @@ from deploy.launch import Launch
 from deploy.live_args import add_live_arguments
 from deploy.netns import add_netns_arguments, netns_requested, run_in_namespace
 from deploy.restarts import add_supervision_arguments
+from deploy.verdict import add_json_argument
 
 
 def register(sub: Any) -> None:
@@ -43,6 +44,7 @@ def register(sub: Any) -> None:
         help="no Zenoh authentication/access control and no MAVLink signing (not recommended)",
     )
     add_live_arguments(p)
+    add_json_argument(p)
     add_supervision_arguments(p)
     add_network_arguments(p)
     add_netns_arguments(p)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time
@@ -15,6 +14,7 @@ from agents.errors import ScenarioError
 from agents.scenario_file import load_scenario
 from deploy.report import write_run_outputs
 from deploy.rundir import RunInfo
+from deploy.verdict import add_json_argument, announce
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +43,7 @@ def register(sub: Any) -> None:
         help="numba: compiled loop (default when installed); numpy: reference functions",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_json_argument(parser)
     parser.set_defaults(func=_main)
 
 
@@ -85,9 +86,9 @@ def _main(args: argparse.Namespace) -> int:
     series = simulate_lockstep(scenario, dt, duration, bar, engine=args.engine)
     wall = time.perf_counter() - start
     info = RunInfo.from_scenario(scenario, "lockstep", duration)
-    metrics = write_run_outputs(
+    write_run_outputs(
         out, series, info, {"dt_s": dt, "engine": args.engine, "integration_wall_s": wall}
     )
     log.info("integration took %.2f s wall; outputs in %s", wall, out)
-    print(json.dumps(metrics.as_dict(), indent=2))
+    announce(out.resolve(), f"enclose simulate {scenario.name}", args.json)
     return 0

@@ -1,7 +1,9 @@
-"""The paper's six performance panels and the trajectory plot, as PNG files."""
+"""The paper's six performance panels and the trajectory plot, as PNG files, with the
+run's marks (faults, pauses, deaths, restarts, membership changes: `deploy.marks`)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
@@ -13,6 +15,7 @@ from matplotlib.axes import Axes
 
 from agents.core.metrics import ErrorSeries
 from agents.core.timeseries import RunSeries
+from deploy.marks import STYLE, Mark, draw_marks, legend_handles
 
 PANELS = (
     ("z_m", "z_i = rho'_i - rho_d [m]", "estimated radius error"),
@@ -33,9 +36,9 @@ def performance_figure(
     errors: ErrorSeries,
     eps: tuple[float, float],
     path: Path,
-    marks_s: list[float] | None = None,
-) -> None:
-    """`marks_s`: times the membership changed (a follower left or joined), on every panel."""
+    marks: Sequence[Mark] = (),
+) -> list[Mark]:
+    """The six panels, `marks` on every one; the marks drawn."""
     fig, axes = plt.subplots(3, 2, figsize=(12, 10), sharex=True)
     t = series.t_s
     for ax, (field, ylabel, title) in zip(axes.flat, PANELS, strict=False):
@@ -54,18 +57,25 @@ def performance_figure(
     cmd.set_title("control commands")
     cmd.set_ylabel("|u_i| [m/s]")
     cmd.grid(alpha=0.3)
+    drawn: list[Mark] = []
     for ax in axes.flat:
-        for t_mark in marks_s or []:
-            ax.axvline(t_mark, color="tab:red", ls=":", lw=1.0)
+        drawn = draw_marks(ax, marks)
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
     axes.flat[0].legend(loc="upper right", fontsize=8)
+    if drawn:
+        axes.flat[5].legend(handles=legend_handles(drawn), loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return drawn
 
 
-def trajectory_figure(series: RunSeries, rho_d_m: float, path: Path) -> None:
+def trajectory_figure(
+    series: RunSeries, rho_d_m: float, path: Path, marks: Sequence[Mark] = ()
+) -> list[Mark]:
+    """Tracks, the LAP and the final circle; each mark where its follower (all followers
+    for a mark about another process) was at that time.  The marks drawn."""
     xy_all = np.concatenate(
         [series.follower_pos_m.reshape(-1, 2), series.target_pos_m.reshape(-1, 2)]
     )
@@ -84,6 +94,7 @@ def trajectory_figure(series: RunSeries, rho_d_m: float, path: Path) -> None:
     circle = plt.Circle(tuple(lap[-1]), rho_d_m, fill=False, ls=":", color="k")
     ax.add_patch(circle)
     ax.plot(series.follower_pos_m[-1, :, 0], series.follower_pos_m[-1, :, 1], "k^", ms=7)
+    drawn = _mark_positions(ax, series, marks)
     ax.set_aspect("equal")
     ax.set_xlabel("x east [m]")
     ax.set_ylabel("y north [m]")
@@ -93,3 +104,25 @@ def trajectory_figure(series: RunSeries, rho_d_m: float, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return drawn
+
+
+MARKERS = {"membership": "D", "fault": "X", "died": "x", "restart": "P", "pause": "s"}
+
+
+def _mark_positions(ax: Axes, series: RunSeries, marks: Sequence[Mark]) -> list[Mark]:
+    drawn, labelled = [], set()
+    t = series.t_s
+    for m in marks:
+        if len(t) == 0 or not t[0] <= m.t_s <= t[-1]:
+            continue
+        k = min(int(np.searchsorted(t, m.t_s)), len(t) - 1)
+        n = series.follower_pos_m.shape[1]
+        who = [m.follower] if m.follower is not None and m.follower < n else range(n)
+        xy = series.follower_pos_m[k, list(who)]
+        label = STYLE[m.kind][2] if m.kind not in labelled else None
+        labelled.add(m.kind)
+        ax.plot(xy[:, 0], xy[:, 1], MARKERS[m.kind], color=STYLE[m.kind][0], ms=9, mfc="none",
+                mew=1.6, ls="none", label=label)
+        drawn.append(m)
+    return drawn

@@ -6,7 +6,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import time
 from pathlib import Path
@@ -20,9 +19,11 @@ from deploy.faults import FaultRunner
 from deploy.live_args import announce_live_url, pin_live_port, recorder_live_argv
 from deploy.ports import mavlink_bases, rendezvous_endpoint
 from deploy.restarts import EXIT_SOMETHING_DIED, RestartPolicy, Watchdog
-from deploy.run_monitor import StatusBoard, show_progress
+from deploy.run_board import BoardView, LiveBoard
+from deploy.run_monitor import StatusBoard, launch_view, write_json_atomic
 from deploy.run_secrets import RunSecrets
 from deploy.supervisor import Child, Supervisor
+from deploy.verdict import announce
 from transport.bus import Bus
 from transport.codec import encode
 from transport.keys import SwarmKeys
@@ -62,6 +63,8 @@ class Launch:
         self.injector: FaultRunner | None = None
         self.control_stamper: Stamper | None = None
         self.live_url: str | None = None
+        self.started_s = time.monotonic()
+        self.t0_s = float("inf")  # monotonic time of the experiment's start, once known
 
     def common(self) -> list[str]:
         scen = self.args.scenario
@@ -184,6 +187,7 @@ class Launch:
                 except KeyboardInterrupt:
                     interrupted = True
                     log.warning("interrupted: stopping the run, keeping what was recorded")
+                self.write_launch()  # the recorder draws its events on the figures
                 bus.publish(
                     self.keys.control(),
                     encode(
@@ -198,7 +202,7 @@ class Launch:
             if self.injector is not None:
                 self.injector.resume_all()
             self.sup.stop_all()
-            (self.out / "launch.json").write_text(json.dumps(self.report(), indent=2) + "\n")
+            self.write_launch()
         return self.exit_code(interrupted)
 
     def fly(self, bus: Bus) -> None:
@@ -208,25 +212,28 @@ class Launch:
         def word() -> bytes:  # repeats keep the start stamp and carry their own seq
             return encode(RunControl(stamper.header(), "start", start, self.duration_s))
 
-        t0 = time.monotonic() + START_DELAY_S
+        t0 = self.t0_s = time.monotonic() + START_DELAY_S
         self.watchdog = Watchdog(self.sup, self.policy, t0, self._before_restart)
         self.injector = FaultRunner(
             self.sup, self.faults, t0, self.watchdog.events, self.watchdog.pending,
             self._before_restart,
         )
-        next_report = next_word = start
+        next_word = start
         bus.publish(self.keys.control(), word())
-        while bus.now_s() < start + self.duration_s:
-            self.injector.check()
-            self.watchdog.check()
-            self.board.collect()
-            if bus.now_s() >= next_word:  # same start stamp: a repeat changes nothing
-                next_word += START_REPEAT_S
-                bus.publish(self.keys.control(), word())
-            if bus.now_s() >= next_report:
-                next_report += PROGRESS_PERIOD_S
-                show_progress(self.out, bus.now_s() - start, self.duration_s)
-            time.sleep(0.05)
+        with LiveBoard(self.view, PROGRESS_PERIOD_S) as board:
+            while bus.now_s() < start + self.duration_s:
+                self.injector.check()
+                self.watchdog.check()
+                self.board.collect()
+                if bus.now_s() >= next_word:  # same start stamp: a repeat changes nothing
+                    next_word += START_REPEAT_S
+                    bus.publish(self.keys.control(), word())
+                board.tick()
+                time.sleep(0.05)
+
+    def view(self) -> BoardView:
+        """What the live board shows now (deploy.run_board)."""
+        return launch_view(self)
 
     def _stamper(self, bus: Bus) -> Stamper:
         """The launcher's one sequence of control words (repeats are not stale)."""
@@ -262,6 +269,9 @@ class Launch:
             self.sup.terminate(recorder)
         self.sup.terminate([c for c in self.sup.children if c.name == "sim"])
 
+    def write_launch(self) -> None:
+        write_json_atomic(self.out / "launch.json", self.report())
+
     def report(self) -> dict[str, Any]:
         return {
             "swarm": self.keys.swarm,
@@ -288,9 +298,8 @@ class Launch:
         failed = [c for c in self.sup.dead() if dog is None or not dog.handled(c)]
         for c in failed:
             log.error("%s exited with code %s (log: %s)", c.name, c.exit_code, c.log_path)
-        metrics = self.out / "metrics.json"
-        if metrics.exists():
-            print(metrics.read_text())
+        title = f"enclose run {self.scenario.name}"
+        announce(self.out, title, self.args.json, "interrupted" if interrupted else "")
         if interrupted:
             return 130
         if failed:

@@ -243,6 +243,8 @@ def inner_argv(args: argparse.Namespace, out: Path, swarm: str, duration_s: floa
         argv.append("--insecure")
     # The namespace's loopback is not this machine's: a live view there could not be opened.
     argv.append("--no-live")
+    if getattr(args, "json", False):
+        argv.append("--json")
     return argv + network_overrides(args)
 
 

@@ -14,6 +14,9 @@ from agents.core.metrics import Metrics, compute_metrics, error_series
 from agents.core.timeseries import RunSeries
 from agents.errors import EncloseError
 from deploy.figures import performance_figure, trajectory_figure
+from deploy.figures_links import LINKS_PNG, link_health_figure
+from deploy.marks import run_marks
+from deploy.recording.link_history import LINKS_CSV, read_links_csv
 from deploy.rundir import (
     METRICS_FILE,
     SERIES_FILE,
@@ -57,13 +60,20 @@ def _decimation(t_s: np.ndarray) -> int:
     return max(1, round(1.0 / (MAX_CSV_RATE_HZ * dt))) if dt > 0 else 1
 
 
-def _figures(run_dir: Path, series: RunSeries, info: RunInfo, marks_s: list[float]) -> None:
-    """`marks_s`: membership changes, a vertical line on every panel."""
+def _figures(run_dir: Path, series: RunSeries, info: RunInfo, marks_s: list[float]) -> list[Path]:
+    """`marks_s`: membership changes; with the launcher's events (launch.json) they are
+    marks on every figure.  links.png only where links.csv exists (networked runs)."""
     angles = np.asarray(info.angles_rad)
     errors = error_series(series, info.successor, angles, info.rho_d_m)
     eps = (info.eps_rho_m, info.eps_delta)
-    performance_figure(series, errors, eps, run_dir / PERFORMANCE_PNG, marks_s)
-    trajectory_figure(series, info.rho_d_m, run_dir / TRAJECTORY_PNG)
+    marks = run_marks(run_dir, marks_s)
+    performance_figure(series, errors, eps, run_dir / PERFORMANCE_PNG, marks)
+    trajectory_figure(series, info.rho_d_m, run_dir / TRAJECTORY_PNG, marks)
+    paths = [run_dir / PERFORMANCE_PNG, run_dir / TRAJECTORY_PNG]
+    if (run_dir / LINKS_CSV).exists():
+        link_health_figure(read_links_csv(run_dir / LINKS_CSV), run_dir / LINKS_PNG, marks)
+        paths.append(run_dir / LINKS_PNG)
+    return paths
 
 
 def _marks(run_dir: Path) -> list[float]:
@@ -81,8 +91,7 @@ def regenerate_figures(run_dir: Path) -> list[Path]:
         raise EncloseError(f"{run_dir} is not a run directory")
     info = read_info(run_dir)
     series = read_series(run_dir / SERIES_FILE, info.n, info.m)
-    _figures(run_dir, series, info, _marks(run_dir))
-    return [run_dir / PERFORMANCE_PNG, run_dir / TRAJECTORY_PNG]
+    return _figures(run_dir, series, info, _marks(run_dir))
 
 
 def register(sub: Any) -> None:

@@ -1,23 +1,26 @@
-"""What the launcher watches during a run: every process's latest status, and live progress."""
+"""What the launcher watches during a run: every process's latest status, the recorder's
+progress.json, and the health of each child: the data of its board (deploy.run_board)."""
 
 from __future__ import annotations
 
 import json
 import logging
-import sys
+import os
+import time
+from collections.abc import Collection, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from deploy.run_board import BoardView, ProcessView
+from deploy.supervisor import Child
 from transport.bus import Subscription
 from transport.decoder import Decoder
 from transport.messages import ProcessStatus
 
+if TYPE_CHECKING:
+    from deploy.launch import Launch
+
 log = logging.getLogger("enclose.run")
-PROGRESS_FIELDS = (
-    ("max_estimator_error_m", "|r-LAP| m"),
-    ("max_abs_e_rho_m", "|e_rho| m"),
-    ("max_abs_e_delta", "|e_delta|"),
-)
 
 
 class StatusBoard:
@@ -44,18 +47,58 @@ class StatusBoard:
         return {name: {"state": s.state, **s.counters} for name, s in self.latest.items()}
 
 
-def show_progress(run_dir: Path, t_s: float, duration_s: float) -> None:
-    """One line from the recorder's progress.json: on a terminal in place, else logged."""
+def read_progress(run_dir: Path) -> dict[str, Any]:
+    """The recorder's progress.json ({} until it exists; it is replaced atomically)."""
     try:
-        p = json.loads((run_dir / "progress.json").read_text())
+        doc = json.loads((run_dir / "progress.json").read_text())
     except (OSError, ValueError):
-        p = {}
-    errs = "  ".join(
-        f"{label} {p[key]:.3g}" for key, label in PROGRESS_FIELDS if isinstance(p.get(key), float)
+        return {}
+    return doc if isinstance(doc, dict) else {}
+
+
+def health_of(child: Child, paused: Collection[str], pending: Collection[str]) -> str:
+    code = child.poll()
+    if code is None:
+        return "paused" if child.name in paused else "up"
+    if child.name in pending:
+        return "restarting"
+    return f"exited {code}" if code >= 0 else f"killed ({-code})"
+
+
+def process_views(children: Sequence[Child], board: StatusBoard, paused: Collection[str],
+                  pending: Collection[str]) -> tuple[ProcessView, ...]:
+    # Statuses are keyed role-index: "sim-0" and "recorder-0" for the children "sim", "recorder".
+    return tuple(ProcessView(c.name, health_of(c, paused, pending),
+                             board.state_of(c.name) or board.state_of(f"{c.name}-0"), c.restarts)
+                 for c in children)
+
+
+def event_text(e: dict[str, Any]) -> str:
+    rest = " ".join(f"{k}={v}" for k, v in e.items() if k not in ("t_s", "process", "event"))
+    return f"{e.get('t_s', 0.0):.1f} s {e.get('process', '?')} {e.get('event', '?')} {rest}"
+
+
+def write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
+    """Readers (the recorder draws launch.json's events) never see half a file."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(payload, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def launch_view(launch: Launch) -> BoardView:
+    """What the launcher's live board shows now."""
+    progress = read_progress(launch.out)
+    inj, dog = launch.injector, launch.watchdog
+    events = [] if dog is None else dog.events[-3:]
+    run = launch.scenario.run
+    # The live view's address (another part of the launcher may set it): shown when known.
+    live_url = getattr(launch, "live_url", None) or progress.get("live_url")
+    return BoardView(
+        f"enclose run {launch.scenario.name}", time.monotonic() - launch.started_s,
+        time.monotonic() - launch.t0_s, launch.duration_s,
+        {"rho": run.eps_rho_m, "delta": run.eps_delta}, progress,
+        process_views(launch.sup.children, launch.board, () if inj is None else inj.paused,
+                      () if dog is None else dog.pending),
+        tuple(event_text(e) for e in events),
+        live_url if isinstance(live_url, str) else None,
     )
-    line = f"t = {max(0.0, t_s):6.1f} / {duration_s:.0f} s  {errs}"
-    if sys.stderr.isatty():
-        sys.stderr.write("\r" + line.ljust(100))
-        sys.stderr.flush()
-    else:
-        log.info("%s", line)

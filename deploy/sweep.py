@@ -18,10 +18,13 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from rich.console import Console
+
 from deploy.sweep_figures import write_figures
 from deploy.sweep_runner import CellRunner, SubprocessRunner, SweepProgress
 from deploy.sweep_spec import Cell, SweepSpec, load_sweep
 from deploy.sweep_table import RECORD, CellState, cell_state, collect, write_tables
+from deploy.sweep_verdict import print_sweep_verdict
 
 log = logging.getLogger("enclose.sweep")
 STARTUP_S = 15.0  # a cell's start-up and shutdown, for the ETA before any cell has run
@@ -154,6 +157,5 @@ def report(spec: SweepSpec, figures: bool = True) -> None:
     csv_path, md_path = write_tables(spec, rows)
     done = sum(r.state.done for r in rows)
     log.info("%d/%d cells done; table %s and %s", done, len(rows), csv_path, md_path.name)
-    if figures:
-        paths = write_figures(spec, [r for r in rows if r.state.done])
-        log.info("figures: %s", ", ".join(p.name for p in paths) or "none")
+    paths = write_figures(spec, [r for r in rows if r.state.done]) if figures else []
+    print_sweep_verdict(Console(), spec, rows, paths)

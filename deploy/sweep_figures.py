@@ -82,6 +82,22 @@ def mean_of(rows: Sequence[Row], metric: str) -> float:
     return float(np.mean([float(v) for v in values if v is not None]))
 
 
+def spread_of(rows: Sequence[Row], metric: str) -> tuple[float, float, float]:
+    """(mean, min, max) over the repeats (seeds); NaNs as `mean_of`."""
+    mean = mean_of(rows, metric)
+    if not np.isfinite(mean):
+        return math.nan, math.nan, math.nan
+    values = [float(v) for v in (r.state.metrics.get(metric) for r in rows) if v is not None]
+    return mean, min(values), max(values)
+
+
+def mean_and_bars(cells: Sequence[Sequence[Row]], metric: str) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: the mean over its seeds, and error bars (2, points) down to the lowest and
+    up to the highest seed."""
+    stats = np.array([spread_of(rows, metric) for rows in cells]).reshape(len(cells), 3)
+    return stats[:, 0], np.vstack([stats[:, 0] - stats[:, 1], stats[:, 2] - stats[:, 0]])
+
+
 def point_text(pt: Point) -> str:
     return "/".join(format_value(v) for v in pt)
 
@@ -103,6 +119,7 @@ class Panels:
     panels: list[Point]
     grids: list[np.ndarray]  # mean over the repeats; NaN where none
     ran: list[np.ndarray]  # True where a finished cell exists
+    spans: list[np.ndarray]  # max - min over the repeats (0 with one seed); NaN where none
 
 
 def panel_grids(spec: SweepSpec, rows: Sequence[Row], metric: str, axes: tuple[str, str]) -> Panels:
@@ -111,9 +128,10 @@ def panel_grids(spec: SweepSpec, rows: Sequence[Row], metric: str, axes: tuple[s
     rest = [keys for keys, pts in spec.grid if keys not in (xkeys, ykeys) and len(pts) > 1]
     panel_keys = tuple(k for keys in rest for k in keys)
     panels = list(dict.fromkeys(point_of(r, panel_keys) for r in rows))
-    grids, ran = [], []
+    grids, ran, spans = [], [], []
     for panel in panels:
         grid = np.full((len(ys), len(xs)), np.nan)
+        span = np.full((len(ys), len(xs)), np.nan)
         present = np.zeros(grid.shape, dtype=bool)
         for (i, y), (j, x) in itertools.product(enumerate(ys), enumerate(xs)):
             match = [
@@ -121,11 +139,13 @@ def panel_grids(spec: SweepSpec, rows: Sequence[Row], metric: str, axes: tuple[s
                 if point_of(r, panel_keys) == panel
                 and point_of(r, xkeys) == x and point_of(r, ykeys) == y
             ]
-            grid[i, j] = mean_of(match, metric) if match else np.nan
+            mean, lo, hi = spread_of(match, metric) if match else (np.nan,) * 3
+            grid[i, j], span[i, j] = mean, hi - lo
             present[i, j] = bool(match)
         grids.append(grid)
         ran.append(present)
-    return Panels(xkeys, ykeys, xs, ys, panel_keys, panels, grids, ran)
+        spans.append(span)
+    return Panels(xkeys, ykeys, xs, ys, panel_keys, panels, grids, ran, spans)
 
 
 def colour_norm(grids: list[np.ndarray], log_scale: bool, bound: float | None) -> Normalize:
@@ -158,9 +178,11 @@ def heatmap(
     )
     image = None
     missing = "never" if metric == "settle_time_s" else "none"
-    for ax, panel, grid, present in zip(axs.flat, panels, grids, ran, strict=False):
+    for ax, panel, grid, present, span in zip(axs.flat, panels, grids, ran, p.spans,
+                                              strict=False):
         image = ax.imshow(grid, norm=norm, cmap="viridis", origin="lower", aspect="auto")
-        annotate(ax, grid, np.where(present, missing, "no run"), (norm, image.cmap), bound)
+        annotate(ax, grid, np.where(present, missing, "no run"), (norm, image.cmap), bound,
+                 span if spec.repeats > 1 else None)
         ax.set_xticks(range(len(xs)), [point_text(x) for x in xs])
         ax.set_yticks(range(len(ys)), [point_text(y) for y in ys])
         ax.set_xlabel("/".join(xkeys))
@@ -178,7 +200,8 @@ def heatmap(
         if bound is not None:
             cbar.ax.axhline(bound, color="r", lw=2)
     note = f"; bold red: above the paper's bound {bound:g} (red line)" if bound else ""
-    fig.suptitle(f"{metric}: mean over {spec.repeats} seed(s){note}\n{held_text(spec)}",
+    spread = " (below it: max - min over the seeds)" if spec.repeats > 1 else ""
+    fig.suptitle(f"{metric}: mean over {spec.repeats} seed(s){spread}{note}\n{held_text(spec)}",
                  fontsize=10)
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -186,9 +209,10 @@ def heatmap(
 
 def annotate(
     ax: Axes, grid: np.ndarray, blank: np.ndarray, colours: tuple[Normalize, Any],
-    bound: float | None,
+    bound: float | None, span: np.ndarray | None = None,
 ) -> None:
-    """Each value in its cell (bold red above the bound); `blank` says why a cell has none."""
+    """Each value in its cell (bold red above the bound), with the spread over the seeds
+    under it when given; `blank` says why a cell has none."""
     norm, cmap = colours
     for (i, j), v in np.ndenumerate(grid):
         if not np.isfinite(v):
@@ -197,7 +221,8 @@ def annotate(
         over = bound is not None and v > bound
         r, g, b, _ = cmap(norm(v))
         ink = "k" if 0.299 * r + 0.587 * g + 0.114 * b > 0.5 else "w"
-        ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=9,
+        spread = "" if span is None or not np.isfinite(span[i, j]) else f"\n±{span[i, j]:.2g}"
+        ax.text(j, i, f"{v:.3g}{spread}", ha="center", va="center", fontsize=9,
                 color="r" if over else ink, fontweight="bold" if over else "normal",
                 bbox={"facecolor": "w", "alpha": 0.7, "lw": 0} if over else None)
 
@@ -209,9 +234,12 @@ def held_text(spec: SweepSpec) -> str:
     )
 
 
-def error_against(spec: SweepSpec, rows: Sequence[Row], key: str, path: Path) -> None:
-    """estimator and radius errors against `key`, one line per estimator; the other axes
-    held at their first value."""
+def error_against(
+    spec: SweepSpec, rows: Sequence[Row], key: str, path: Path
+) -> list[np.ndarray]:
+    """estimator and radius errors against `key`, one line per estimator, with error bars
+    from the lowest to the highest seed; the other axes held at their first value.  The
+    error bars drawn, (2, points) each: below and above the mean."""
     xkeys, xs = spec.partners(key), points(spec, key)
     ekeys = spec.partners("estimator") if "estimator" in spec.axes else ()
     estimators = points(spec, "estimator") if ekeys else [()]
@@ -219,35 +247,41 @@ def error_against(spec: SweepSpec, rows: Sequence[Row], key: str, path: Path) ->
     kept = [r for r in rows if all(point_of(r, keys) == first for keys, first in held)]
     x = [float(dict(zip(xkeys, pt, strict=True))[key]) for pt in xs]
     fig, axs = plt.subplots(1, 2, figsize=(12, 4.8))
+    bars: list[np.ndarray] = []
     for ax, metric in zip(axs, ("estimator_error_m", "radius_error_m"), strict=True):
         for k, est in enumerate(estimators):
-            ys = [
-                mean_of([r for r in kept if point_of(r, xkeys) == pt
-                         and point_of(r, ekeys) == est], metric)
-                for pt in xs
-            ]
+            cells = [[r for r in kept if point_of(r, xkeys) == pt and point_of(r, ekeys) == est]
+                     for pt in xs]
+            ys, yerr = mean_and_bars(cells, metric)
+            bars.append(yerr)
             name = point_text(est) if est else dict(spec.fixed).get("estimator", "of the scenario")
             # distinct markers and dashes: equal results must not hide a line
-            ax.plot(x, ys, marker="os^v"[k % 4], ls=("-", "--", ":")[k % 3], lw=1.5,
-                    ms=8 - 2 * (k % 3), label=f"estimator: {name}")
-        bound = bound_of(spec, metric)
-        if bound is not None:
-            ax.axhline(bound, color="k", ls="--", lw=1, label=f"paper's bound {bound:g}")
-        ax.set_yscale("log")
-        ax.yaxis.set_major_formatter(PLAIN)
-        ax.yaxis.set_minor_formatter(SPARSE)
-        ax.set_xticks(x, [point_text(pt) for pt in xs])
-        ax.set_xlabel("/".join(xkeys))
-        ax.set_ylabel(STYLE[metric][0])
-        ax.set_title(metric)
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8)
+            ax.errorbar(x, ys, yerr=yerr, marker="os^v"[k % 4], ls=("-", "--", ":")[k % 3],
+                        lw=1.5, ms=8 - 2 * (k % 3), capsize=4, label=f"estimator: {name}")
+        _error_axis(ax, spec, metric, x, [point_text(pt) for pt in xs], "/".join(xkeys))
     held_at = ", ".join(f"{'/'.join(k)}={point_text(p)}" for k, p in held)
     fig.suptitle(
-        f"errors against {'/'.join(xkeys)}; mean over {spec.repeats} seed(s); "
+        f"errors against {'/'.join(xkeys)}; mean over {spec.repeats} seed(s), bars: min-max; "
         f"other axes held at their first value: {held_at or 'none'}\n{held_text(spec)}",
         fontsize=10,
     )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return bars
+
+
+def _error_axis(ax: Axes, spec: SweepSpec, metric: str, x: list[float], ticks: list[str],
+                xlabel: str) -> None:
+    bound = bound_of(spec, metric)
+    if bound is not None:
+        ax.axhline(bound, color="k", ls="--", lw=1, label=f"paper's bound {bound:g}")
+    ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(PLAIN)
+    ax.yaxis.set_minor_formatter(SPARSE)
+    ax.set_xticks(x, ticks)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(STYLE[metric][0])
+    ax.set_title(metric)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)

@@ -13,7 +13,9 @@ that reach the agent.  Its `counters()` add, for each link L seen:
 - `seq_first_L`, `seq_last_L`: lowest and highest sequence number received, so that the
   messages offered while listening were `seq_last_L - seq_first_L + 1`;
 - `age_p50_us_L`, `age_p99_us_L`: age at delivery of the unique messages, receive stamp
-  minus the sender's header stamp, in microseconds (100 µs resolution).  Once a RunControl
+  minus the sender's header stamp, in microseconds (100 µs resolution);
+- `age_n_L`, `age_sum_us_L`: how many ages were taken and their sum (µs), so that a reader
+  of two successive counter sets has the mean age over the time between them.  Once a RunControl
   "start" passes through the decoder, only messages stamped from the experiment's start on
   count: the backlog a process drains after its start-up (seconds old) says nothing of
   the link.
@@ -75,17 +77,20 @@ class AgeHistogram:
         self.bins = np.zeros(n_bins, dtype=np.int64)
         self.blocks = np.zeros(n_bins // self.BLOCK, dtype=np.int64)
         self.count = 0
+        self.sum_s = 0.0
 
     def add(self, age_s: float) -> None:
         k = min(max(int(age_s / AGE_BIN_S), 0), len(self.bins) - 1) if age_s == age_s else 0
         self.bins[k] += 1
         self.blocks[k // self.BLOCK] += 1
         self.count += 1
+        self.sum_s += min(max(age_s, 0.0), AGE_MAX_S) if age_s == age_s else 0.0
 
     def merge(self, other: AgeHistogram) -> None:
         self.bins += other.bins
         self.blocks += other.blocks
         self.count += other.count
+        self.sum_s += other.sum_s
 
     def percentile_s(self, q: float) -> float | None:
         """The q-th percentile (0..100), at the middle of its bin; None when empty."""
@@ -148,7 +153,10 @@ class LinkDecoder(Decoder):
         inbound = super().decode(rec)
         if inbound is not None:
             msg = inbound.message
-            if isinstance(msg, RunControl) and msg.command == "start":
+            # The launcher repeats its start word every second with the same start stamp:
+            # only a new start resets the ages (else "whole-run" meant "the last second").
+            if (isinstance(msg, RunControl) and msg.command == "start"
+                    and msg.start_stamp_s != self.ages_from_s):
                 self.ages_from_s = msg.start_stamp_s
                 for t in self.tallies.values():
                     t.ages = AgeHistogram()
@@ -188,6 +196,7 @@ class LinkDecoder(Decoder):
                 "rx": t.rx, "rx_dup": t.rx_dup, "seq_first": t.seq_first,
                 "seq_last": t.seq_last, "age_p50_us": _us(t.ages.percentile_s(50)),
                 "age_p99_us": _us(t.ages.percentile_s(99)),
+                "age_n": t.ages.count, "age_sum_us": _us(t.ages.sum_s),
             }
             out.update({f"{k}_{name}": v for k, v in values.items() if v is not None})
         return out

@@ -18,6 +18,7 @@ from agents.errors import CodecError, TransportError
 from agents.liveness import MembershipWatch
 from agents.scenario import Scenario
 from deploy.recording.assembler import RunAssembler
+from deploy.recording.link_history import LinkHistory
 from deploy.recording.links import FINAL_STATES, link_report
 from deploy.recording.live_server import LiveServer
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
@@ -56,6 +57,7 @@ class Recorder:
         self.period_s = period_s
         self.final_status_wait_s = final_status_wait_s
         self.follower_status: dict[int, ProcessStatus] = {}  # latest, per follower index
+        self.link_history = LinkHistory()  # links.csv, links.png, progress.json "links"
         run_dir.mkdir(parents=True, exist_ok=True)
         self.mcap = McapLog(run_dir / MCAP_FILE, chunk_size=chunk_bytes,
                             metadata={"swarm": swarm, "scenario": scenario.name})
@@ -110,6 +112,7 @@ class Recorder:
         self.asm.add(msg)
         if isinstance(msg, ProcessStatus) and msg.role == "follower":
             self.follower_status[msg.index] = msg
+            self.link_history.add(msg)
 
     def _view_add(self, msg: Message, recv_stamp_s: float) -> None:
         if self.view is None:
@@ -221,7 +224,7 @@ class Recorder:
         self.mcap.close()
         try:
             metrics = write_final_outputs(self.run_dir, self.scenario, self.asm, self.counters(),
-                                          self.membership)
+                                          self.membership, self.link_history)
         except Exception:
             log.exception("writing the run outputs failed")
             metrics = None
@@ -263,6 +266,7 @@ class Recorder:
             "follower_states": self.asm.state_counts(),
             "messages_total": sum(self.mcap.messages.values()),
             "dropped_total": self.decoder.dropped_total,
+            "links": self.link_history.summary(self.bus.now_s()),
             "wall_stamp_s": self.bus.now_s(),
             "live_url": self.live_url,
         }

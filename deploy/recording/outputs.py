@@ -12,6 +12,7 @@ from agents.errors import DeployError
 from agents.membership_metrics import membership_phases, phase_report
 from agents.scenario import Scenario
 from deploy.recording.assembler import Assembly, RunAssembler, assembly_extra
+from deploy.recording.link_history import LINKS_CSV, LinkHistory
 from deploy.recording.progress import write_json_atomic
 from deploy.report import write_run_outputs
 from deploy.rundir import METRICS_FILE, RunInfo
@@ -35,6 +36,7 @@ def write_final_outputs(
     asm: RunAssembler,
     recorder_extra: dict[str, Any],
     membership: list[tuple[float, frozenset[int]]] | None = None,
+    link_history: LinkHistory | None = None,
 ) -> Metrics | None:
     """Metrics, CSV and figures of the run; None (and metrics.json with "error") if none."""
     try:
@@ -44,6 +46,8 @@ def write_final_outputs(
         write_error_metrics(run_dir, str(exc), {**recorder_extra,
                                                  "assembler_drops": dict(asm.drops)})
         return None
+    if link_history is not None:  # before the figures: links.png is drawn from it
+        link_history.write_csv(run_dir / LINKS_CSV, assembly.start_stamp_s)
     duration = judged_duration_s(assembly)
     info = RunInfo.from_scenario(scenario, RUN_KIND, duration)
     extra = {**assembly_extra(assembly, asm.drops), **recorder_extra,

@@ -151,9 +151,16 @@ def test_paper_case_forms_the_formation_and_every_process_exits_cleanly(tmp_path
     assert metrics["estimator_error_m"] < 0.0999
     assert metrics["settle_time_s"] is not None and metrics["settle_time_s"] < 12.0
     assert metrics["command_jump_m_s"] < 0.5
-    for name in ("series.csv", "recording.mcap", "performance.png", "trajectory.png"):
+    for name in ("series.csv", "recording.mcap", "performance.png", "trajectory.png",
+                 "links.csv", "links.png"):
         assert (out / name).stat().st_size > 1000, name
     assert (out / "logs" / "follower-0.log").exists()
+    # Piped: board lines, no escape codes, and the verdict at the end instead of metrics.json.
+    assert "\x1b" not in output
+    assert "processes 8/8 up" in output and "agents on UDP" in output
+    tail = "\n".join(output.rstrip().splitlines()[-15:])
+    assert "enclose run paper: INSIDE the paper's bounds" in tail, tail
+    assert "none died, restarted or failed" in tail and f"files        {out}/" in tail
 
 
 @pytest.mark.timeout(240)

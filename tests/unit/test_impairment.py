@@ -306,6 +306,28 @@ def test_link_decoder_ages_leave_out_the_start_up_backlog() -> None:
 
 
 @pytest.mark.timeout(30)
+def test_link_decoder_keeps_its_ages_over_repeated_start_words() -> None:
+    """The launcher repeats the start word each second: the ages (and their running sum, for
+    the mean age between two status messages) must cover the run, not the last second."""
+    rig = Rig(NetworkConfig())
+    subs = [rig.bus.subscribe(K.control()), rig.bus.subscribe(K.follower_state(0))]
+    decoder = LinkDecoder()
+    start_s = rig.clock.t
+    for k in range(100):
+        rig.clock.t += 0.02
+        if k % 50 == 0:  # the same start word again
+            rig.tx.publish(K.control(), encode(RunControl(Header("l", k, rig.clock.t), "start",
+                                                          start_s, 10.0)))
+        rig.tx.publish(K.follower_state(0), state(0, k, rig.clock.t - 0.002))
+        for sub in subs:
+            decoder.drain(sub)
+    rig.close()
+    c = decoder.counters()
+    assert c["age_n_f0"] == 100
+    assert c["age_sum_us_f0"] == pytest.approx(100 * 2000, rel=0.05)
+
+
+@pytest.mark.timeout(30)
 def test_a_backlog_drained_late_comes_out_at_once_and_in_order() -> None:
     rig = Rig(net(delay_ms=50.0))
     sub = rig.bus.subscribe(K.follower_state(0))

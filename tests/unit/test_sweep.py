@@ -13,6 +13,7 @@ import pytest
 from agents.errors import ConfigError
 from deploy.cli import main
 from deploy.sweep import run_sweep
+from deploy.sweep_figures import error_against
 from deploy.sweep_runner import SweepProgress, clock_text
 from deploy.sweep_spec import SweepSpec, load_sweep, parse_sweep
 from deploy.sweep_table import collect
@@ -249,6 +250,45 @@ def test_figures_from_fake_results(tmp_path: Path) -> None:
         "heatmap_settle_time_s.png", "heatmap_command_jump_m_s.png",
         "heatmap_delivered_ratio.png", "error_vs_loss.png", "error_vs_delay.png"}
     assert all((spec.out / n).stat().st_size > 10_000 for n in names)
+
+
+class SeededRunner(FakeRunner):
+    """As FakeRunner, with an estimator error that depends on the cell's seed."""
+
+    def write(self, argv: Sequence[str], out_dir: Path) -> None:
+        super().write(argv, out_dir)
+        seed = int(argv[argv.index("--impair-seed") + 1])
+        metrics = json.loads((out_dir / "metrics.json").read_text())
+        metrics["estimator_error_m"] += 0.001 * seed
+        (out_dir / "metrics.json").write_text(json.dumps(metrics))
+
+
+def test_line_figures_have_error_bars_over_the_seeds(tmp_path: Path) -> None:
+    text = SWEEP.replace('out = "out"', 'out = "out"\nrepeats = 3')
+    spec = load_sweep(sweep_file(tmp_path, text))
+    run_sweep(spec, SeededRunner(), tty=False, figures=False)
+    done = [r for r in collect(spec) if r.state.done]
+    bars = error_against(spec, done, "loss", tmp_path / "e.png")
+    estimator_bars, radius_bars = bars[:2], bars[2:]  # one per estimator and panel
+    seeds = sorted({r.cell.seed for r in done})
+    spread = 0.001 * (seeds[-1] - seeds[0])
+    for yerr in estimator_bars:  # from the mean down to the lowest seed, up to the highest
+        assert yerr.shape == (2, 2)
+        assert (yerr.sum(axis=0) == pytest.approx([spread, spread]))
+    assert all(float(abs(y).max()) < 1e-12 for y in radius_bars)  # no spread: no bar
+
+
+def test_the_sweep_ends_with_a_verdict(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    spec = load_sweep(sweep_file(tmp_path))
+    bad = spec.cells()[0].name
+    run_sweep(spec, FakeRunner(fail=[bad]), tty=False, figures=False)
+    out = capsys.readouterr().out
+    assert "\x1b" not in out
+    lines = out.splitlines()
+    assert lines[0] == "enclose sweep s: 7/8 cells done; 3 inside the paper's bounds, 4 outside"
+    assert "estimator_error_m 0.21 m >= 0.0999" in lines[1]
+    assert f"not done     {bad} (failed)" in lines[2]
+    assert lines[3].startswith(f"  files        {spec.out}/ (results.csv, results.md")
 
 
 def test_figures_skip_what_the_grid_cannot_show(tmp_path: Path,

@@ -1,0 +1,129 @@
+"""Link health over time, from the followers' periodic status counters: `links.csv`.
+
+Each follower publishes its per-link counters (`transport.link_stats`) about once a
+second.  Between two successive statuses of one receiver, for each link into it:
+- `delivered`: unique messages received / sequence numbers the sender used (its seq
+  span), i.e. 1 - loss over that interval;
+- `age_mean_ms`: mean age at delivery of the messages received in the interval.
+A restarted receiver starts its counters again from zero: its first interval after
+that has no value.  `age_p50_ms` and `age_p99_ms` are the receiver's whole-run figures
+at that time.  Times are seconds of the receiver's status stamp on the bus clock; the
+writer turns them into experiment time.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from transport.messages import ProcessStatus
+
+LINKS_CSV = "links.csv"
+COLUMNS = ("t_s", "link", "rx", "offered", "delivered", "age_mean_ms", "age_p50_ms",
+           "age_p99_ms")
+SILENT_AFTER_S = 3.0  # a link with no status this long is reported as silent
+
+
+@dataclass(frozen=True)
+class LinkSample:
+    stamp_s: float
+    link: str  # "f0->f2", "sensor->f1"
+    rx: int
+    offered: int | None
+    delivered: float | None  # over the interval since the previous sample
+    age_mean_ms: float | None  # idem
+    age_p50_ms: float | None
+    age_p99_ms: float | None
+
+
+def _ratio(num: float, den: float) -> float | None:
+    return num / den if den > 0 and num >= 0 else None
+
+
+def _ms(us: int | None) -> float | None:
+    return None if us is None else us / 1000.0
+
+
+class LinkHistory:
+    """Every follower status's link counters, as interval samples per link."""
+
+    def __init__(self) -> None:
+        self.samples: list[LinkSample] = []
+        self._last: dict[str, Mapping[str, int]] = {}  # link -> counters of its last sample
+        self._latest: dict[str, LinkSample] = {}
+
+    def add(self, status: ProcessStatus) -> None:
+        c = status.counters
+        for name in sorted(k[3:] for k in c if k.startswith("rx_") and not k.startswith("rx_dup")):
+            link = f"{name}->f{status.index}"
+            now = self._counters(c, name)
+            before = self._last.get(link)
+            delivered = age = None
+            if before is not None:
+                delivered = _ratio(now["rx"] - before["rx"], now["seq"] - before["seq"])
+                n = now["age_n"] - before["age_n"]
+                age = _ratio((now["age_sum_us"] - before["age_sum_us"]) / 1000.0, n)
+            if delivered is not None:
+                delivered = min(delivered, 1.0)  # copies and reordering at the span's edges
+            sample = LinkSample(status.header.stamp_s, link, now["rx"],
+                                now["seq"] - now["seq0"] + 1 if now["seq"] >= 0 else None,
+                                delivered, age, _ms(c.get(f"age_p50_us_{name}")),
+                                _ms(c.get(f"age_p99_us_{name}")))
+            self._last[link] = now
+            self._latest[link] = sample
+            self.samples.append(sample)
+
+    @staticmethod
+    def _counters(c: Mapping[str, int], name: str) -> dict[str, int]:
+        return {"rx": int(c.get(f"rx_{name}", 0)), "seq": int(c.get(f"seq_last_{name}", -1)),
+                "seq0": int(c.get(f"seq_first_{name}", 0)),
+                "age_n": int(c.get(f"age_n_{name}", 0)),
+                "age_sum_us": int(c.get(f"age_sum_us_{name}", 0))}
+
+    def summary(self, now_s: float) -> dict[str, Any]:
+        """For progress.json: the worst link now (small: the launcher's board reads it)."""
+        latest = list(self._latest.values())
+        fresh = [s for s in latest if now_s - s.stamp_s <= SILENT_AFTER_S]
+        ratios = [(s.delivered, s.link) for s in fresh if s.delivered is not None]
+        ages = [(s.age_mean_ms, s.link) for s in fresh if s.age_mean_ms is not None]
+        worst_ratio = min(ratios, default=None)
+        worst_age = max(ages, default=None)
+        return {
+            "count": len(latest),
+            "silent": sorted(s.link for s in latest if s not in fresh),
+            "min_delivered": None if worst_ratio is None else round(worst_ratio[0], 4),
+            "min_delivered_link": None if worst_ratio is None else worst_ratio[1],
+            "max_age_ms": None if worst_age is None else round(worst_age[0], 2),
+            "max_age_link": None if worst_age is None else worst_age[1],
+        }
+
+    def write_csv(self, path: Path, start_stamp_s: float) -> None:
+        with open(path, "w", newline="") as f:
+            out = csv.writer(f)
+            out.writerow(COLUMNS)
+            for s in self.samples:
+                out.writerow([f"{s.stamp_s - start_stamp_s:.3f}", s.link, s.rx,
+                              _cell(s.offered), _cell(s.delivered), _cell(s.age_mean_ms),
+                              _cell(s.age_p50_ms), _cell(s.age_p99_ms)])
+
+
+def _cell(v: float | int | None) -> str:
+    return "" if v is None else f"{v:.6g}"
+
+
+def read_links_csv(path: Path) -> dict[str, dict[str, list[float]]]:
+    """links.csv as link -> column -> values (NaN where empty); {} if there is none."""
+    out: dict[str, dict[str, list[float]]] = {}
+    try:
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                cols = out.setdefault(row["link"], {k: [] for k in COLUMNS if k != "link"})
+                for k, values in cols.items():
+                    values.append(float(row[k]) if row.get(k) else math.nan)
+    except (OSError, ValueError, KeyError):
+        return {}
+    return out

@@ -1,0 +1,192 @@
+"""The end of a run, in a few lines: inside the paper's bounds or not (per metric, with the
+bound), settle time, what died or restarted, link health, where the files are.
+
+`read_verdict(run_dir)` reads metrics.json, run.json (the bounds the run was judged
+against) and, for networked runs, launch.json; `print_verdict` prints it with rich (plain
+text when not on a terminal); `verdict_json` is what `--json` prints for scripts.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
+
+# metrics.json key -> (label, unit, run.json key of its bound)
+BOUNDED = (
+    ("estimator_error_m", "estimator error |r-LAP|", "m", "eps_rho_m"),
+    ("radius_error_m", "radius error |e_rho|", "m", "eps_rho_m"),
+    ("angle_error", "angle error |e_delta|", "", "eps_delta"),
+)
+PAPER_BOUNDS = {"eps_rho_m": 0.0999, "eps_delta": 0.0199}  # agents.scenario defaults
+FILES = ("metrics.json", "series.csv", "performance.png", "trajectory.png", "links.png",
+         "recording.mcap", "launch.json", "logs")
+
+
+@dataclass(frozen=True)
+class Check:
+    key: str
+    label: str
+    unit: str
+    value: float | None
+    bound: float
+
+    @property
+    def inside(self) -> bool:
+        return self.value is not None and self.value < self.bound
+
+    def text(self) -> str:
+        u = f" {self.unit}" if self.unit else ""
+        return "none" if self.value is None else f"{self.value:.4g}{u}"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    title: str
+    run_dir: Path
+    checks: tuple[Check, ...]
+    error: str | None  # no metrics: why
+    metrics: dict[str, Any]
+    processes: tuple[str, ...]  # what died, restarted, was faulted or failed
+    links: str | None
+    live_url: str | None
+    files: tuple[str, ...]
+    note: str = ""  # e.g. "interrupted"
+    networked: bool = False  # a launch.json exists: processes to report on
+
+    @property
+    def inside(self) -> bool:
+        return self.error is None and all(c.inside for c in self.checks)
+
+
+def _read(path: Path) -> dict[str, Any]:
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return doc if isinstance(doc, dict) else {}
+
+
+def _num(v: Any) -> float | None:
+    return float(v) if isinstance(v, int | float) and not isinstance(v, bool) else None
+
+
+def process_lines(launch: dict[str, Any]) -> tuple[str, ...]:
+    """One line per process that did not simply run and exit 0; empty: all fine."""
+    counts: dict[str, dict[str, int]] = {}
+    for e in launch.get("events") or []:
+        if isinstance(e, dict) and isinstance(e.get("event"), str):
+            per = counts.setdefault(str(e.get("process", "?")), {})
+            per[e["event"]] = per.get(e["event"], 0) + 1
+    procs = launch.get("processes") or {}
+    for name, p in procs.items():
+        code = p.get("exit_code") if isinstance(p, dict) else None
+        if code not in (0, None):
+            counts.setdefault(name, {})[f"exit code {code}"] = 0
+    return tuple(
+        f"{name}: " + ", ".join(k if n == 0 else f"{k} {n}x" for k, n in sorted(per.items()))
+        for name, per in sorted(counts.items())
+    )
+
+
+def link_summary(metrics: dict[str, Any]) -> str | None:
+    links = metrics.get("links")
+    if not isinstance(links, dict) or not links:
+        return None
+    ratios = [(_num(v.get("delivered_ratio")), k) for k, v in links.items() if isinstance(v, dict)]
+    ages = [(_num(v.get("age_p99_ms")), k) for k, v in links.items() if isinstance(v, dict)]
+    worst = min(((r, k) for r, k in ratios if r is not None), default=None)
+    oldest = max(((a, k) for a, k in ages if a is not None), default=None)
+    parts = [f"{len(links)} links"]
+    if worst is not None:
+        parts.append(f"delivered >= {worst[0]:.3f} (worst {worst[1]})")
+    if oldest is not None:
+        parts.append(f"age p99 <= {oldest[0]:.1f} ms ({oldest[1]})")
+    return ", ".join(parts)
+
+
+def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
+    metrics, info = _read(run_dir / "metrics.json"), _read(run_dir / "run.json")
+    launch = _read(run_dir / "launch.json")
+    error = metrics.get("error") if metrics else f"no metrics.json in {run_dir}"
+    checks = tuple(
+        Check(key, label, unit, _num(metrics.get(key)),
+              _num(info.get(bound)) or PAPER_BOUNDS[bound])
+        for key, label, unit, bound in BOUNDED
+    )
+    live = launch.get("live_url")
+    return Verdict(
+        title, run_dir, checks, None if error is None else str(error), metrics,
+        process_lines(launch), link_summary(metrics),
+        live if isinstance(live, str) and live else None,
+        tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
+        bool(launch),
+    )
+
+
+def verdict_json(v: Verdict) -> dict[str, Any]:
+    """metrics.json with a "verdict" object added, for scripts (`--json`)."""
+    return {**v.metrics, "verdict": {
+        "inside_bounds": v.inside,
+        "error": v.error,
+        "checks": {c.key: {"value": c.value, "bound": c.bound, "inside": c.inside}
+                   for c in v.checks},
+        "processes": list(v.processes),
+        "live_url": v.live_url,
+        "run_dir": str(v.run_dir),
+    }}
+
+
+def headline(v: Verdict) -> Text:
+    if v.error is not None:
+        return Text.assemble((f"{v.title}: NO VERDICT", "bold red"), f" ({v.error})")
+    steady = _num(v.metrics.get("steady_from_s"))
+    window = "" if steady is None else f" (steady state from {steady:g} s)"
+    if v.inside:
+        return Text.assemble((f"{v.title}: INSIDE the paper's bounds", "bold green"), window)
+    return Text.assemble((f"{v.title}: OUTSIDE the paper's bounds", "bold red"), window)
+
+
+def print_verdict(console: Console, v: Verdict) -> None:
+    """At most about 12 lines: the answer first, then its evidence."""
+    console.print(headline(v) + (Text(f"  [{v.note}]", style="yellow") if v.note else ""))
+    grid = Table.grid(padding=(0, 2))
+    for _ in range(4):
+        grid.add_column()
+    if v.error is None:
+        for c in v.checks:
+            u = f" {c.unit}" if c.unit else ""
+            mark = Text("ok", style="green") if c.inside else Text("OVER", style="bold red")
+            grid.add_row(f"  {c.label}", c.text(), f"< {c.bound:g}{u}", mark)
+        console.print(grid)
+    settle = _num(v.metrics.get("settle_time_s"))
+    rows = [] if v.error else [("settle time", "never" if settle is None else f"{settle:.1f} s")]
+    if v.networked:
+        rows.append(("processes", "; ".join(v.processes) or "none died, restarted or failed"))
+    rows += [("links", v.links)] if v.links else []
+    rows += [("live view", v.live_url)] if v.live_url else []
+    rows.append(("files", f"{v.run_dir}/ ({', '.join(v.files) or 'none'})"))
+    for label, value in rows:
+        console.print(Text(f"  {label:<13}{value}"), soft_wrap=True)
+
+
+def announce(run_dir: Path, title: str, as_json: bool, note: str = "") -> Verdict:
+    """The end of a command: the verdict on stdout; with `as_json`, the metrics and verdict
+    as JSON on stdout (for scripts) and the verdict for people on stderr."""
+    v = read_verdict(run_dir, title, note)
+    if as_json:
+        print(json.dumps(verdict_json(v), indent=2), flush=True)
+    print_verdict(Console(stderr=as_json), v)
+    return v
+
+
+def add_json_argument(parser: Any) -> None:
+    parser.add_argument(
+        "--json", action="store_true",
+        help="print metrics.json and the verdict as JSON on stdout (the verdict text on stderr)",
+    )
