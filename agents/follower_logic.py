@@ -65,6 +65,13 @@ class FollowerSetup:
     target_vel_tau_s: float = 0.1
     max_gap_s: float = 0.25  # longest dt the estimator integrates over one tick
     age_tau_s: float = 0.5  # time constant of the low-passed data ages
+    # The estimator's own step (issue 15): it advances between control ticks too, on
+    # what its neighbours published at that rate; None: one step per control tick.
+    estimator_period_s: float | None = None
+
+    @property
+    def est_period_s(self) -> float:
+        return self.period_s if self.estimator_period_s is None else self.estimator_period_s
 
     @staticmethod
     def from_scenario(
@@ -87,6 +94,7 @@ class FollowerSetup:
             estimator=estimator_params(scenario),
             control=control_gains(scenario),
             period_s=1.0 / scenario.run.rate_hz,
+            estimator_period_s=1.0 / scenario.run.estimator_hz,
             robust=scenario.network.estimator == "robust",
         )
 
@@ -235,8 +243,9 @@ def _estimate(
     # consensus down instead of making it ring.  Neither law changes; the discretisation
     # stays consistent (fresh data: the lock-step limit).
     ages = np.array([memory.peer_age_s[j] for j in setup.neighbours])
-    fractions = setup.nbr_fractions * setup.period_s / np.maximum(ages, setup.period_s)
-    args = (fractions, setup.estimator, setup.period_s)
+    step = setup.est_period_s
+    fractions = setup.nbr_fractions * step / np.maximum(ages, step)
+    args = (fractions, setup.estimator, step)
     resume = None
     if memory.rebase_pending and memory.last_r is not None:
         resume = memory.last_r.held(now_s, setup.hold_after_s)
@@ -278,6 +287,31 @@ def _smoothed_ages(
     return ages
 
 
+def _advance(
+    memory: FollowerMemory, setup: FollowerSetup, peers: dict[int, PeerView], now_s: float
+) -> tuple[FollowerMemory, FloatArray, FloatArray]:
+    """The estimator over the time since its last step: new memory, r_i, dr_i/dt."""
+    last = memory.last_tick_s
+    dt = 0.0 if last is None else min(max(now_s - last, 0.0), setup.max_gap_s)
+    memory = replace(memory, peer_age_s=_smoothed_ages(memory, setup, peers, now_s, dt))
+    new_memory, r, dr = _estimate(memory, setup, peers, now_s, dt)
+    # A target newly ours is not heard yet: p~_i lacks it, so r_i stays carried until it is.
+    pending = memory.rebase_pending and not all(j in memory.targets for j in setup.observed)
+    new_memory = replace(new_memory, last_tick_s=now_s, last_r=Sample(r, dr, now_s),
+                         rebase_pending=pending)
+    return new_memory, r, dr
+
+
+def estimator_tick(
+    memory: FollowerMemory, setup: FollowerSetup, peers: dict[int, PeerView], now_s: float
+) -> FollowerMemory:
+    """One estimator step at `now_s` between control ticks (at `setup.est_period_s`).
+
+    The same integration as the control tick's, which is only one more estimator step
+    followed by the control law: a link's flows still cancel (or balance, robust)."""
+    return _advance(memory, setup, peers, now_s)[0]
+
+
 def follower_tick(
     memory: FollowerMemory,
     setup: FollowerSetup,
@@ -287,10 +321,8 @@ def follower_tick(
 ) -> tuple[FollowerMemory, TickOutput]:
     """One control cycle at `now_s`; call when `ready`, or after the first cycle with
     the peers not heard yet stood in for (agents.follower_membership.with_missing)."""
-    last = memory.last_tick_s
-    dt = 0.0 if last is None else min(max(now_s - last, 0.0), setup.max_gap_s)
-    memory = replace(memory, peer_age_s=_smoothed_ages(memory, setup, peers, now_s, dt))
-    new_memory, r, dr = _estimate(memory, setup, peers, now_s, dt)
+    new_memory, r, dr = _advance(memory, setup, peers, now_s)
+    memory = replace(memory, peer_age_s=new_memory.peer_age_s)
     own_pos = own.held(now_s, setup.hold_after_s)
     succ = peers[setup.successor].pos
     if succ.fresh(now_s, setup.stale_after_s):
@@ -309,10 +341,6 @@ def follower_tick(
         setup.period_s,
         memory.peer_age_s[setup.successor],
     )
-    # A target newly ours is not heard yet: p~_i lacks it, so r_i stays carried until it is.
-    pending = memory.rebase_pending and not all(j in memory.targets for j in setup.observed)
-    new_memory = replace(new_memory, last_tick_s=now_s, last_r=Sample(r, dr, now_s),
-                         rebase_pending=pending)
     u = out.u_m_s[0].copy()
     z, delta = float(out.z_m[0]), float(out.delta[0])
     if not (np.all(np.isfinite(u)) and math.isfinite(z)):
