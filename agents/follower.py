@@ -9,6 +9,7 @@ import argparse
 import logging
 import math
 import sys
+import time
 from collections import deque
 from collections.abc import Sequence
 
@@ -20,6 +21,7 @@ from agents.follower_logic import (
     FollowerSetup,
     PeerView,
     Sample,
+    estimator_tick,
     follower_tick,
     link_flows,
     observe_target,
@@ -94,9 +96,18 @@ class FollowerNode:
             bus.subscribe(self.keys.control()),
         ]
         self.peer_subs: dict[int, Subscription] = {}
+        self.est_subs: dict[int, Subscription] = {}
+        # The estimator's own rate (issue 15): steps between control ticks, each published
+        # on a second key so that an update crosses a link in an estimator period.
+        self.est_steps = scenario.run.estimator_substeps > 1
         self._follow(set(self.setup.neighbours) | {self.setup.successor})
         self.out = bus.declare_publisher(self.keys.follower_state(index))
         self.stamper = Stamper(f"follower-{index}", bus.now_s)
+        self.est_out = bus.declare_publisher(self.keys.follower_estimate(index))
+        self.est_stamper = Stamper(f"follower-{index}", bus.now_s)
+        self.est_phase_s = 0.5 * self.setup.est_period_s * scenario.tick_group(index)
+        self.last_state: VehicleState | None = None
+        self.last_u = np.zeros(2)
         # Checked, not trusted (transport.checks); + per-link rx and age (transport.link_stats)
         self.decoder: Decoder = LinkDecoder(limits=DEFAULT_LIMITS)
         self.status = StatusReporter(bus, self.keys, "follower", index)
@@ -117,8 +128,12 @@ class FollowerNode:
         peers = peers - {self.index}
         for j in set(self.peer_subs) - peers:
             self.peer_subs.pop(j).close()
+            if j in self.est_subs:
+                self.est_subs.pop(j).close()
         for j in sorted(peers - set(self.peer_subs)):
             self.peer_subs[j] = self.bus.subscribe(self.keys.follower_state(j), PEER_QUEUE)
+            if self.est_steps:
+                self.est_subs[j] = self.bus.subscribe(self.keys.follower_estimate(j), PEER_QUEUE)
 
     def regroup(self, now_s: float) -> None:
         """Re-form around the followers alive now (agents.liveness, agents.membership).
@@ -137,6 +152,7 @@ class FollowerNode:
         self.peers = {j: v for j, v in self.peers.items() if j in members}
         for j in self.members - members:
             self.decoder.forget(self.keys.follower_state(j))
+            self.decoder.forget(self.keys.follower_estimate(j))
         log.info(
             "members %s -> %s: neighbours %s, successor %d, angle %.1f deg",
             sorted(self.members), sorted(members), list(new.neighbours), new.successor,
@@ -148,7 +164,7 @@ class FollowerNode:
         self.status.counters["members"] = len(members)  # as this follower sees the swarm
 
     def ingest(self) -> None:
-        for sub in [*self.subs, *self.peer_subs.values()]:
+        for sub in [*self.subs, *self.peer_subs.values(), *self.est_subs.values()]:
             for inbound in self.decoder.drain(sub):
                 self._apply(inbound.message)
 
@@ -205,10 +221,37 @@ class FollowerNode:
         if r is None:  # not flying the law (yet, or for a moment after a change)
             r = standing_estimate(self.memory, self.setup, now_s)
         self._command(state, u)
+        self.last_state, self.last_u = state, u
         if self.joining and self.memory.last_r is None:
             self.status.counters["ticks_joining"] += 1  # p~ would throw the running ring
             return
         self._publish(now_s, state, r, dr, u)
+
+    def idle(self, duration_s: float) -> None:
+        """The wait between control ticks (the Ticker's sleep): estimator steps on the
+        grid k * est_period + phase (neighbours half a period apart), the last one at
+        least half a period before the control tick, which is an estimator step too."""
+        until = self.bus.now_s() + duration_s
+        period = self.setup.est_period_s
+        while self.est_steps:
+            now = self.bus.now_s()
+            nxt = math.ceil((now - self.est_phase_s) / period) * period + self.est_phase_s
+            if nxt > until - 0.5 * period:
+                break
+            time.sleep(max(nxt - now, 0.0))
+            self.estimator_step(self.bus.now_s())
+        time.sleep(max(until - self.bus.now_s(), 0.0))
+
+    def estimator_step(self, now_s: float) -> None:
+        """Advance the estimator alone and publish the state on the estimator key."""
+        if self.last_state is None or self.memory.last_r is None or self.start_s is None:
+            return  # the law is not running yet: nothing to advance
+        self.ingest()
+        views = with_missing(self.peers, self.setup, self.memory, now_s)
+        self.memory = estimator_tick(self.memory, self.setup, views, now_s)
+        r = self.memory.last_r
+        if r is not None:
+            self._publish(now_s, self.last_state, r.value, r.rate, self.last_u, estimate=True)
 
     def _command(self, state: VehicleState, u: np.ndarray) -> None:
         climb = ALTITUDE_GAIN_PER_S * (self.altitude_m - state.pos_enu_m[2])
@@ -218,13 +261,15 @@ class FollowerNode:
             self.status.counters["setpoints_refused"] += 1
 
     def _publish(
-        self, now_s: float, state: VehicleState, r: np.ndarray, dr: np.ndarray, u: np.ndarray
+        self, now_s: float, state: VehicleState, r: np.ndarray, dr: np.ndarray, u: np.ndarray,
+        estimate: bool = False,
     ) -> None:
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(state.pos_enu_m))):
             self.status.counters["states_not_published"] += 1
             return
+        stamper = self.est_stamper if estimate else self.stamper
         msg = FollowerState(
-            self.stamper.header(now_s),
+            stamper.header(now_s),
             self.index,
             vec2(r),
             vec2(dr),
@@ -235,27 +280,30 @@ class FollowerNode:
             state.stamp_s,
             link_flows(self.memory, self.setup),
         )
-        self.out.put(encode(msg))
+        (self.est_out if estimate else self.out).put(encode(msg))
 
     def counters(self) -> dict[str, int]:
         """Decoder drops and gaps, and the age of neighbour states at use (p50, p99).
 
         Per link L (`f<j>`: follower j, 0-based; `sensor`): rx_L, rx_dup_L, seq_first_L,
         seq_last_L, age_p50_us_L, age_p99_us_L (transport.link_stats) and imp_<count>_L
-        (transport.impairment); states_sent: FollowerStates this follower published.
+        (transport.impairment); states_sent: FollowerStates this follower published, on
+        both its keys (a link counts both: its rx and delivered ratio cover the two).
         """
         ages = {}
         if self.ages_s:
             p50, p99 = np.percentile(np.asarray(self.ages_s), [50, 99]) * 1e6
             ages = {"nbr_age_p50_us": round(float(p50)), "nbr_age_p99_us": round(float(p99))}
         links = self.bus.counters() if isinstance(self.bus, ImpairedBus) else {}
-        return {**self.decoder.counters(), **ages, **links, "states_sent": self.stamper.next_seq}
+        sent = self.stamper.next_seq + self.est_stamper.next_seq
+        return {**self.decoder.counters(), **ages, **links, "states_sent": sent}
 
     def close(self) -> None:
-        for sub in [*self.subs, *self.peer_subs.values()]:
+        for sub in [*self.subs, *self.peer_subs.values(), *self.est_subs.values()]:
             sub.close()
         self.liveness.close()
         self.out.close()
+        self.est_out.close()
 
 
 def run(args: argparse.Namespace) -> int:

@@ -70,10 +70,22 @@ class RunConfig:
     duration_s: float = 200.0
     dt_s: float = 0.001
     rate_hz: float = 50.0
+    # The estimator's own rate (issue 15), a whole multiple of rate_hz; None: rate_hz.
+    # Information crosses one link per estimator step, so long rings need it faster.
+    estimator_rate_hz: float | None = None
     steady_from_s: float | None = None
     eps_rho_m: float = 0.0999
     eps_delta: float = 0.0199
     target_start_s: float = 0.0
+
+    @property
+    def estimator_hz(self) -> float:
+        return self.rate_hz if self.estimator_rate_hz is None else self.estimator_rate_hz
+
+    @property
+    def estimator_substeps(self) -> int:
+        """Estimator steps per control step."""
+        return round(self.estimator_hz / self.rate_hz)
 
 
 @dataclass(frozen=True)

@@ -265,10 +265,17 @@ def _run(t: Table) -> RunConfig:
     d = RunConfig()
     known_keys(t, d.__dataclass_fields__, "run")
     steady = t.get("steady_from_s")
+    rate_hz = positive(t, "rate_hz", "run", d.rate_hz)
+    est_hz = positive(t, "estimator_rate_hz", "run", rate_hz)
+    ratio = est_hz / rate_hz
+    if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9:
+        raise ScenarioError("run.estimator_rate_hz",
+                            f"must be a whole multiple of rate_hz ({rate_hz:g}), got {est_hz:g}")
     return RunConfig(
         duration_s=positive(t, "duration_s", "run", d.duration_s),
         dt_s=positive(t, "dt_s", "run", d.dt_s),
-        rate_hz=positive(t, "rate_hz", "run", d.rate_hz),
+        rate_hz=rate_hz,
+        estimator_rate_hz=None if "estimator_rate_hz" not in t else est_hz,
         steady_from_s=None if steady is None else number(t, "steady_from_s", "run"),
         eps_rho_m=positive(t, "eps_rho_m", "run", d.eps_rho_m),
         eps_delta=positive(t, "eps_delta", "run", d.eps_delta),

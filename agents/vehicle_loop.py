@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Protocol
@@ -112,7 +113,9 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         # Neighbouring followers tick half a period apart (Scenario.tick_group).
         group = scenario.tick_group(index) if role == "follower" else 0
         phase = 0.5 * period * group
-        ticker = Ticker(period, bus.now_s, phase_s=phase)
+        # A node with work between ticks (the follower's estimator) does it in the wait.
+        idle = getattr(node, "idle", None)
+        ticker = Ticker(period, bus.now_s, phase_s=phase, sleep=idle or time.sleep)
         watch, keeper = VehicleWatch(), OffboardKeeper(mav)
 
         def extra() -> dict[str, int]:

@@ -6,7 +6,7 @@ Runs `enclose run` as a real multi-process swarm for each case and prints:
   RSS per follower (max over the run), and the time from the command to all
   processes linked.
 
-Run: python bench/bench_swarm.py [--duration 120] [--cases paper ring16]
+Run: python bench/bench_swarm.py [--duration 120] [--cases paper ring16 ring32]
      [--estimators paper robust] [--out runs/bench-swarm]
 """
 
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -29,6 +30,15 @@ def rss_mb(pid: int) -> float | None:
     except OSError:
         return None
     return None
+
+
+def cpu_s(pid: int) -> float | None:
+    """User + system CPU seconds of a live process (/proc/<pid>/stat)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def run_case(scenario: str, duration_s: float, out: Path, estimator: str) -> dict[str, Any]:
@@ -48,6 +58,7 @@ def run_case(scenario: str, duration_s: float, out: Path, estimator: str) -> dic
     t_command = time.time()
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     peak: dict[str, float] = {}
+    cpu: dict[str, float] = {}
     try:
         while proc.poll() is None:
             pids_file = out / "logs" / "pids.json"
@@ -57,6 +68,9 @@ def run_case(scenario: str, duration_s: float, out: Path, estimator: str) -> dic
                         rss = rss_mb(pid)
                         if rss is not None:
                             peak[name] = max(peak.get(name, 0.0), rss)
+                    used = cpu_s(pid)
+                    if used is not None:  # the last reading before the process ends
+                        cpu[name] = used
             time.sleep(1.0)
     finally:
         if proc.poll() is None:
@@ -84,6 +98,11 @@ def run_case(scenario: str, duration_s: float, out: Path, estimator: str) -> dic
         "rss_follower_mb_max": max(peak.values()) if peak else None,
         "rss_follower_mb_mean": sum(peak.values()) / len(peak) if peak else None,
         "followers": len(followers),
+        # Whole-process CPU over its life (take-off and start-up included), % of one core.
+        "cpu_pct_of_core": {k: round(100.0 * v / (time.time() - t_command), 1)
+                            for k, v in sorted(cpu.items())},
+        "states_sent_per_s_per_follower": sum(f.get("states_sent", 0) for f in
+                                              followers.values()) / len(followers) / duration_s,
     }
 
 

@@ -42,6 +42,11 @@ def register(sub: Any) -> None:
         default="auto",
         help="numba: compiled loop (default when installed); numpy: reference functions",
     )
+    parser.add_argument(
+        "--estimator-dt", type=float, default=None,
+        help="estimator step in seconds, dividing --dt (default: the scenario's "
+             "estimator_rate_hz, as the followers run it; --dt if that is coarser)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_json_argument(parser)
     parser.set_defaults(func=_main)
@@ -72,23 +77,30 @@ def _main(args: argparse.Namespace) -> int:
     duration = scenario.run.duration_s if args.duration is None else args.duration
     if not 0.0 < dt < duration:
         raise ScenarioError("--dt", f"must satisfy 0 < dt < duration ({duration} s), got {dt}")
+    est_dt = args.estimator_dt
+    if est_dt is None:  # the followers' estimator rate, in whole steps of dt
+        est_dt = dt / max(1, round(dt * scenario.run.estimator_hz))
     out = args.out or Path("runs") / f"simulate-{scenario.name}"
     log.info(
-        "simulating %s: n=%d m=%d dt=%g s duration=%g s",
+        "simulating %s: n=%d m=%d dt=%g s estimator dt=%g s duration=%g s",
         scenario.name,
         scenario.n,
         scenario.m,
         dt,
+        est_dt,
         duration,
     )
     start = time.perf_counter()
     bar = ProgressBar("simulate", not args.no_progress)
-    series = simulate_lockstep(scenario, dt, duration, bar, engine=args.engine)
+    try:
+        series = simulate_lockstep(scenario, dt, duration, bar, args.engine, est_dt)
+    except ValueError as exc:
+        raise ScenarioError("--estimator-dt", str(exc)) from exc
     wall = time.perf_counter() - start
     info = RunInfo.from_scenario(scenario, "lockstep", duration)
-    write_run_outputs(
-        out, series, info, {"dt_s": dt, "engine": args.engine, "integration_wall_s": wall}
-    )
+    extra = {"dt_s": dt, "estimator_dt_s": est_dt, "engine": args.engine,
+             "integration_wall_s": wall}
+    write_run_outputs(out, series, info, extra)
     log.info("integration took %.2f s wall; outputs in %s", wall, out)
     announce(out.resolve(), f"enclose simulate {scenario.name}", args.json)
     return 0

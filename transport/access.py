@@ -9,7 +9,7 @@ names (mTLS, see transport.credentials), so a rule is bound to an authenticated 
   egress `declare_subscriber`, or publishers never route to it).
 - Everybody may send (egress) puts and tokens: a receiver decides, on its ingress.
 - Ingress puts and liveliness tokens are allowed per process, on its own keys only:
-  follower i its state, status and token; the simulator sensor and truth keys; targets
+  follower i its states (both rates), status and token; the simulator sensor and truth keys; targets
   and the recorder their status; only the launcher run control.
 Anything else, and any link without a swarm certificate, is denied.
 """
@@ -38,7 +38,7 @@ def own_keys(keys: SwarmKeys, name: str, n_followers: int) -> list[str]:
         i = int(idx)
     out = [keys.status(role, i), keys.alive(role, i)]
     if role == "follower":
-        out.append(keys.follower_state(i))
+        out += [keys.follower_state(i), keys.follower_estimate(i)]
     elif role == "sim":
         out += [keys.truth()] + [keys.sensor_targets(k) for k in range(n_followers)]
     elif role == "launcher":

@@ -57,6 +57,11 @@ class SwarmKeys:
     def follower_state(self, i: int) -> str:
         return f"{self.prefix}/follower/{_index(i, 'follower')}/state"
 
+    def follower_estimate(self, i: int) -> str:
+        """Follower i's state at its estimator's rate, between the states of its control
+        ticks (issue 15): same message, for its neighbours only (not recorded)."""
+        return f"{self.prefix}/follower/{_index(i, 'follower')}/est"
+
     def sensor_targets(self, i: int) -> str:
         """Where the simulator publishes the targets follower `i` observes."""
         return f"{self.prefix}/sensor/{_index(i, 'follower')}/targets"
@@ -97,6 +102,12 @@ class SwarmKeys:
 
     def everything(self) -> str:
         return f"{self.prefix}/**"
+
+    def recorded(self) -> tuple[str, ...]:
+        """What a recorder subscribes to: everything but the estimator-rate states."""
+        p = self.prefix
+        return (self.all_follower_states(), f"{p}/sensor/**", self.truth(), self.control(),
+                self.all_status(), self.all_alive())
 
 
 @dataclass(frozen=True)

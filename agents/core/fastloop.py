@@ -37,6 +37,7 @@ def _steps(
     k0: int,
     k1: int,
     dt: float,
+    substeps: int,
     cap: float,
     gains: FloatArray,
     tails: IntArray,
@@ -59,13 +60,10 @@ def _steps(
     k_e, inv_a1, k_z, inv_a2 = gains[0], 1.0 / gains[1], gains[2], 1.0 / gains[3]
     k_d, inv_a3, rho_d, w_d = gains[4], 1.0 / gains[5], gains[6], gains[7]
     rate = np.zeros((n, 2))
+    dt_e, cap_u = dt / substeps, cap / substeps  # cap is the estimator step's
     for k in range(k0, k1):
         r = phi + p_tilde[k]
-        rate[:, :] = 0.0
-        for e in range(tails.shape[0]):
-            i, j = tails[e], heads[e]
-            for d in range(2):
-                rate[i, d] += _limited(r[j, d] - r[i, d], inv_a1, k_e, cap * fractions[e])
+        _consensus(r, tails, heads, fractions, inv_a1, k_e, cap, rate)
         for i in range(n):
             s = succ[i]
             rel_x, rel_y = pos[k, i, 0] - r[i, 0], pos[k, i, 1] - r[i, 1]
@@ -73,15 +71,38 @@ def _steps(
             ux, uy = rel_x / rho, rel_y / rho
             sx, sy = pos[k, s, 0] - r[i, 0], pos[k, s, 1] - r[i, 1]
             gap = math.atan2(rel_x * sy - rel_y * sx, rel_x * sx + rel_y * sy) % TWO_PI
-            w_z = _limited(rho - rho_d, inv_a2, k_z, cap)
+            w_z = _limited(rho - rho_d, inv_a2, k_z, cap_u)
             delta = gap / angles[i] - 1.0
-            w_t = _limited(delta, inv_a3, k_d, 0.5 * cap * rho * angles[i]) + w_d * rho
+            w_t = _limited(delta, inv_a3, k_d, 0.5 * cap_u * rho * angles[i]) + w_d * rho
             cmd[k, i, 0] = -ux * w_z - uy * w_t + rate[i, 0] + p_tilde_rate[k, i, 0]
             cmd[k, i, 1] = -uy * w_z + ux * w_t + rate[i, 1] + p_tilde_rate[k, i, 1]
         est[k] = r
         if k + 1 < pos.shape[0]:
             pos[k + 1] = pos[k] + dt * cmd[k]
-            phi += dt * rate
+            phi += dt_e * rate
+            # Between control steps p~ moves linearly to its next sample.
+            for j in range(1, substeps):
+                r = phi + p_tilde[k] + (j * dt_e) * p_tilde_rate[k + 1]
+                _consensus(r, tails, heads, fractions, inv_a1, k_e, cap, rate)
+                phi += dt_e * rate
+
+
+def _consensus(
+    r: FloatArray,
+    tails: IntArray,
+    heads: IntArray,
+    fractions: FloatArray,
+    inv_a1: float,
+    k_e: float,
+    cap: float,
+    rate: FloatArray,
+) -> None:
+    """dPhi/dt of every follower into `rate` (cap: the estimator step's)."""
+    rate[:, :] = 0.0
+    for e in range(tails.shape[0]):
+        i, j = tails[e], heads[e]
+        for d in range(2):
+            rate[i, d] += _limited(r[j, d] - r[i, d], inv_a1, k_e, cap * fractions[e])
 
 
 StepsFn = Callable[..., None]
@@ -94,8 +115,9 @@ def compiled_steps() -> StepsFn:
         raise RuntimeError("numba is not installed")
     from numba import njit
 
-    global _limited  # _steps resolves _limited as a global: it must be compiled first
+    global _limited, _consensus  # _steps resolves them as globals: compiled first
     _limited = njit(cache=True)(_limited)
+    _consensus = njit(cache=True)(_consensus)
     return cast(StepsFn, njit(cache=True)(_steps))
 
 

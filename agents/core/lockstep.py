@@ -42,6 +42,7 @@ class _Loop:
 
     scenario: Scenario
     dt_s: float
+    substeps: int  # estimator steps per control step (the estimator's own, faster rate)
     p_tilde: FloatArray  # (k, n, 2) references from exact observations
     p_tilde_rate: FloatArray  # (k, n, 2) their finite-difference rates
     phi: FloatArray  # (n, 2) estimator state
@@ -50,14 +51,15 @@ class _Loop:
     cmd: FloatArray
 
     def numpy_steps(self, k0: int, k1: int) -> None:
-        s, dt = self.scenario, self.dt_s
+        s, dt, sub = self.scenario, self.dt_s, self.substeps
+        dt_e = dt / sub
         edges = EdgeOperators.from_adjacency(s.adjacency())
         params, gains = estimator_params(s), control_gains(s)
         succ, angles = np.asarray(s.successor), np.asarray(s.pattern.angles_rad)
         phi = self.phi
         for k in range(k0, k1):
             r = phi + self.p_tilde[k]
-            phi_rate = estimator_rate(r, edges, params, dt)
+            phi_rate = estimator_rate(r, edges, params, dt_e)
             p = self.pos[k]
             out = enclosing_control(
                 p, p[succ], r, phi_rate + self.p_tilde_rate[k], angles, gains, dt
@@ -66,7 +68,11 @@ class _Loop:
             self.cmd[k] = out.u_m_s
             if k + 1 < len(self.pos):
                 self.pos[k + 1] = p + dt * out.u_m_s
-                phi = phi + dt * phi_rate
+                phi = phi + dt_e * phi_rate
+                # Between control steps p~ moves linearly to its next sample.
+                for j in range(1, sub):
+                    r = phi + self.p_tilde[k] + (j * dt_e) * self.p_tilde_rate[k + 1]
+                    phi = phi + dt_e * estimator_rate(r, edges, params, dt_e)
         self.phi[:] = phi
 
     def numba_steps(self, k0: int, k1: int) -> None:
@@ -81,7 +87,8 @@ class _Loop:
             k0,
             k1,
             self.dt_s,
-            rate_cap(g.step_fraction, self.dt_s),
+            self.substeps,
+            rate_cap(g.step_fraction, self.dt_s / self.substeps),
             gains,
             tails,
             heads,
@@ -103,10 +110,17 @@ def simulate_lockstep(
     duration_s: float,
     progress: ProgressFn | None = None,
     engine: str = "auto",
+    estimator_dt_s: float | None = None,
 ) -> RunSeries:
-    """Integrate the closed loop for `duration_s` at step `dt_s`; every step is recorded."""
+    """Integrate the closed loop for `duration_s` at step `dt_s`; every step is recorded.
+
+    `estimator_dt_s` (default `dt_s`) runs the estimator at its own, faster rate: it
+    must divide `dt_s`.  Information then crosses a link per estimator step, as in
+    the followers whose estimator advances on message arrival.
+    """
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    substeps = estimator_substeps(dt_s, estimator_dt_s)
     use_numba = engine == "numba" or (engine == "auto" and fastloop.HAVE_NUMBA)
     steps = round(duration_s / dt_s)
     t = np.arange(steps + 1, dtype=np.float64) * dt_s
@@ -120,6 +134,7 @@ def simulate_lockstep(
     loop = _Loop(
         scenario,
         dt_s,
+        substeps,
         p_tilde,
         p_tilde_rate,
         np.zeros((scenario.n, 2)),
@@ -134,3 +149,15 @@ def simulate_lockstep(
         if progress is not None:
             progress(k1 / (steps + 1))
     return RunSeries(t, loop.pos, loop.est, loop.cmd, targets)
+
+
+def estimator_substeps(dt_s: float, estimator_dt_s: float | None) -> int:
+    """How many estimator steps of `estimator_dt_s` make one control step of `dt_s`."""
+    if estimator_dt_s is None:
+        return 1
+    substeps = round(dt_s / estimator_dt_s)
+    if estimator_dt_s <= 0.0 or substeps < 1 or abs(substeps * estimator_dt_s - dt_s) > 1e-9:
+        raise ValueError(
+            f"estimator_dt_s must divide dt_s ({dt_s:g} s) into whole steps, got {estimator_dt_s:g}"
+        )
+    return substeps

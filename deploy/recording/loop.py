@@ -73,7 +73,9 @@ class Recorder:
         self.view_errors = 0
         self._stamper = Stamper(f"{ROLE}-{index}", bus.now_s)
         self._status = bus.declare_publisher(self.keys.status(ROLE, index), Congestion.DROP)
-        self._sub = bus.subscribe(self.keys.everything(), QUEUE_CAPACITY)
+        # Everything but the followers' estimator-rate states (issue 15): up to 400 per
+        # second per follower, for their neighbours; the 50 Hz states carry the same estimate.
+        self._subs = [bus.subscribe(k, QUEUE_CAPACITY) for k in self.keys.recorded()]
         # After the subscription: what arrives while we read back waits in its queue.
         self.carried: Counter[str] = Counter()
         self._carry_on()
@@ -95,7 +97,7 @@ class Recorder:
         members = self.liveness.members(self.bus.now_s())
         if members and (not self.membership or members != self.membership[-1][1]):
             self.membership.append((self.bus.now_s(), members))
-        inbound = self.decoder.drain(self._sub)
+        inbound = [item for sub in self._subs for item in self.decoder.drain(sub)]
         for item in inbound:
             self._record(item.received.key, item.message, item.received.recv_stamp_s)
             self._view_add(item.message, item.received.recv_stamp_s)

@@ -18,7 +18,8 @@ KEYS = SwarmKeys("acl")
 
 def test_each_process_owns_only_its_keys() -> None:
     assert set(own_keys(KEYS, "follower-2", 4)) == {
-        KEYS.follower_state(2), KEYS.status("follower", 2), KEYS.alive("follower", 2)}
+        KEYS.follower_state(2), KEYS.follower_estimate(2), KEYS.status("follower", 2),
+        KEYS.alive("follower", 2)}
     sim = own_keys(KEYS, "sim", 4)
     assert KEYS.truth() in sim and KEYS.sensor_targets(3) in sim and KEYS.control() not in sim
     assert KEYS.control() in own_keys(KEYS, "launcher", 4)
