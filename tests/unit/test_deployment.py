@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from agents.errors import ConfigError
+from agents.scenario_file import load_scenario
 from deploy.deployment import dump_deployment, parse_deployment, split_over_hosts
 from deploy.host_launch import _links
-from agents.scenario_file import load_scenario
 
 pytestmark = pytest.mark.timeout(30)
 

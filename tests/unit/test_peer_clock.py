@@ -11,12 +11,12 @@ from dataclasses import dataclass, field
 import pytest
 
 from agents.errors import ConfigError
+from transport.bus import Received
+from transport.checks import DEFAULT_LIMITS
 from transport.clock import SkewedClock, clock_env, process_clock
 from transport.clock_sync import ClockExchange
 from transport.codec import decode, encode
 from transport.decoder import Decoder
-from transport.bus import Received
-from transport.checks import DEFAULT_LIMITS
 from transport.messages import ClockProbe, FollowerState, Header, RunControl
 from transport.peer_clock import ClockBook, PeerClock, exchange_sample
 
