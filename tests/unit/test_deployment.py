@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from agents.errors import ConfigError
@@ -11,7 +13,7 @@ from deploy.host_launch import _links
 
 pytestmark = pytest.mark.timeout(30)
 
-DOC = {"swarm": "s", "scenario": "paper", "hosts": [
+DOC: dict[str, Any] = {"swarm": "s", "scenario": "paper", "hosts": [
     {"name": "ground", "address": "192.168.1.10",
      "processes": ["launcher", "sim", "recorder", "target-0", "target-1"]},
     {"name": "air", "address": "192.168.1.11", "router_port": 7448,
@@ -36,7 +38,7 @@ def test_a_deployment_places_every_process_once_and_round_trips() -> None:
 def test_bad_fields_are_named(change: object, field: str) -> None:
     import copy
     doc = copy.deepcopy(DOC)
-    change(doc)  # type: ignore[operator]
+    change(doc)
     with pytest.raises(ConfigError, match=field.replace("[", r"\[").replace("]", r"\]")):
         parse_deployment(doc)
 
@@ -44,10 +46,10 @@ def test_bad_fields_are_named(change: object, field: str) -> None:
 def test_missing_or_twice_placed_processes_are_errors() -> None:
     import copy
     doc = copy.deepcopy(DOC)
-    doc["hosts"][1]["processes"] = ["follower-0", "follower-0"]  # type: ignore[index]
+    doc["hosts"][1]["processes"] = ["follower-0", "follower-0"]
     with pytest.raises(ConfigError, match="twice"):
         parse_deployment(doc).check(4, 2)
-    doc["hosts"][1]["processes"] = ["follower-0"]  # type: ignore[index]
+    doc["hosts"][1]["processes"] = ["follower-0"]
     with pytest.raises(ConfigError, match="not placed: follower-1"):
         parse_deployment(doc).check(4, 2)
 
@@ -63,8 +65,8 @@ def test_inter_host_delay_goes_on_follower_links_across_hosts_only() -> None:
     import copy
     doc = copy.deepcopy(DOC)
     doc["inter_host_delay_ms"] = 10.0
-    doc["hosts"][1]["processes"] = ["follower-0", "follower-1"]  # type: ignore[index]
-    doc["hosts"][0]["processes"] += ["follower-2", "follower-3"]  # type: ignore[index]
+    doc["hosts"][1]["processes"] = ["follower-0", "follower-1"]
+    doc["hosts"][0]["processes"] += ["follower-2", "follower-3"]
     text = _links(parse_deployment(doc), load_scenario("paper"))
     assert text.count("[[network.links]]") == 8  # 2 x 2 pairs, both ways
     assert "from = 1\nto = 3" in text and "from = 1\nto = 2" not in text
