@@ -62,6 +62,11 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
         help="this process's identity file (transport.credentials): mTLS + access control; "
         "without it the session is unauthenticated",
     )
+    parser.add_argument("--mode", choices=("peer", "client"), default="peer",
+                        help="Zenoh mode: peer (one host) or client of this host's router")
+    parser.add_argument("--clock-id", default=None, metavar="SENDER",
+                        help="estimate peers' clock offsets, probing as SENDER (e.g. "
+                        "follower-0): for swarms over hosts whose clocks differ")
     parser.add_argument("--log-level", default="INFO")
     add_network_arguments(parser)
 
@@ -80,8 +85,12 @@ def open_bus(args: argparse.Namespace) -> Bus:
         user_config_path=args.zenoh_config,
         link=load_run_scenario(args).network.link,
         identity=None if args.credentials is None else Identity.load(args.credentials),
+        mode=getattr(args, "mode", "peer"),
     )
-    return ZenohBus(cfg)
+    bus = ZenohBus(cfg)
+    if getattr(args, "clock_id", None):
+        bus.start_clock_sync(SwarmKeys(args.swarm), args.clock_id)
+    return bus
 
 
 def process_main(

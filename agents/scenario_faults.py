@@ -98,6 +98,8 @@ def _seconds(raw: Any, where: str, required: bool) -> float | None:
 
 
 def _process(raw: Any, where: str, n: int, m: int) -> str:
+    if isinstance(raw, str) and re.fullmatch(r"router-\d+", raw):
+        return raw  # the Zenoh router of host K (0-based, deploy.deployment); runs with --hosts
     match = _TARGET_RE.match(raw) if isinstance(raw, str) else None
     if match is None:
         raise ScenarioError(where, f"must be follower-K, target-K, recorder or sim, got {raw!r}")

@@ -87,12 +87,17 @@ def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
                         help="vehicle v listens on BASE+v (PX4 SITL: 14580)")
     parser.add_argument("--signing-key", default=None, metavar="FILE",
                         help="32-byte MAVLink 2 signing key: sign everything sent to the vehicle")
+    parser.add_argument("--mav-vehicle-host", default=None, metavar="ADDR",
+                        help="the vehicle's address when it is on another host (default: "
+                        "127.0.0.1); the adapter then listens on every address")
 
 
 def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, vehicle: int,
         make_node: NodeFactory) -> int:
     """Take off, declare the process linked, tick until stopped; returns the exit code."""
     cfg = AdapterConfig.px4_sitl(vehicle, args.mav_local_base, args.mav_vehicle_base)
+    if getattr(args, "mav_vehicle_host", None):  # a companion computer off the vehicle's host
+        cfg = replace(cfg, remote_host=args.mav_vehicle_host, local_host="0.0.0.0")
     if args.signing_key is not None:  # link id: the vehicle's number, one stream per agent
         cfg = replace(cfg, signing_key=load_key(args.signing_key), signing_link_id=vehicle & 0xFF)
     keys = SwarmKeys(args.swarm)

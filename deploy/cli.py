@@ -18,6 +18,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "deploy.cmd_sim",
     "deploy.sweep",
     "deploy.run_secrets",
+    "deploy.cmd_host",
 )
 
 

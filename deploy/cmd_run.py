@@ -15,6 +15,7 @@ from agents.scenario_file import load_scenario
 from deploy.launch import Launch
 from deploy.live_args import add_live_arguments
 from deploy.netns import add_netns_arguments, netns_requested, run_in_namespace
+from deploy.netns_hosts import add_hosts_arguments, run_on_hosts
 from deploy.restarts import add_supervision_arguments
 from deploy.verdict import add_json_argument
 
@@ -48,6 +49,7 @@ def register(sub: Any) -> None:
     add_supervision_arguments(p)
     add_network_arguments(p)
     add_netns_arguments(p)
+    add_hosts_arguments(p)
     p.set_defaults(func=_main)
 
 
@@ -66,6 +68,8 @@ def _main(args: argparse.Namespace) -> int:
     swarm = args.swarm or f"{scenario.name}-{stamp}".replace("_", "-")
     previous = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as cleanly as Ctrl-C
     try:
+        if args.hosts is not None:  # K namespaced hosts: deploy.netns_hosts
+            return run_on_hosts(args, out, swarm, duration)
         if netns_requested(args):  # the same run, launched again inside a lossy namespace
             return run_in_namespace(args, out, swarm, duration)
         return Launch(scenario, args, out, swarm, duration).execute()

@@ -160,18 +160,10 @@ class Launch:
         )
         t0 = time.monotonic()
         interrupted = False
-        s = self.scenario
-        self.secrets = RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure)
+        self.secrets = self.make_secrets()
         try:
             self.start_all()
-            with ZenohBus(
-                ZenohConfig(
-                    connect=(self.endpoint,),
-                    user_config_path=self.args.zenoh_config,
-                    link=self.scenario.network.link,
-                    identity=self.secrets.identity("launcher"),
-                )
-            ) as bus:
+            with self.open_bus() as bus:
                 self.board.subscription = bus.subscribe(self.keys.all_status())
                 self.wait_linked(bus, t0)
                 self.timings["link_s"] = time.monotonic() - t0
@@ -204,6 +196,16 @@ class Launch:
             self.sup.stop_all()
             self.write_launch()
         return self.exit_code(interrupted)
+
+    def make_secrets(self) -> RunSecrets:
+        s = self.scenario
+        return RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure)
+
+    def open_bus(self) -> ZenohBus:
+        """The launcher's own session (deploy.host_launch: a client of its host's router)."""
+        return ZenohBus(ZenohConfig(
+            connect=(self.endpoint,), user_config_path=self.args.zenoh_config,
+            link=self.scenario.network.link, identity=self.secrets.identity("launcher")))
 
     def fly(self, bus: Bus) -> None:
         start = bus.now_s() + START_DELAY_S

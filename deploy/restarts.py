@@ -27,7 +27,7 @@ from deploy.supervisor import Child, Supervisor
 
 log = logging.getLogger("enclose.run")
 RESTART_POLICIES = ("on-failure", "never")
-RESTARTABLE = ("follower-", "target-", "recorder", "sim")
+RESTARTABLE = ("follower-", "target-", "recorder", "sim", "router-")
 EXIT_SOMETHING_DIED = 3  # the run went to its end, but a process died during it
 
 

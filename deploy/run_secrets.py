@@ -29,12 +29,13 @@ class RunSecrets:
     cred_dir: Path | None
 
     @classmethod
-    def make(cls, out: Path, keys: SwarmKeys, n: int, m: int, insecure: bool) -> RunSecrets:
+    def make(cls, out: Path, keys: SwarmKeys, n: int, m: int, insecure: bool,
+             n_routers: int = 0) -> RunSecrets:
         if insecure:
             log.warning("--insecure: Zenoh is unauthenticated and MAVLink unsigned; any "
                         "process on this machine can join the swarm and command its vehicles")
             return cls(None)
-        cred_dir = make_credentials(out / "credentials", keys, n, m)
+        cred_dir = make_credentials(out / "credentials", keys, n, m, n_routers=n_routers)
         write_key(cred_dir / SIGNING_KEY_FILE)
         return cls(cred_dir)
 
@@ -56,13 +57,16 @@ def register(sub: Any) -> None:
     p.add_argument("out_dir", type=Path, help="directory to create (0700)")
     p.add_argument("scenario", nargs="?", default=None, help="scenario (default: paper)")
     p.add_argument("--swarm", default="enclose", help="swarm name on the bus (key prefix)")
+    p.add_argument("--routers", type=int, default=0, metavar="K",
+                   help="also certificates router-0..router-K-1, one per host (enclose host)")
     p.set_defaults(func=_keys_main)
 
 
 def _keys_main(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     keys = SwarmKeys(args.swarm)
-    out = make_credentials(args.out_dir, keys, scenario.n, scenario.m, keep_ca_key=True)
+    out = make_credentials(args.out_dir, keys, scenario.n, scenario.m, keep_ca_key=True,
+                           n_routers=args.routers)
     write_key(out / SIGNING_KEY_FILE)
     print(f"credentials for swarm {keys.swarm} ({scenario.n} followers, {scenario.m} targets) "
           f"in {out}: copy ca.pem, acl.json and <name>.{{json,pem,key}} to the host of process "

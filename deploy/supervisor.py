@@ -52,9 +52,12 @@ class Supervisor:
     children: list[Child] = field(default_factory=list)
     clock: Clock = time.monotonic
 
-    def start(self, name: str, module: str, args: Sequence[str]) -> Child:
+    def start(self, name: str, module: str, args: Sequence[str],
+              prefix: Sequence[str] = ()) -> Child:
+        """Start `python -m module args`, after `prefix` (e.g. `ip netns exec NS env K=V`)."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        child = Child(name, [sys.executable, "-m", module, *args], self.log_dir / f"{name}.log")
+        argv = [*prefix, sys.executable, "-m", module, *args]
+        child = Child(name, argv, self.log_dir / f"{name}.log")
         self._spawn(child, "wb")
         self.children.append(child)
         self._write_pids()

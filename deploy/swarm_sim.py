@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         rate_hz=args.rate_hz,
         telemetry_hz=args.telemetry_hz,
         flavour=scenario.vehicle.flavour,
+        host=args.mav_host,
         listen_base_port=args.base_port,
         send_base_port=args.send_base_port,
         signing_key=None if args.signing_key is None else load_key(args.signing_key),
@@ -189,6 +190,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of the observation noise")
     parser.add_argument("--base-port", type=int, default=14580)
+    parser.add_argument("--mav-host", default="127.0.0.1", metavar="ADDR",
+                        help="address the vehicles listen on (another host's agents: its "
+                        "own address, or 0.0.0.0); telemetry also goes to whoever sends")
     parser.add_argument("--send-base-port", type=int, default=14540)
     parser.add_argument("--signing-key", default=None, metavar="FILE",
                         help="MAVLink 2 signing key the vehicles enforce")

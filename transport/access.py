@@ -23,20 +23,24 @@ READ_MESSAGES = ["declare_subscriber", "declare_liveliness_subscriber", "livelin
 WRITE_MESSAGES = ["put", "liveliness_token"]
 
 
-def process_names(n_followers: int, n_targets: int) -> list[str]:
-    """Every process of a swarm run, by the name its certificate carries."""
+def process_names(n_followers: int, n_targets: int, n_routers: int = 0) -> list[str]:
+    """Every process of a swarm run, by the name its certificate carries; `router-<k>` is
+    the Zenoh router of host k in a swarm over several hosts (deploy.hosts)."""
     return (["launcher", "sim", "recorder"] + [f"follower-{i}" for i in range(n_followers)]
-            + [f"target-{j}" for j in range(n_targets)])
+            + [f"target-{j}" for j in range(n_targets)]
+            + [f"router-{k}" for k in range(n_routers)])
 
 
 def own_keys(keys: SwarmKeys, name: str, n_followers: int) -> list[str]:
     """The keys process `name` may publish on (put, liveliness token)."""
     role, _, idx = name.rpartition("-")
+    if role == "router":  # relays everybody's puts and tokens: trusted like the network
+        return [keys.everything()]
     if name in ("launcher", "sim", "recorder"):
         role, i = name, 0
     else:
         i = int(idx)
-    out = [keys.status(role, i), keys.alive(role, i)]
+    out = [keys.status(role, i), keys.alive(role, i), keys.clock(role, i)]
     if role == "follower":
         out += [keys.follower_state(i), keys.follower_estimate(i)]
     elif role == "sim":
@@ -51,9 +55,12 @@ def _rule(rule_id: str, messages: list[str], flows: list[str], key_exprs: list[s
             "key_exprs": key_exprs}
 
 
-def access_control(keys: SwarmKeys, n_followers: int, n_targets: int) -> dict[str, object]:
-    """The `access_control` config section for a swarm of n followers and m targets."""
-    names = process_names(n_followers, n_targets)
+def access_control(keys: SwarmKeys, n_followers: int, n_targets: int,
+                   n_routers: int = 0) -> dict[str, object]:
+    """The `access_control` config section for a swarm of n followers and m targets
+    (and its hosts' routers: each checks its own clients' puts on ingress, and the
+    clients and other routers accept what a router relays)."""
+    names = process_names(n_followers, n_targets, n_routers)
     rules = [_rule("read", READ_MESSAGES, ["ingress", "egress"], [keys.everything()]),
              _rule("send", WRITE_MESSAGES, ["egress"], [keys.everything()])]
     subjects: list[dict[str, object]] = [{"id": "swarm", "cert_common_names": names}]

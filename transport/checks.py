@@ -62,7 +62,7 @@ def _owner(key: str) -> str | None:
         return "sim-0"
     if info.kind == "control":
         return "launcher-0"
-    if info.kind == "status":
+    if info.kind in ("status", "clock"):
         return f"{info.role}-{info.index}"
     return None
 

@@ -24,6 +24,7 @@ from agents.errors import CodecError
 from transport.messages import (
     PROCESS_STATES,
     RUN_COMMANDS,
+    ClockProbe,
     FollowerState,
     Header,
     Message,
@@ -43,7 +44,7 @@ _HEADER_LEN = 5
 @dataclass(frozen=True)
 class Field:
     name: str
-    kind: str  # int float opt_float str state command vec2 vec2s vec3s counters flows
+    kind: str  # int float opt_float str state command vec2 vec2s vec3s counters flows echoes
     since: int = 1
 
 
@@ -71,6 +72,7 @@ SCHEMAS: dict[type, tuple[int, tuple[Field, ...]]] = {
         Field("command", "command"), Field("start_stamp_s", "float"),
         Field("duration_s", "float"),
     )),
+    ClockProbe: (6, (Field("epoch_s", "float"), Field("echoes", "echoes"))),
 }
 _BY_TAG = {tag: (cls, fields) for cls, (tag, fields) in SCHEMAS.items()}
 
@@ -118,6 +120,11 @@ def _flow(v: Any, name: str) -> tuple[int, float, float, float, float]:
     return (_int(j, name), _float(fx, name), _float(fy, name), _float(rx, name), _float(ry, name))
 
 
+def _echo(v: Any, name: str) -> tuple[str, float, float]:
+    peer, t1, t2 = _seq(v, name, 3)
+    return (_str(peer, name), _float(t1, name), _float(t2, name))
+
+
 def _counters(v: Any, name: str) -> dict[str, int]:
     if not isinstance(v, dict) or len(v) > _MAX_ITEMS:
         raise _fail("type", f"{name} must be a map")
@@ -153,11 +160,13 @@ def _check(kind: str, v: Any, name: str) -> Any:
         return _counters(v, name)
     if kind == "flows":
         return tuple(_flow(x, name) for x in _seq(v, name))
+    if kind == "echoes":
+        return tuple(_echo(x, name) for x in _seq(v, name))
     raise AssertionError(f"unknown field kind {kind}")
 
 
 def _wire(kind: str, v: Any) -> Any:
-    if kind in ("vec2", "vec2s", "vec3s", "flows"):
+    if kind in ("vec2", "vec2s", "vec3s", "flows", "echoes"):
         return [list(x) for x in v] if kind != "vec2" else list(v)
     return v
 

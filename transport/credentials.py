@@ -101,7 +101,7 @@ def _cert(name: str, key: ec.EllipticCurvePrivateKey, issuer: x509.Name,
 
 
 def make_credentials(out_dir: Path, keys: SwarmKeys, n_followers: int, n_targets: int,
-                     keep_ca_key: bool = False) -> Path:
+                     keep_ca_key: bool = False, n_routers: int = 0) -> Path:
     """Generate a fresh CA, a certificate per process and the ACL into `out_dir`."""
     out_dir.mkdir(parents=True, exist_ok=True)
     os.chmod(out_dir, 0o700)
@@ -111,9 +111,9 @@ def make_credentials(out_dir: Path, keys: SwarmKeys, n_followers: int, n_targets
     _write_private(out_dir / "ca.pem", ca_cert.public_bytes(serialization.Encoding.PEM))
     if keep_ca_key:
         _write_private(out_dir / "ca.key", _key_pem(ca_key))
-    acl = access_control(keys, n_followers, n_targets)
+    acl = access_control(keys, n_followers, n_targets, n_routers)
     _write_private(out_dir / "acl.json", json.dumps(acl, indent=1).encode())
-    add_identities(out_dir, ca_key, ca_cert, process_names(n_followers, n_targets))
+    add_identities(out_dir, ca_key, ca_cert, process_names(n_followers, n_targets, n_routers))
     return out_dir
 
 

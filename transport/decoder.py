@@ -23,6 +23,7 @@ from transport.checks import Limits, check
 from transport.codec import decode
 from transport.keys import parse_key
 from transport.messages import FollowerState, Message, TargetObservation
+from transport.peer_clock import PROCESS_BOOK, ClockBook
 
 
 @dataclass(frozen=True)
@@ -54,8 +55,9 @@ class Decoder:
     """Decodes, validates and counts; `expect` limits the accepted message types."""
 
     def __init__(self, expect: tuple[type, ...] | None = None,
-                 limits: Limits | None = None) -> None:
+                 limits: Limits | None = None, clocks: ClockBook = PROCESS_BOOK) -> None:
         self.expect = expect
+        self.clocks = clocks  # stamps are mapped onto our clock (transport.peer_clock)
         self.limits = limits  # with limits, implausible messages are dropped (transport.checks)
         self.dropped: Counter[str] = Counter()
         self.accepted = 0
@@ -81,6 +83,7 @@ class Decoder:
         if not _key_index_ok(msg, rec.key):
             self.dropped["key_mismatch"] += 1
             return None
+        msg = self.clocks.to_local(msg)
         if self.limits is not None:
             reason = check(msg, rec.key, rec.recv_stamp_s, self.limits)
             if reason is not None:

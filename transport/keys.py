@@ -81,6 +81,13 @@ class SwarmKeys:
         return f"{self.prefix}/alive/{validate_name(role, 'role')}/{_index(i, 'index')}"
 
     # Wildcards, for recorders, launchers and tests.
+    def clock(self, role: str, i: int) -> str:
+        """Clock probes of process (role, i) (transport.clock_sync)."""
+        return f"{self.prefix}/clock/{validate_name(role, 'role')}/{_index(i, 'index')}"
+
+    def all_clock(self) -> str:
+        return f"{self.prefix}/clock/**"
+
     def all_follower_states(self) -> str:
         return f"{self.prefix}/follower/*/state"
 
@@ -130,7 +137,7 @@ def parse_key(key: str) -> KeyInfo | None:
         return KeyInfo(swarm, kind)
     if kind in ("follower", "sensor") and len(rest) == 2 and rest[0].isdigit():
         return KeyInfo(swarm, kind, "follower", int(rest[0]))
-    if kind in ("status", "alive") and len(rest) == 2 and rest[1].isdigit():
+    if kind in ("status", "alive", "clock") and len(rest) == 2 and rest[1].isdigit():
         return KeyInfo(swarm, kind, rest[0], int(rest[1]))
     return None
 

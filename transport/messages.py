@@ -25,6 +25,7 @@ from transport.bus import Clock
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
 LinkFlow = tuple[int, float, float, float, float]
+ClockEcho = tuple[str, float, float]  # (peer sender id, its probe's stamp, our receive time)
 
 PROCESS_STATES = ("starting", "linked", "running", "flying", "stopping", "done", "failed")
 
@@ -137,4 +138,15 @@ class RunControl:
     duration_s: float  # experiment length after start
 
 
-Message = FollowerState | TargetObservation | TruthSnapshot | ProcessStatus | RunControl
+@dataclass(frozen=True)
+class ClockProbe:
+    """One process's side of the NTP-style exchange that estimates peer clock offsets
+    (transport.clock_sync): sent a few times a second; the header stamp is the send time."""
+
+    header: Header
+    epoch_s: float  # sender's clock when its process started: a new value means a restart
+    echoes: tuple[ClockEcho, ...] = ()  # the newest probe heard from each peer
+
+
+Message = (FollowerState | TargetObservation | TruthSnapshot | ProcessStatus | RunControl
+           | ClockProbe)

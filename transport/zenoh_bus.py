@@ -9,14 +9,15 @@ everything and closes the session; use the bus as a context manager.
 from __future__ import annotations
 
 import logging
-import time
 from typing import TypeVar, Union
 
 import zenoh
 
 from agents.errors import TransportError
 from transport.bus import DEFAULT_CAPACITY, AliveEvent, BusBase, Clock, Congestion, Received
-from transport.keys import validate_concrete
+from transport.clock import process_clock
+from transport.clock_sync import ClockSync
+from transport.keys import SwarmKeys, validate_concrete
 from transport.zenoh_config import ZenohConfig, build_zenoh_config
 
 log = logging.getLogger(__name__)
@@ -120,10 +121,11 @@ class ZenohAliveWatch:
 class ZenohBus(BusBase):
     """A Zenoh session configured by `ZenohConfig`."""
 
-    def __init__(self, cfg: ZenohConfig, clock: Clock = time.time) -> None:
+    def __init__(self, cfg: ZenohConfig, clock: Clock | None = None) -> None:
         super().__init__()
         self.cfg = cfg
-        self._clock = clock
+        self._clock = process_clock() if clock is None else clock  # transport.clock
+        self.clock_sync: ClockSync | None = None
         self._owned: list[_Owned] = []
         try:
             self.session = zenoh.open(build_zenoh_config(cfg))
@@ -169,9 +171,17 @@ class ZenohBus(BusBase):
         """Zenoh ids of the peers this session is linked to right now."""
         return [str(z) for z in self.session.info.peers_zid()]
 
+    def start_clock_sync(self, keys: SwarmKeys, sender_id: str) -> ClockSync:
+        """Estimate peers' clock offsets from here on (transport.clock_sync)."""
+        if self.clock_sync is None:
+            self.clock_sync = ClockSync(self, keys, sender_id)
+        return self.clock_sync
+
     def close(self) -> None:
         if self.closed:
             return
+        if self.clock_sync is not None:
+            self.clock_sync.close()
         self.closed = True
         for obj in reversed(self._owned):
             try:

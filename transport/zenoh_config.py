@@ -85,10 +85,20 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
     if not (user and _is_set(config, default, "mode")):
         _put(config, "mode", cfg.mode)
     proto = "tls" if cfg.identity is not None else cfg.link
-    if cfg.listen or not (user and _is_set(config, default, "listen/endpoints")):
+    # A client listens nowhere: it reaches the swarm through its router only.
+    if cfg.mode == "client" and not cfg.listen:
+        _put(config, "listen/endpoints", [])
+    elif cfg.listen or not (user and _is_set(config, default, "listen/endpoints")):
         _put(config, "listen/endpoints", list(cfg.listen or (loopback_endpoint(0, proto),)))
     if cfg.connect:
         _put(config, "connect/endpoints", list(cfg.connect))
+    if cfg.mode != "peer":
+        # A client waits at open for its host's router, and both clients and routers
+        # survive a router's restart: they keep retrying every 0.25-1 s (Zenoh: 1-4 s).
+        _put(config, "connect/retry", {"period_init_ms": 250, "period_max_ms": 1000,
+                                       "period_increase_factor": 2})
+    if cfg.mode == "client":
+        _put(config, "connect/timeout_ms", -1)
     if not (user and _is_set(config, default, "scouting/multicast/enabled")):
         _put(config, "scouting/multicast/enabled", False)
     _put(config, "timestamping/enabled", True)

@@ -19,14 +19,24 @@ KEYS = SwarmKeys("acl")
 def test_each_process_owns_only_its_keys() -> None:
     assert set(own_keys(KEYS, "follower-2", 4)) == {
         KEYS.follower_state(2), KEYS.follower_estimate(2), KEYS.status("follower", 2),
-        KEYS.alive("follower", 2)}
+        KEYS.alive("follower", 2), KEYS.clock("follower", 2)}
     sim = own_keys(KEYS, "sim", 4)
     assert KEYS.truth() in sim and KEYS.sensor_targets(3) in sim and KEYS.control() not in sim
     assert KEYS.control() in own_keys(KEYS, "launcher", 4)
     assert set(own_keys(KEYS, "recorder", 4)) == {KEYS.status("recorder", 0),
-                                                  KEYS.alive("recorder", 0)}
+                                                  KEYS.alive("recorder", 0),
+                                                  KEYS.clock("recorder", 0)}
     assert set(own_keys(KEYS, "target-1", 4)) == {KEYS.status("target", 1),
-                                                  KEYS.alive("target", 1)}
+                                                  KEYS.alive("target", 1), KEYS.clock("target", 1)}
+
+
+def test_routers_relay_every_swarm_key_but_are_named_apart() -> None:
+    acl = access_control(KEYS, 2, 1, n_routers=2)
+    rules = {r["id"]: r for r in acl["rules"]}  # type: ignore[attr-defined]
+    assert rules["own-router-1"]["key_exprs"] == [KEYS.everything()]
+    assert rules["own-router-1"]["flows"] == ["ingress"]
+    names = acl["subjects"][0]["cert_common_names"]  # type: ignore[index]
+    assert "router-0" in names and "router-1" in names
 
 
 def test_default_deny_and_ingress_puts_only_per_process() -> None:

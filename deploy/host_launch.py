@@ -1,0 +1,153 @@
+"""The part of a swarm that lives on some hosts of a deployment (deploy.deployment).
+
+`Launch` (one host, peers on loopback) is the special case; here every host runs a Zenoh
+router (`deploy.router`), the host's processes are its clients (`--mode client`), and
+every process estimates its peers' clock offsets (`--clock-id`, transport.clock_sync),
+since hosts do not share a clock.  The host of the `launcher` also waits for the whole
+swarm, sends the start and stop words and reports; other hosts run their processes
+until those stop (the stop word) or this launcher is stopped.
+
+A host given a network namespace in the deployment (test hosts, `enclose run --hosts K`)
+has its processes started with `ip netns exec NS env ENCLOSE_CLOCK_OFFSET_S=...`: one
+launcher then supervises several namespaced hosts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+
+from agents.scenario import Scenario
+from agents.scenario_file import load_scenario
+from deploy.deployment import Deployment
+from deploy.launch import Launch
+from deploy.run_secrets import RunSecrets
+from transport.clock import clock_env
+from transport.zenoh_bus import ZenohBus
+from transport.zenoh_config import ZenohConfig
+
+log = logging.getLogger("enclose.host")
+IMPAIRED_SCENARIO = "scenario-hosts.toml"
+
+
+class HostLaunch(Launch):
+    def __init__(self, dep: Deployment, local: tuple[int, ...], args: argparse.Namespace,
+                 out: Path, duration_s: float) -> None:
+        self.dep, self.local = dep, local
+        scenario = load_scenario(dep.scenario)
+        dep.check(scenario.n, scenario.m)
+        if dep.inter_host_delay_ms > 0:  # at each follower's receiving end (impairment)
+            out.mkdir(parents=True, exist_ok=True)
+            path = out / IMPAIRED_SCENARIO
+            path.write_text(_source(dep.scenario) + _links(dep, scenario))
+            dep_scenario = str(path)
+        else:
+            dep_scenario = dep.scenario
+        args.scenario = dep_scenario
+        super().__init__(load_scenario(dep_scenario), args, out, dep.swarm, duration_s)
+        self.coordinator = dep.host_of("launcher") in local
+        self.sim_address = dep.hosts[dep.host_of("sim")].address
+
+    def make_secrets(self) -> RunSecrets:
+        if self.args.credentials_dir is not None:
+            return RunSecrets(Path(self.args.credentials_dir).resolve())
+        s = self.scenario
+        return RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure,
+                               n_routers=len(self.dep.hosts))
+
+    def prefix(self, k: int) -> list[str]:
+        host = self.dep.hosts[k]
+        env = ["env", *(f"{a}={b}" for a, b in
+                        clock_env(host.clock_offset_s, host.clock_drift_ppm).items())]
+        return (["ip", "netns", "exec", host.netns] if host.netns else []) + env
+
+    def client_args(self, name: str) -> list[str]:
+        k = self.dep.host_of(name)
+        role, _, idx = name.rpartition("-")
+        sender = f"{role}-{idx}" if role else f"{name}-0"
+        return [*self.common(), "--mode", "client", "--connect", self.router(k),
+                "--clock-id", sender, *self.secrets.args_for(name)]
+
+    def router(self, k: int) -> str:
+        return self.dep.router_endpoint(k, secure=not self.args.insecure)
+
+    def start_all(self) -> None:
+        for k in self.local:
+            argv = ["--listen", self.router(k), "--swarm", self.keys.swarm,
+                    *(a for j in range(k) for a in ("--connect", self.router(j))),
+                    *self.secrets.args_for(f"router-{k}")]
+            self.sup.start(f"router-{k}", "deploy.router", argv, self.prefix(k))
+        mav = ["--mav-local-base", str(self.adapter_base),
+               "--mav-vehicle-base", str(self.vehicle_base)]
+        for k in self.local:
+            for name in self.dep.hosts[k].processes:
+                self._start(name, k, mav)
+
+    def _start(self, name: str, k: int, mav: list[str]) -> None:
+        argv, pre = self.client_args(name), self.prefix(k)
+        remote = k != self.dep.host_of("sim")
+        if name == "sim":
+            self.sup.start(name, "deploy.swarm_sim", [
+                *argv, "--mav-host", "0.0.0.0", "--base-port", str(self.vehicle_base),
+                "--send-base-port", str(self.adapter_base),
+                "--noise-std-m", str(self.args.noise_std_m)], pre)
+        elif name == "recorder":
+            self.sup.start(name, "deploy.recorder", [*argv, "--out", str(self.out)], pre)
+        elif name != "launcher":
+            role, _, idx = name.rpartition("-")
+            extra = ["--mav-vehicle-host", self.sim_address] if remote else []
+            self.sup.start(name, f"agents.{role}", [*argv, *mav, *extra, "--index", idx], pre)
+
+    def open_bus(self) -> ZenohBus:
+        k = self.dep.host_of("launcher")
+        bus = ZenohBus(ZenohConfig(  # our clock: the environment's (transport.clock)
+            mode="client", connect=(self.router(k),), user_config_path=self.args.zenoh_config,
+            identity=self.secrets.identity("launcher")))
+        bus.start_clock_sync(self.keys, "launcher-0")
+        return bus
+
+    def expected_tokens(self) -> set[str]:
+        if self.coordinator:
+            return super().expected_tokens()
+        local = {p for k in self.local for p in self.dep.hosts[k].processes}
+        return {t for t in super().expected_tokens()
+                if t.rsplit("/", 2)[-2] + "-" + t.rsplit("/", 1)[-1] in
+                {p if "-" in p else f"{p}-0" for p in local}}
+
+    def fly(self, bus: object) -> None:
+        if self.coordinator:
+            super().fly(bus)  # type: ignore[arg-type]
+            return
+        # Not the coordinator: supervise until our movers have stopped (stop word).
+        movers = [c for c in self.sup.children if c.name.startswith(("follower", "target"))]
+        while any(c.poll() is None for c in movers):
+            time.sleep(0.2)
+
+    def report(self) -> dict[str, object]:
+        out = super().report()
+        out["hosts"] = {h.name: {"address": h.address, "processes": list(h.processes),
+                                 "clock_offset_s": h.clock_offset_s, "netns": h.netns}
+                        for h in self.dep.hosts}
+        out["inter_host_delay_ms"] = self.dep.inter_host_delay_ms
+        return out
+
+
+def _source(scenario: str) -> str:
+    if scenario.endswith(".toml"):
+        return Path(scenario).read_text()
+    from importlib import resources
+    return (resources.files("agents") / "scenarios" / f"{scenario}.toml").read_text()
+
+
+def _links(dep: Deployment, s: Scenario) -> str:
+    """`[[network.links]]` overrides: the delay on every follower link across hosts
+    (file numbering is 1-based)."""
+    out = []
+    for i in range(s.n):
+        for j in range(s.n):
+            if i != j and dep.host_of(f"follower-{i}") != dep.host_of(f"follower-{j}"):
+                out.append(f"\n[[network.links]]\nfrom = {j + 1}\nto = {i + 1}\n"
+                           f"delay_ms = {dep.inter_host_delay_ms!r}\n")
+    return "".join(out)

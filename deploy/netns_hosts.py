@@ -1,0 +1,129 @@
+"""`enclose run --hosts K`: the swarm split over K network namespaces, one host each.
+
+Each host is a namespace `enclose-<pid>-h<k>` with a veth link `eth0` (10.77.0.<k+1>/24)
+to a bridge in a hub namespace `enclose-<pid>-hub`: hosts reach each other only over
+those links.  The run is a deployment (deploy.deployment) written to RUN_DIR and run
+with `enclose host RUN_DIR/deployment.toml --all` inside host 0: one router per host,
+processes as clients of their host's router, each host's processes on their own clock
+(`--host-offsets`), MAVLink from the other hosts to the simulator over the links.
+`--host-delay-ms` delays every follower link across hosts at its receiving end (the
+impairment layer: this kernel has no netem).  Every namespace is removed afterwards,
+whatever happens (deploy.netns.destroy; stale ones of dead launchers at the next start).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import sys
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+from agents.errors import DeployError
+from agents.scenario_file import load_scenario
+from deploy.deployment import Deployment, HostSpec, dump_deployment, split_over_hosts
+from deploy.netns import _tool, clean_stale, destroy, install_tools, run_forwarding_signals
+from deploy.netns import unavailable as netns_unavailable
+from transport.clock import clock_env
+
+log = logging.getLogger("enclose.hosts")
+SUBNET = "10.77.0"
+
+
+def add_hosts_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("several hosts (root: one network namespace per host)")
+    g.add_argument("--hosts", type=int, default=None, metavar="K",
+                   help="split the swarm over K namespaced hosts linked by veth pairs")
+    g.add_argument("--host-offsets", default=None, metavar="S,S,...",
+                   help="clock offset of each host's processes in s (e.g. -0.8,0,1.3)")
+    g.add_argument("--host-delay-ms", type=float, default=0.0,
+                   help="one-way delay on follower links between hosts")
+
+
+def _offsets(text: str | None, k: int) -> list[float]:
+    if text is None:
+        return [0.0] * k
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise DeployError(f"--host-offsets: {text!r} is not a list of numbers") from None
+    if len(values) != k:
+        raise DeployError(f"--host-offsets: {len(values)} values for --hosts {k}")
+    return values
+
+
+def hosts_deployment(args: argparse.Namespace, swarm: str, prefix: str) -> Deployment:
+    scenario = load_scenario(args.scenario)
+    k = int(args.hosts)
+    offsets = _offsets(args.host_offsets, k)
+    source = args.scenario or "paper"
+    if source.endswith(".toml"):
+        source = str(Path(source).resolve())
+    hosts = tuple(HostSpec(f"h{i}", f"{SUBNET}.{i + 1}", tuple(procs), netns=f"{prefix}-h{i}",
+                           clock_offset_s=offsets[i])
+                  for i, procs in enumerate(split_over_hosts(k, scenario.n, scenario.m)))
+    return Deployment(swarm, source, hosts, float(args.host_delay_ms))
+
+
+@contextlib.contextmanager
+def linked_namespaces(dep: Deployment, hub: str) -> Iterator[None]:
+    """The hub with its bridge and one namespace per host, linked; all removed on exit."""
+    install_tools()
+    reason = netns_unavailable()
+    if reason is not None:
+        raise DeployError(f"--hosts {reason}")
+    clean_stale()
+    made: list[str] = []
+    try:
+        for name in (hub, *(h.netns for h in dep.hosts if h.netns)):
+            _tool(["ip", "netns", "add", name])
+            made.append(name)
+            _tool(["ip", "-n", name, "link", "set", "lo", "up"])
+        _tool(["ip", "-n", hub, "link", "add", "br0", "type", "bridge"])
+        _tool(["ip", "-n", hub, "link", "set", "br0", "up"])
+        for i, h in enumerate(dep.hosts):
+            assert h.netns is not None
+            _tool(["ip", "link", "add", "eth0", "netns", h.netns, "type", "veth",
+                   "peer", "name", f"h{i}", "netns", hub])
+            _tool(["ip", "-n", h.netns, "addr", "add", f"{h.address}/24", "dev", "eth0"])
+            _tool(["ip", "-n", h.netns, "link", "set", "eth0", "up"])
+            _tool(["ip", "-n", hub, "link", "set", f"h{i}", "master", "br0", "up"])
+        log.info("hosts %s linked through %s", ", ".join(h.netns or "" for h in dep.hosts), hub)
+        yield
+    finally:
+        for name in reversed(made):
+            with contextlib.suppress(DeployError):
+                destroy(name)
+
+
+def inner_argv(args: argparse.Namespace, out: Path, duration_s: float) -> list[str]:
+    argv = ["host", str(out / "deployment.toml"), "--all", "--out", str(out),
+            "--duration", repr(duration_s), "--link-timeout", repr(args.link_timeout),
+            "--noise-std-m", repr(args.noise_std_m), "--restart", args.restart,
+            "--max-restarts", str(args.max_restarts)]
+    for fault in args.fault:
+        argv += ["--fault", fault]
+    if args.insecure:
+        argv.append("--insecure")
+    return argv
+
+
+def run_on_hosts(args: argparse.Namespace, out: Path, swarm: str, duration_s: float) -> int:
+    """The run over `--hosts K` namespaces; the launcher runs in host 0 on its clock."""
+    prefix = f"enclose-{os.getpid()}"
+    dep = hosts_deployment(args, swarm, prefix)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "deployment.toml").write_text(dump_deployment(dep))
+    with linked_namespaces(dep, f"{prefix}-hub"):
+        h0 = dep.hosts[0]
+        env = [f"{a}={b}" for a, b in clock_env(h0.clock_offset_s, h0.clock_drift_ppm).items()]
+        argv: Sequence[str] = ["ip", "netns", "exec", str(h0.netns), "env", *env,
+                               sys.executable, "-m", "deploy.cli",
+                               *inner_argv(args, out, duration_s)]
+        return run_forwarding_signals(argv)
+
+
+def unavailable() -> str | None:
+    return netns_unavailable()

@@ -1,0 +1,64 @@
+"""A host's Zenoh router: the host's processes are its clients; it links to the other hosts'.
+
+    python -m deploy.router --listen tls/10.0.0.5:7447 [--connect tls/10.0.0.6:7447 ...] \
+        --credentials router-0.json --swarm NAME
+
+There is no `zenohd` package on PyPI or Debian here; a zenoh-python session in router
+mode is a router (notes/multihost.md).  Multicast scouting stays off and it listens only
+on the endpoints given.  With credentials it speaks mTLS with the swarm's CA and enforces
+the swarm's ACL on its ingress: a client may put only its own keys (transport.access);
+other routers relay everyone's.  Runs until SIGTERM/SIGINT.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import threading
+from collections.abc import Sequence
+
+from agents.errors import EncloseError
+from agents.process import stop_on_signals
+from transport.credentials import Identity
+from transport.zenoh_bus import ZenohBus
+from transport.zenoh_config import ZenohConfig
+
+log = logging.getLogger("deploy.router")
+
+
+def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="python -m deploy.router", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--listen", action="append", required=True, metavar="ENDPOINT")
+    parser.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                        help="another host's router (repeatable)")
+    parser.add_argument("--credentials", default=None, metavar="IDENTITY_JSON")
+    parser.add_argument("--swarm", default="enclose", help="swarm name (for the logs)")
+    parser.add_argument("--zenoh-config", default=None, metavar="JSON5")
+    return parser.parse_args(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    logging.basicConfig(level=logging.INFO,
+                        format="%(asctime)s %(levelname)s router: %(message)s")
+    cfg = ZenohConfig(
+        mode="router", listen=tuple(args.listen), connect=tuple(args.connect),
+        user_config_path=args.zenoh_config,
+        identity=None if args.credentials is None else Identity.load(args.credentials))
+    try:
+        with stop_on_signals() as stop, ZenohBus(cfg) as bus:
+            log.info("router %s of swarm %s: listen %s, connect %s", bus.zid, args.swarm,
+                     args.listen, args.connect)
+            idle = threading.Event()
+            while not stop.raised:
+                idle.wait(0.2)
+    except EncloseError as exc:
+        log.error("%s: %s", type(exc).__name__, exc)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,204 @@
+"""Per-peer clock offsets from the probe exchange, on injected clocks (transport.peer_clock,
+transport.clock_sync.ClockExchange, transport.clock): offsets of seconds, 100 ppm drift,
+delays with jitter, loss, a peer restarting, a clock step."""
+
+from __future__ import annotations
+
+import heapq
+import random
+from dataclasses import dataclass, field
+
+import pytest
+
+from agents.errors import ConfigError
+from transport.bus import Received
+from transport.checks import DEFAULT_LIMITS
+from transport.clock import SkewedClock, clock_env, process_clock
+from transport.clock_sync import ClockExchange
+from transport.codec import decode, encode
+from transport.decoder import Decoder
+from transport.messages import ClockProbe, FollowerState, Header, RunControl
+from transport.peer_clock import ClockBook, PeerClock, exchange_sample
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def test_exchange_sample_is_exact_for_symmetric_delays() -> None:
+    # Peer clock = ours + 1.3 s; 10 ms each way; the peer holds the probe 0.2 s.
+    t1 = 100.0
+    t2 = t1 + 0.010 + 1.3
+    t3 = t2 + 0.2
+    t4 = t3 - 1.3 + 0.010
+    s = exchange_sample(t1, t2, t3, t4)
+    assert s is not None
+    assert s.offset_s == pytest.approx(1.3, abs=1e-9)
+    assert s.delay_s == pytest.approx(0.020, abs=1e-9)
+    assert exchange_sample(t1, t2, t3, t1 - 5.0) is None  # negative round trip: refused
+
+
+@dataclass
+class Host:
+    """A process with a skewed clock: local(T) = T + offset + drift * T (T: true time)."""
+
+    name: str
+    offset_s: float
+    drift_ppm: float
+    book: ClockBook = field(default_factory=ClockBook)
+    ex: ClockExchange | None = None
+    epoch_true_s: float = 0.0
+
+    def local(self, t: float) -> float:
+        return t + self.offset_s + self.drift_ppm * 1e-6 * t
+
+    def start(self, t: float) -> None:
+        self.ex = ClockExchange(self.name, lambda: self.local(self.now), self.book)
+        self.epoch_true_s = t
+
+    now: float = 0.0
+
+
+class Net:
+    """Probes every 0.25 s from every host, delivered after base + exponential jitter,
+    some lost; the receiver takes its receive time when a probe arrives."""
+
+    def __init__(self, hosts: list[Host], base_s: float = 0.010, jitter_s: float = 0.003,
+                 loss: float = 0.2, seed: int = 1) -> None:
+        self.hosts = {h.name: h for h in hosts}
+        self.base_s, self.jitter_s, self.loss = base_s, jitter_s, loss
+        self.rng = random.Random(seed)
+        self.events: list[tuple[float, int, str, str, bytes]] = []
+        self._n = 0
+        for h in hosts:
+            h.start(0.0)
+            self._push(self.rng.uniform(0, 0.25), "send", h.name, b"")
+
+    def _push(self, t: float, kind: str, name: str, payload: bytes) -> None:
+        self._n += 1
+        heapq.heappush(self.events, (t, self._n, kind, name, payload))
+
+    def run_until(self, t_end: float) -> None:
+        while self.events and self.events[0][0] <= t_end:
+            t, _, kind, name, payload = heapq.heappop(self.events)
+            host = self.hosts[name]
+            host.now = t
+            assert host.ex is not None
+            if kind == "send":
+                wire = encode(host.ex.probe())
+                for other in self.hosts.values():
+                    if other is not host and self.rng.random() >= self.loss:
+                        delay = self.base_s + self.rng.expovariate(1.0 / self.jitter_s)
+                        self._push(t + delay, "recv", other.name, wire)
+                self._push(t + 0.25, "send", name, b"")
+            else:
+                probe = decode(payload)
+                assert isinstance(probe, ClockProbe)
+                host.ex.receive(probe, host.local(t))
+
+    def error_s(self, at: str, peer: str, t: float) -> float:
+        """Estimated minus true offset of `peer`'s clock from `at`'s, at true time t."""
+        a, p = self.hosts[at], self.hosts[peer]
+        est = a.book.offset_s(f"{peer}")
+        assert est is not None, f"{at} has no estimate for {peer}"
+        return est - (p.local(t) - a.local(t))
+
+
+def _hosts() -> list[Host]:
+    return [Host("follower-0", -0.8, -100.0), Host("follower-1", 0.0, 0.0),
+            Host("follower-2", 1.3, 100.0)]
+
+
+def test_offsets_of_seconds_with_drift_delay_and_loss_are_found_within_2_ms() -> None:
+    net = Net(_hosts())
+    for t in (3.0, 30.0, 120.0):  # converged in 3 s; stays locked under 100 ppm drift
+        net.run_until(t)
+        for a in net.hosts:
+            for p in net.hosts:
+                if a != p:
+                    assert abs(net.error_s(a, p, t)) < 0.002, (a, p, t)
+
+
+def test_heavier_jitter_still_bounded_by_half_the_least_delay_asymmetry() -> None:
+    net = Net(_hosts(), base_s=0.010, jitter_s=0.020, loss=0.4, seed=7)
+    net.run_until(60.0)
+    assert max(abs(net.error_s(a, p, 60.0)) for a in net.hosts for p in net.hosts
+               if a != p) < 0.005
+
+
+def test_a_restarted_peer_with_another_clock_is_relearned_within_a_second() -> None:
+    net = Net(_hosts())
+    net.run_until(10.0)
+    peer = net.hosts["follower-2"]
+    peer.offset_s = 5.0  # new process, new host clock
+    peer.now = 10.0
+    peer.start(10.0)  # new epoch
+    net.run_until(11.5)
+    assert abs(net.error_s("follower-0", "follower-2", 11.5)) < 0.002
+    assert net.hosts["follower-0"].book.peers["follower-2"].resets == 1
+
+
+def test_a_clock_step_without_restart_is_relocked() -> None:
+    net = Net(_hosts(), loss=0.0)
+    net.run_until(10.0)
+    net.hosts["follower-1"].offset_s += 0.5  # e.g. NTP stepped the host clock
+    net.run_until(12.5)
+    assert abs(net.error_s("follower-0", "follower-1", 12.5)) < 0.002
+
+
+def test_peer_clock_prefers_the_least_delayed_sample_of_its_window() -> None:
+    clock = PeerClock(window_s=8.0)
+    for k, (offset, delay) in enumerate([(1.010, 0.02), (1.001, 0.002), (1.015, 0.03)]):
+        s = exchange_sample(0.0, offset + delay / 2, offset + delay / 2, delay)
+        assert s is not None
+        clock.add(type(s)(offset, delay, float(k)))
+    assert clock.offset_s == pytest.approx(1.001)
+
+
+def _state(stamp_s: float) -> FollowerState:
+    z = (0.0, 0.0)
+    return FollowerState(Header("follower-2", 0, stamp_s), 2, z, z, z, z, z, z, stamp_s - 0.01)
+
+
+def test_book_maps_every_stamp_of_a_message_onto_our_clock() -> None:
+    book = ClockBook()
+    s = exchange_sample(0.0, 1.3 + 0.01, 1.3 + 0.01, 0.02)
+    assert s is not None
+    book.add("follower-2", 0.0, s)
+    moved = book.to_local(_state(101.3))
+    assert isinstance(moved, FollowerState)
+    assert moved.header.stamp_s == pytest.approx(100.0)
+    assert moved.vehicle_stamp_s == pytest.approx(99.99)
+    word = RunControl(Header("follower-2", 0, 101.3), "start", 102.3, 10.0)
+    assert book.to_local(word).start_stamp_s == pytest.approx(101.0)  # type: ignore[union-attr]
+    assert book.to_local(_state(5.0)) != _state(5.0)
+    other = FollowerState(Header("follower-1", 0, 7.0), 1, *((0.0, 0.0),) * 6, 7.0)
+    assert book.to_local(other) == other  # no estimate: same clock
+
+
+def test_decoder_maps_before_it_checks_a_state_stamped_seconds_ahead() -> None:
+    key = "enclose/s/follower/2/state"
+    wire = encode(_state(101.3))
+    plain = Decoder(limits=DEFAULT_LIMITS, clocks=ClockBook())
+    assert plain.decode(Received(key, wire, 100.0)) is None  # 1.3 s "in the future"
+    book = ClockBook()
+    s = exchange_sample(0.0, 1.31, 1.31, 0.02)
+    assert s is not None
+    book.add("follower-2", 0.0, s)
+    inbound = Decoder(limits=DEFAULT_LIMITS, clocks=book).decode(Received(key, wire, 100.0))
+    assert inbound is not None and inbound.message.header.stamp_s == pytest.approx(100.0)
+
+
+def test_probe_round_trips_through_the_codec() -> None:
+    probe = ClockProbe(Header("sim-0", 3, 12.5), 1.0, (("follower-0", 11.0, 12.4),))
+    assert decode(encode(probe)) == probe
+
+
+def test_process_clock_from_the_environment() -> None:
+    assert process_clock({}) is not None
+    clock = process_clock(clock_env(1.3, 100.0))
+    assert isinstance(clock, SkewedClock) and clock.offset_s == 1.3
+    skew = SkewedClock(-0.8, 100.0, base=lambda: 1010.0, origin_s=1000.0)
+    assert skew() == pytest.approx(1010.0 - 0.8 + 10.0 * 1e-4)
+    with pytest.raises(ConfigError, match="ENCLOSE_CLOCK_OFFSET_S"):
+        process_clock({"ENCLOSE_CLOCK_OFFSET_S": "soon"})
+    with pytest.raises(ConfigError, match="ENCLOSE_CLOCK_DRIFT_PPM"):
+        process_clock({"ENCLOSE_CLOCK_DRIFT_PPM": "5000"})
