@@ -89,6 +89,9 @@ def ports_in_range(ports: range, count: int, link: str, secure: bool) -> tuple[i
             raise DeployError(f"--port-range: UDP {base}-{base + count - 1} is in use")
     probe = socket.SOCK_DGRAM if link == "udp" else socket.SOCK_STREAM
     with socket.socket(socket.AF_INET, probe) as sock:
+        # As the Zenoh listener binds (SO_REUSEADDR): the previous cell's connections in
+        # TIME_WAIT do not keep the port from a new listener.
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             sock.bind((HOST, rendezvous))
         except OSError as exc:

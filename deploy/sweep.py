@@ -26,6 +26,7 @@ from deploy.sweep_parallel import StopSignals, run_parallel
 from deploy.sweep_progress import SweepProgress
 from deploy.sweep_runner import HOST_FILE, CellRunner, SubprocessRunner
 from deploy.sweep_spec import Cell, SweepSpec, load_sweep
+from deploy.sweep_summary import write_summary
 from deploy.sweep_table import RECORD, CellState, cell_state, collect, read_json, write_tables
 
 log = logging.getLogger("enclose.sweep")
@@ -222,6 +223,9 @@ def report(spec: SweepSpec, figures: bool = True) -> None:
     csv_path, md_path = write_tables(spec, rows)
     done = sum(r.state.done for r in rows)
     log.info("%d/%d cells done; table %s and %s", done, len(rows), csv_path, md_path.name)
+    if spec.repeats > 1:
+        path = write_summary(spec, rows, md_path)
+        log.info("mean and spread over %d seeds: %s", spec.repeats, path.name)
     if figures:
         paths = write_figures(spec, [r for r in rows if r.state.done])
         log.info("figures: %s", ", ".join(p.name for p in paths) or "none")

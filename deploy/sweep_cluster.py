@@ -39,6 +39,7 @@ CONNECT_TIMEOUT_S = 30.0
 POLL_S = 0.5
 LOST_EXIT = 1  # the task raised or its worker was lost: the cell counts as failed
 INTERRUPTED_EXIT = 130
+NOT_SENT = ("credentials",)  # deploy.run_secrets: keys of the finished run
 
 
 @contextlib.contextmanager
@@ -152,11 +153,14 @@ def localise(argv: list[str], out: Path, tmp: Path, scenario_text: str | None) -
 
 
 def pack(folder: Path) -> bytes:
+    """The cell's folder as a gzipped tar, without its run's private keys: the run is over,
+    and they would cross the network in clear."""
     buf = io.BytesIO()
     with tarfile.open(fileobj=buf, mode="w:gz") as tar:
         if folder.is_dir():
             for path in sorted(folder.iterdir()):
-                tar.add(path, arcname=path.name)
+                if path.name not in NOT_SENT:
+                    tar.add(path, arcname=path.name)
     return buf.getvalue()
 
 
