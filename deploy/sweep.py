@@ -1,4 +1,6 @@
-"""`enclose sweep SWEEP_FILE`: a grid of real `enclose run`s, one after the other, resumable.
+"""`enclose sweep SWEEP_FILE`: a grid of real `enclose run`s, resumable; one after the other
+by default, `--jobs N` at a time here (deploy.sweep_parallel), or on a Dask cluster
+(`--cluster`, deploy.sweep_cluster).
 
 Each cell has its own run directory under the sweep directory; a cell whose directory holds
 good metrics and clean exit codes is done and skipped on the next invocation. The table and
@@ -16,6 +18,7 @@ import os
 import shutil
 import signal
 import time
+from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -130,17 +133,7 @@ def run_sweep(
     )
     if jobs > 1:
         warn_contention(jobs, where)
-    positions = itertools.count(len(cells) - len(todo) + 1)
-
-    def job(cell: Cell) -> bool:
-        progress.begin(next(positions), cell.label())
-        code, wall_s = run_one(spec, runner, cell, timeout, {"jobs": jobs, "where": where})
-        progress.end(wall_s)
-        done = _state(spec, cell).done
-        if not done:
-            log.warning("cell %s failed (exit code %s): see its folder", cell.name, code)
-        return done
-
+    job = _cell_job(spec, runner, timeout, progress, {"jobs": jobs, "where": where})
     try:
         if jobs == 1:
             failed = [cell.name for cell in todo if not job(cell)]
@@ -156,6 +149,28 @@ def run_sweep(
     if failed:
         log.warning("%d of %d cells failed: %s", len(failed), len(todo), ", ".join(failed))
     return 1 if failed else 0
+
+
+def _cell_job(
+    spec: SweepSpec,
+    runner: CellRunner,
+    timeout_s: float,
+    progress: SweepProgress,
+    context: dict[str, Any],
+) -> Callable[[Cell], bool]:
+    """Run one cell with progress; True when it is done (callable from several threads)."""
+    positions = itertools.count(progress.finished + 1)
+
+    def job(cell: Cell) -> bool:
+        progress.begin(next(positions), cell.label())
+        code, wall_s = run_one(spec, runner, cell, timeout_s, context)
+        progress.end(wall_s)
+        done = _state(spec, cell).done
+        if not done:
+            log.warning("cell %s failed (exit code %s): see its folder", cell.name, code)
+        return done
+
+    return job
 
 
 def warn_contention(jobs: int, where: str) -> None:

@@ -17,6 +17,7 @@ from deploy.port_slots import PORTS_PER_SLOT, port_slot, slot_ports
 from deploy.ports import parse_port_range, ports_in_range
 from deploy.sweep import run_sweep
 from deploy.sweep_cluster import localise, pack, unpack
+from deploy.sweep_progress import SweepProgress
 from deploy.sweep_runner import RUN_EXTRA_FLAGS, placement_flags
 from deploy.sweep_spec import load_sweep
 from tests.unit.test_sweep import SWEEP, FakeRunner, rows, sweep_file
@@ -157,3 +158,9 @@ def test_cluster_cells_travel_as_tar_without_keys_and_run_in_a_local_folder(
     assert (tmp_path / "s.toml").read_text() == "name = 'x'"
     assert local[local.index("--out") + 1] == str(tmp_path / "w" / "cell")
     assert localise(["run", "paper", "--out", "x"], tmp_path / "c", tmp_path, None)[1] == "paper"
+
+
+def test_progress_eta_shares_the_remaining_cells_among_the_jobs() -> None:
+    progress = SweepProgress(total=10, prior_cell_s=100.0, tty=False, jobs=2)
+    progress.skipped(4)
+    assert progress.eta_s() == pytest.approx(300.0)
