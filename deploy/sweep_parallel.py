@@ -72,7 +72,7 @@ def run_parallel(
     except KeyboardInterrupt:
         signals.stop.set()
     if signals.stop.is_set():
-        running = sum(not f.done() for f in futures)
+        running = sum(f.running() for f in futures)
         log.warning("interrupted: stopping %d running cells cleanly (Ctrl-C again: kill them)",
                     running)
         pool.shutdown(wait=False, cancel_futures=True)
