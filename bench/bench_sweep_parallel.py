@@ -79,10 +79,13 @@ def mean_load(rows: list[dict[str, str]]) -> float:
 
 
 def on_cluster(path: Path) -> float:
+    import dask
     from distributed import LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster:
+    with dask.config.set({"temporary-directory": str(path.parent / "dask")}), LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+        dashboard_address=None,
+    ) as cluster:
         return run(path, "--cluster", cluster.scheduler_address)
 
 

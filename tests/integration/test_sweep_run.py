@@ -190,14 +190,17 @@ def test_ctrl_c_stops_every_running_cell_of_a_parallel_sweep_once(tmp_path: Path
 def test_a_sweep_on_a_local_two_worker_dask_cluster(tmp_path: Path) -> None:
     """`--cluster`: cells as Dask tasks on two workers (127.0.0.1 only); outputs come back
     over the wire into the sweep folder, without the runs' keys."""
+    import dask
     from distributed import LocalCluster
 
     sweep_file = tmp_path / "s.toml"
     sweep_file.write_text(SWEEP)
     out = tmp_path / "out"
     before = set(Path(tempfile.gettempdir()).glob("enclose-cell-*"))
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster:
+    with dask.config.set({"temporary-directory": str(tmp_path / "dask")}), LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+        dashboard_address=None,
+    ) as cluster:
         with sweeping(sweep_file, "--cluster", cluster.scheduler_address) as proc:
             output, _ = proc.communicate(timeout=240)
         workers = [w.pid for w in cluster.workers.values()]
