@@ -34,6 +34,12 @@ def register(sub: Any) -> None:
         "--out", type=Path, default=None, help="run directory (default: runs/run-<name>-<time>)"
     )
     p.add_argument("--swarm", default=None, help="swarm name on the bus (default: unique per run)")
+    p.add_argument(
+        "--port-range",
+        default=None,
+        metavar="LO-HI",
+        help="take the MAVLink and Zenoh ports from LO-HI (default: the first free ones)",
+    )
     p.add_argument("--noise-std-m", type=float, default=0.0, help="noise on target observations")
     p.add_argument("--zenoh-config", default=None, metavar="JSON5", help="your Zenoh config file")
     p.add_argument(

@@ -17,7 +17,7 @@ from agents.scenario import Scenario
 from agents.scenario_faults import parse_fault_flag
 from deploy.faults import FaultRunner
 from deploy.live_args import announce_live_url, pin_live_port, recorder_live_argv
-from deploy.ports import mavlink_bases, rendezvous_endpoint
+from deploy.ports import mavlink_bases, parse_port_range, ports_in_range, rendezvous_endpoint
 from deploy.restarts import EXIT_SOMETHING_DIED, RestartPolicy, Watchdog
 from deploy.run_board import BoardView, LiveBoard
 from deploy.run_monitor import StatusBoard, launch_view, write_json_atomic
@@ -46,13 +46,7 @@ class Launch:
         self.scenario, self.args, self.out, self.duration_s = scenario, args, out, duration_s
         self.keys = SwarmKeys(swarm)
         self.sup = Supervisor(out / "logs")
-        self.vehicle_base, self.adapter_base = mavlink_bases(scenario.n + scenario.m)
-        blocks = [
-            range(b, b + scenario.n + scenario.m) for b in (self.vehicle_base, self.adapter_base)
-        ]
-        self.endpoint = rendezvous_endpoint(
-            scenario.network.link, avoid=blocks, secure=not args.insecure
-        )
+        self.vehicle_base, self.adapter_base, self.endpoint = self._ports()
         self.secrets = RunSecrets(None)
         self.timings: dict[str, float] = {}
         self.board = StatusBoard()
@@ -65,6 +59,18 @@ class Launch:
         self.live_url: str | None = None
         self.started_s = time.monotonic()
         self.t0_s = float("inf")  # monotonic time of the experiment's start, once known
+
+    def _ports(self) -> tuple[int, int, str]:
+        """MAVLink blocks and the Zenoh rendezvous: inside `--port-range` when given (a
+        parallel sweep's cell), else the first free ones."""
+        count, link = self.scenario.n + self.scenario.m, self.scenario.network.link
+        secure = not self.args.insecure
+        given = getattr(self.args, "port_range", None)
+        if given:
+            return ports_in_range(parse_port_range(given), count, link, secure)
+        vehicle_base, adapter_base = mavlink_bases(count)
+        blocks = [range(b, b + count) for b in (vehicle_base, adapter_base)]
+        return vehicle_base, adapter_base, rendezvous_endpoint(link, blocks, secure)
 
     def common(self) -> list[str]:
         scen = self.args.scenario

@@ -59,3 +59,42 @@ def mavlink_bases(count: int, preferred: tuple[int, int] = PX4_SITL_BASES) -> tu
         if udp_block_free(vehicle_base, count) and udp_block_free(adapter_base, count):
             return vehicle_base, adapter_base
     raise DeployError(f"no free UDP port blocks for {count} vehicles on {HOST}")
+
+
+def parse_port_range(text: str) -> range:
+    """`"LO-HI"` (HI inclusive) as a range, for `enclose run --port-range`."""
+    lo_text, sep, hi_text = text.partition("-")
+    try:
+        lo, hi = int(lo_text), int(hi_text)
+    except ValueError:
+        lo = hi = -1
+    if not sep or not 1024 <= lo <= hi <= 65535:
+        raise DeployError(f"--port-range must be LO-HI within 1024-65535, got {text!r}")
+    return range(lo, hi + 1)
+
+
+def ports_in_range(ports: range, count: int, link: str, secure: bool) -> tuple[int, int, str]:
+    """(vehicle base, adapter base, rendezvous endpoint) packed at the start of `ports`: the
+    range is this run's alone (a sweep hands one to each parallel cell), so nothing is
+    searched; a port someone else holds is an error naming it."""
+    need = 2 * count + 1
+    if len(ports) < need:
+        raise DeployError(
+            f"--port-range {ports.start}-{ports.stop - 1} holds {len(ports)} ports; "
+            f"{count} vehicles need {need}"
+        )
+    vehicle, adapter, rendezvous = ports.start, ports.start + count, ports.start + 2 * count
+    for base in (vehicle, adapter):
+        if not udp_block_free(base, count):
+            raise DeployError(f"--port-range: UDP {base}-{base + count - 1} is in use")
+    probe = socket.SOCK_DGRAM if link == "udp" else socket.SOCK_STREAM
+    with socket.socket(socket.AF_INET, probe) as sock:
+        # As the Zenoh listener binds (SO_REUSEADDR): the previous cell's connections in
+        # TIME_WAIT do not keep the port from a new listener.
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((HOST, rendezvous))
+        except OSError as exc:
+            raise DeployError(f"--port-range: {link} port {rendezvous} is in use") from exc
+    proto = "tls" if secure and link == "tcp" else link
+    return vehicle, adapter, loopback_endpoint(rendezvous, proto)

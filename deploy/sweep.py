@@ -1,4 +1,6 @@
-"""`enclose sweep SWEEP_FILE`: a grid of real `enclose run`s, one after the other, resumable.
+"""`enclose sweep SWEEP_FILE`: a grid of real `enclose run`s, resumable; one after the other
+by default, `--jobs N` at a time here (deploy.sweep_parallel), or on a Dask cluster
+(`--cluster`, deploy.sweep_cluster).
 
 Each cell has its own run directory under the sweep directory; a cell whose directory holds
 good metrics and clean exit codes is done and skipped on the next invocation. The table and
@@ -9,21 +11,28 @@ figures are rebuilt from the cell directories every time, so a resumed sweep and
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import logging
+import os
 import shutil
 import signal
 import time
+from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
 from rich.console import Console
 
+from agents.errors import ConfigError
 from deploy.sweep_figures import write_figures
-from deploy.sweep_runner import CellRunner, SubprocessRunner, SweepProgress
+from deploy.sweep_parallel import StopSignals, run_parallel
+from deploy.sweep_progress import SweepProgress
+from deploy.sweep_runner import HOST_FILE, CellRunner, SubprocessRunner
 from deploy.sweep_spec import Cell, SweepSpec, load_sweep
-from deploy.sweep_table import RECORD, CellState, cell_state, collect, write_tables
+from deploy.sweep_summary import write_summary
+from deploy.sweep_table import RECORD, CellState, cell_state, collect, read_json, write_tables
 from deploy.sweep_verdict import print_sweep_verdict
 
 log = logging.getLogger("enclose.sweep")
@@ -47,25 +56,54 @@ def register(sub: Any) -> None:
         default=None,
         help=f"seconds before a cell is stopped (default: duration + {TIMEOUT_MARGIN_S:.0f})",
     )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=None,
+        metavar="N",
+        help="cells at a time (default: 1 here; with --cluster, one per worker thread); "
+        "parallel cells share the CPU, which changes their results",
+    )
+    p.add_argument(
+        "--cluster",
+        default=None,
+        metavar="ADDRESS",
+        help="run the cells on a Dask distributed scheduler (tcp://host:8786); needs the "
+        "`cluster` extra",
+    )
     p.set_defaults(func=_main)
 
 
 def _main(args: argparse.Namespace) -> int:
     spec = load_sweep(args.sweep_file, args.out.resolve() if args.out else None)
+    if args.jobs is not None and args.jobs < 1:
+        raise ConfigError("--jobs", f"must be >= 1, got {args.jobs}")
     if args.list:
         for row in collect(spec):
             print(f"{row.state.status:11s} {row.cell.name}")
         return 0
-    code = 0
-    if not args.report_only:
-        previous = signal.signal(signal.SIGTERM, _interrupt)  # stop as cleanly as on Ctrl-C
-        try:
-            code = run_sweep(spec, timeout_s=args.cell_timeout)
-        finally:
-            signal.signal(signal.SIGTERM, previous)
-    else:
+    if args.report_only:
         report(spec)
-    return code
+        return 0
+    previous = signal.signal(signal.SIGTERM, _interrupt)  # stop as cleanly as on Ctrl-C
+    try:
+        if args.cluster:
+            return _on_cluster(spec, args)
+        return run_sweep(spec, timeout_s=args.cell_timeout, jobs=args.jobs or 1)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _on_cluster(spec: SweepSpec, args: argparse.Namespace) -> int:
+    from deploy.sweep_cluster import ClusterRunner, connect  # the optional extra
+
+    signals = StopSignals()
+    with connect(args.cluster) as client:
+        runner = ClusterRunner(client, signals)
+        jobs = args.jobs or runner.capacity()
+        return run_sweep(
+            spec, runner, args.cell_timeout, jobs=jobs, signals=signals, where=args.cluster
+        )
 
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:
@@ -78,31 +116,32 @@ def run_sweep(
     timeout_s: float | None = None,
     tty: bool | None = None,
     figures: bool = True,
+    jobs: int = 1,
+    signals: StopSignals | None = None,
+    where: str = "local",
 ) -> int:
-    """Run every cell not done yet; 0 if all are done, 1 if some failed, 130 if interrupted."""
+    """Run every cell not done yet, `jobs` at a time; 0 if all are done, 1 if some failed,
+    130 if interrupted.  `where` ("local" or a cluster address) goes into each record."""
     cells = spec.cells()
     todo = [c for c in cells if not _state(spec, c).done]
-    progress = SweepProgress(len(cells), spec.duration_s + STARTUP_S, tty)
+    progress = SweepProgress(len(cells), spec.duration_s + STARTUP_S, tty, jobs)
     progress.skipped(len(cells) - len(todo))
-    runner = runner or SubprocessRunner(tick=progress.draw)
+    signals = signals or StopSignals()
+    tick = progress.draw if jobs == 1 else signals.tick  # parallel: the main thread draws
+    runner = runner or SubprocessRunner(tick=tick, kill_now=signals.kill_now)
     timeout = timeout_s or spec.duration_s + TIMEOUT_MARGIN_S
     log.info(
-        "sweep %s: %d cells, %d done already, %d to run, in %s",
-        spec.path.name,
-        len(cells),
-        len(cells) - len(todo),
-        len(todo),
-        spec.out,
+        "sweep %s: %d cells, %d done already, %d to run (%d at a time, %s), in %s",
+        spec.path.name, len(cells), len(cells) - len(todo), len(todo), jobs, where, spec.out,
     )
-    failed: list[str] = []
+    if jobs > 1:
+        warn_contention(jobs, where)
+    job = _cell_job(spec, runner, timeout, progress, {"jobs": jobs, "where": where})
     try:
-        for k, cell in enumerate(todo):
-            progress.begin(len(cells) - len(todo) + k + 1, cell.label())
-            code, wall_s = run_one(spec, runner, cell, timeout)
-            progress.end(wall_s)
-            if not _state(spec, cell).done:
-                failed.append(cell.name)
-                log.warning("cell %s failed (exit code %s): see its folder", cell.name, code)
+        if jobs == 1:
+            failed = [cell.name for cell in todo if not job(cell)]
+        else:
+            failed = run_parallel(todo, job, jobs, signals, progress.draw)
     except KeyboardInterrupt:
         progress.close()
         log.warning("sweep interrupted: finished cells are kept; run the same command to resume")
@@ -115,12 +154,55 @@ def run_sweep(
     return 1 if failed else 0
 
 
+def _cell_job(
+    spec: SweepSpec,
+    runner: CellRunner,
+    timeout_s: float,
+    progress: SweepProgress,
+    context: dict[str, Any],
+) -> Callable[[Cell], bool]:
+    """Run one cell with progress; True when it is done (callable from several threads)."""
+    positions = itertools.count(progress.finished + 1)
+
+    def job(cell: Cell) -> bool:
+        progress.begin(next(positions), cell.label())
+        code, wall_s = run_one(spec, runner, cell, timeout_s, context)
+        progress.end(wall_s)
+        done = _state(spec, cell).done
+        if not done:
+            log.warning("cell %s failed (exit code %s): see its folder", cell.name, code)
+        return done
+
+    return job
+
+
+def warn_contention(jobs: int, where: str) -> None:
+    if where == "local":
+        log.warning(
+            "%d cells at a time on %s cores: they share the CPU, which changes their results "
+            "(the table records jobs and load); --jobs 1 (the default) for figures to compare",
+            jobs, os.cpu_count(),
+        )
+    else:
+        log.warning(
+            "%d cells at a time on the cluster: each worker thread runs a whole swarm; give "
+            "workers --nthreads 1 per spare core or so (the table records host, jobs and load)",
+            jobs,
+        )
+
+
 def _state(spec: SweepSpec, cell: Cell) -> CellState:
     cell_dir = spec.out / cell.name
     return cell_state(cell_dir, spec.run_argv(cell, cell_dir))
 
 
-def run_one(spec: SweepSpec, runner: CellRunner, cell: Cell, timeout_s: float) -> tuple[int, float]:
+def run_one(
+    spec: SweepSpec,
+    runner: CellRunner,
+    cell: Cell,
+    timeout_s: float,
+    context: dict[str, Any] | None = None,
+) -> tuple[int, float]:
     """One cell from scratch (what a failed or interrupted attempt left is removed first)."""
     cell_dir = spec.out / cell.name
     if cell_dir.exists():
@@ -132,6 +214,7 @@ def run_one(spec: SweepSpec, runner: CellRunner, cell: Cell, timeout_s: float) -
         "values": {k: v for k, v in cell.values},
         "seed": cell.seed,
         "argv": argv,
+        **(context or {}),
         "started_wall_s": time.time(),
         "exit_code": None,
     }
@@ -141,6 +224,7 @@ def run_one(spec: SweepSpec, runner: CellRunner, cell: Cell, timeout_s: float) -
         code = runner.run_cell(argv, cell_dir, timeout_s)
     finally:
         record.update(exit_code=code, wall_s=time.monotonic() - t0)
+        record.update(read_json(cell_dir / HOST_FILE) or {})
         _write_record(cell_dir, record)
     return code, record["wall_s"]
 
@@ -157,5 +241,8 @@ def report(spec: SweepSpec, figures: bool = True) -> None:
     csv_path, md_path = write_tables(spec, rows)
     done = sum(r.state.done for r in rows)
     log.info("%d/%d cells done; table %s and %s", done, len(rows), csv_path, md_path.name)
+    if spec.repeats > 1:
+        path = write_summary(spec, rows, md_path)
+        log.info("mean and spread over %d seeds: %s", spec.repeats, path.name)
     paths = write_figures(spec, [r for r in rows if r.state.done]) if figures else []
     print_sweep_verdict(Console(), spec, rows, paths)

@@ -16,6 +16,7 @@ METRICS = ("estimator_error_m", "radius_error_m", "angle_error", "settle_time_s"
            "command_jump_m_s")
 DELIVERED = "delivered_ratio"
 INTERRUPTED_EXIT = 130
+RUN_COLUMNS = ("wall_s", "jobs", "load_1min", "host")
 
 
 @dataclass(frozen=True)
@@ -24,6 +25,10 @@ class CellState:
     exit_code: int | None = None
     wall_s: float | None = None
     metrics: dict[str, float | None] = field(default_factory=dict)
+    # Where and how it ran: cells side by side share the CPU, which changes the results.
+    jobs: int | None = None
+    load_1min: float | None = None  # mean 1-minute load average of its machine during the run
+    host: str | None = None
 
     @property
     def done(self) -> bool:
@@ -80,7 +85,13 @@ def cell_state(cell_dir: Path, argv: list[str]) -> CellState:
         status = "failed"
     else:
         status = "incomplete"
-    return CellState(status, code, wall, metrics)
+    jobs, host = record.get("jobs"), record.get("host")
+    return CellState(
+        status, code, wall, metrics,
+        jobs=jobs if isinstance(jobs, int) else None,
+        load_1min=number(record.get("load_1min_mean")),
+        host=host if isinstance(host, str) else None,
+    )
 
 
 def pick_metrics(doc: dict[str, Any]) -> dict[str, float | None]:
@@ -123,7 +134,7 @@ def collect(spec: SweepSpec) -> list[Row]:
 
 def columns(spec: SweepSpec, rows: list[Row]) -> list[str]:
     extra = [DELIVERED] if any(DELIVERED in r.state.metrics for r in rows) else []
-    return [*spec.axes, "seed", "status", "exit_code", *METRICS, *extra, "wall_s", "cell"]
+    return [*spec.axes, "seed", "status", "exit_code", *METRICS, *extra, *RUN_COLUMNS, "cell"]
 
 
 def row_values(spec: SweepSpec, row: Row, cols: list[str], digits: int = 6) -> dict[str, str]:
@@ -133,6 +144,9 @@ def row_values(spec: SweepSpec, row: Row, cols: list[str], digits: int = 6) -> d
     out.update(seed=str(row.cell.seed), status=s.status, cell=row.cell.name)
     out["exit_code"] = "" if s.exit_code is None else str(s.exit_code)
     out["wall_s"] = "" if s.wall_s is None else f"{s.wall_s:.1f}"
+    out["jobs"] = "" if s.jobs is None else str(s.jobs)
+    out["load_1min"] = "" if s.load_1min is None else f"{s.load_1min:.2f}"
+    out["host"] = s.host or ""
     for key in (*METRICS, DELIVERED):
         if key in cols:
             v = s.metrics.get(key)

@@ -2,20 +2,26 @@
 
 from __future__ import annotations
 
+import _thread
 import contextlib
 import csv
 import json
 import signal
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from deploy.sweep import run_sweep
+from deploy.sweep_parallel import StopSignals
 from deploy.sweep_runner import TIMEOUT_EXIT, SubprocessRunner
-from tests.integration.runs import pid_alive, run_pids, spawned
+from deploy.sweep_spec import load_sweep
+from tests.integration.runs import pid_alive, run_pids, spawned, wait_for
 
 pytestmark = pytest.mark.integration
 
@@ -64,17 +70,26 @@ def results(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
+def placements(out: Path) -> list[tuple[str, str]]:
+    """(swarm, port range) each cell ran with."""
+    docs = [json.loads(p.read_text()) for p in sorted(out.glob("*/sweep_host.json"))]
+    return [(d["run_flags"][1], d["run_flags"][3]) for d in docs]
+
+
 @pytest.mark.timeout(300)
 def test_a_two_cell_sweep_runs_real_swarms_and_resumes_without_rerunning(tmp_path: Path) -> None:
+    """Two cells side by side (--jobs 2): their own swarm names and ports, no clash."""
     sweep_file = tmp_path / "s.toml"
     sweep_file.write_text(SWEEP)
     out = tmp_path / "out"
-    with sweeping(sweep_file) as proc:
+    with sweeping(sweep_file, "--jobs", "2") as proc:
         output, _ = proc.communicate(timeout=240)
     assert proc.returncode == 0, output
     table = results(out)
-    assert [(r["loss"], r["status"], r["exit_code"]) for r in table] == [
-        ("0", "done", "0"), ("0.1", "done", "0")]
+    assert [(r["loss"], r["status"], r["exit_code"], r["jobs"]) for r in table] == [
+        ("0", "done", "0", "2"), ("0.1", "done", "0", "2")]
+    (swarm_a, ports_a), (swarm_b, ports_b) = placements(out)
+    assert swarm_a != swarm_b and ports_a != ports_b
     assert all(float(r["estimator_error_m"]) > 0 for r in table)
     assert float(table[0]["delivered_ratio"]) > 0.9  # no loss on the first cell
     assert (out / "error_vs_loss.png").stat().st_size > 10_000
@@ -132,3 +147,72 @@ def test_a_cell_over_its_time_is_stopped_and_reported(tmp_path: Path) -> None:
     runner = SubprocessRunner(command=[sys.executable, str(script)])
     assert runner.run_cell([str(out)], out, timeout_s=2) == TIMEOUT_EXIT
     assert (out / "sigints").read_text() == "1"
+
+
+# A stand-in `enclose run` for a parallel sweep: finds its --out, then behaves as above.
+FAKE_CELL = """
+import pathlib, signal, sys, time
+out = pathlib.Path(sys.argv[sys.argv.index("--out") + 1])
+got = []
+signal.signal(signal.SIGINT, lambda *a: got.append(1))
+(out / "ready").write_text("")
+while not got:
+    time.sleep(0.02)
+time.sleep(0.5)
+(out / "sigints").write_text(str(len(got)))
+sys.exit(130)
+"""
+
+
+@pytest.mark.timeout(60)
+def test_ctrl_c_stops_every_running_cell_of_a_parallel_sweep_once(tmp_path: Path) -> None:
+    script = tmp_path / "launcher.py"
+    script.write_text(FAKE_CELL)
+    sweep_file = tmp_path / "s.toml"
+    sweep_file.write_text(SWEEP.replace("[0.0, 0.1]", "[0.0, 0.1, 0.2]"))
+    spec = load_sweep(sweep_file)
+    signals = StopSignals()
+    runner = SubprocessRunner([sys.executable, str(script)], signals.tick, 30.0, signals.kill_now)
+    cells = [spec.out / c.name for c in spec.cells()]
+
+    def interrupt_when_both_run() -> None:
+        wait_for(lambda: sum((c / "ready").exists() for c in cells) == 2, 30, "two cells")
+        _thread.interrupt_main()  # what a terminal's Ctrl-C does to the sweep
+
+    threading.Thread(target=interrupt_when_both_run, daemon=True).start()
+    code = run_sweep(spec, runner, tty=False, figures=False, jobs=2, signals=signals)
+    assert code == 130
+    assert [r["status"] for r in results(spec.out)] == ["interrupted", "interrupted", "pending"]
+    assert [(c / "sigints").read_text() for c in cells[:2]] == ["1", "1"]
+
+
+@pytest.mark.timeout(300)
+def test_a_sweep_on_a_local_two_worker_dask_cluster(tmp_path: Path) -> None:
+    """`--cluster`: cells as Dask tasks on two workers (127.0.0.1 only); outputs come back
+    over the wire into the sweep folder, without the runs' keys."""
+    import dask
+    from distributed import LocalCluster
+
+    sweep_file = tmp_path / "s.toml"
+    sweep_file.write_text(SWEEP)
+    out = tmp_path / "out"
+    before = set(Path(tempfile.gettempdir()).glob("enclose-cell-*"))
+    with dask.config.set({"temporary-directory": str(tmp_path / "dask")}), LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+        dashboard_address=None,
+    ) as cluster:
+        with sweeping(sweep_file, "--cluster", cluster.scheduler_address) as proc:
+            output, _ = proc.communicate(timeout=240)
+        workers = [w.pid for w in cluster.workers.values()]
+    assert proc.returncode == 0, output
+    table = results(out)
+    assert [(r["loss"], r["status"], r["jobs"]) for r in table] == [
+        ("0", "done", "2"), ("0.1", "done", "2")]
+    assert all(float(r["estimator_error_m"]) > 0 and r["host"] for r in table)
+    for cell in out.iterdir():
+        if cell.is_dir():
+            assert (cell / "recording.mcap").stat().st_size > 0
+            assert not (cell / "credentials").exists()
+    assert len({swarm for swarm, _ in placements(out)}) == 2
+    assert all(not pid_alive(pid) for pid in [*run_pids(out), *workers])
+    assert set(Path(tempfile.gettempdir()).glob("enclose-cell-*")) <= before

@@ -14,7 +14,7 @@ from agents.errors import ConfigError
 from deploy.cli import main
 from deploy.sweep import run_sweep
 from deploy.sweep_figures import error_against
-from deploy.sweep_runner import SweepProgress, clock_text
+from deploy.sweep_progress import SweepProgress, clock_text
 from deploy.sweep_spec import SweepSpec, load_sweep, parse_sweep
 from deploy.sweep_table import collect
 
