@@ -18,6 +18,7 @@ from types import FrameType
 
 from agents.errors import EncloseError
 from agents.network_args import add_network_arguments, apply_network_arguments
+from agents.phases import mark
 from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
 from transport.bus import Bus
@@ -81,7 +82,9 @@ def open_bus(args: argparse.Namespace) -> Bus:
         link=load_run_scenario(args).network.link,
         identity=None if args.credentials is None else Identity.load(args.credentials),
     )
-    return ZenohBus(cfg)
+    bus = ZenohBus(cfg)
+    mark("bus_open")  # the session is up: its first link (TLS handshake included) is made
+    return bus
 
 
 def process_main(
@@ -91,6 +94,7 @@ def process_main(
     name: Callable[[argparse.Namespace], str],
 ) -> int:
     """Parse, set up logging, run; a named error becomes a logged line and exit code 2."""
+    mark("main")  # the entry point's imports are done
     args = parser.parse_args(argv)
     setup_logging(args.log_level, name(args))
     try:

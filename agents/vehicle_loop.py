@@ -14,6 +14,7 @@ from agents.mavlink.modes import HOLD_MODE, OFFBOARD_MODE
 from agents.mavlink.offboard import OffboardKeeper
 from agents.mavlink.signing import load_key
 from agents.mavlink.startup import start_offboard
+from agents.phases import log_phases, mark
 from agents.process import StatusReporter, StopFlag, Ticker, open_bus, stop_on_signals
 from agents.scenario import Scenario
 from transport.bus import Bus
@@ -100,7 +101,7 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         node.status.set("starting")
         stop.interrupt = True
         try:
-            start_offboard(mav, scenario.vehicle.altitude_m)
+            start_offboard(mav, scenario.vehicle.altitude_m, mark=mark)
         except KeyboardInterrupt:
             log.info("%s %d stopped during start-up", role, index)
             node.close()
@@ -108,6 +109,8 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         stop.interrupt = False
         token = bus.declare_token(keys.alive(role, index))
         node.status.set("linked")
+        mark("linked")
+        log_phases(f"{role} {index}")
         period = 1.0 / scenario.run.rate_hz
         # Neighbouring followers tick half a period apart (Scenario.tick_group).
         group = scenario.tick_group(index) if role == "follower" else 0

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.errors import DeployError
+from agents.phases import mark, stamps
 from agents.network_args import network_overrides
 from agents.scenario import Scenario
 from agents.scenario_faults import parse_fault_flag
@@ -156,8 +157,10 @@ class Launch:
         interrupted = False
         s = self.scenario
         self.secrets = RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure)
+        mark("credentials")
         try:
             self.start_all()
+            mark("spawned")
             with ZenohBus(
                 ZenohConfig(
                     connect=(self.endpoint,),
@@ -166,8 +169,10 @@ class Launch:
                     identity=self.secrets.identity("launcher"),
                 )
             ) as bus:
+                mark("bus_open")
                 self.board.subscription = bus.subscribe(self.keys.all_status())
                 self.wait_linked(bus, t0)
+                mark("linked")
                 self.timings["link_s"] = time.monotonic() - t0
                 self.timings["linked_wall_s"] = time.time()
                 log.info(
@@ -264,8 +269,10 @@ class Launch:
             "adapter_base_port": self.adapter_base,
             "duration_s": self.duration_s,
             **self.timings,
+            "start_phases": stamps(),  # CLOCK_MONOTONIC s (agents.phases; bench/bench_start.py)
             "processes": {
-                c.name: {"pid": c.pid, "exit_code": c.poll(), "restarts": c.restarts}
+                c.name: {"pid": c.pid, "exit_code": c.poll(), "restarts": c.restarts,
+                         "spawned_s": c.spawned_s}
                 for c in self.sup.children
             },
             "restart_policy": self.policy.as_dict(),

@@ -26,6 +26,7 @@ class Child:
     proc: subprocess.Popen[bytes] | None = None
     exit_code: int | None = None
     restarts: int = 0
+    spawned_s: float | None = None  # CLOCK_MONOTONIC at the last spawn (agents.phases)
 
     @property
     def pid(self) -> int | None:
@@ -72,6 +73,7 @@ class Supervisor:
         log.info("restarted %s (restart %d) pid %d", child.name, child.restarts, child.pid)
 
     def _spawn(self, child: Child, mode: str) -> None:
+        child.spawned_s = time.monotonic()
         with open(child.log_path, mode) as out:
             child.proc = subprocess.Popen(
                 child.argv,

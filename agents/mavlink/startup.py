@@ -109,9 +109,15 @@ def set_mode(ad: MavlinkAdapter, name: str, t: StartupTimeouts, keepalive_hz: fl
                keepalive_hz)
 
 
-def connect(ad: MavlinkAdapter, t: StartupTimeouts) -> VehicleState:
+def _no_mark(phase: str) -> None:
+    """The default `mark`: phases are not timed."""
+
+
+def connect(ad: MavlinkAdapter, t: StartupTimeouts,
+            mark: Callable[[str], None] = _no_mark) -> VehicleState:
     """Wait for the vehicle's heartbeat and its first position; ask for fast position telemetry."""
     wait_until(ad, lambda _s: ad.flavour is not None, t.heartbeat_s, "vehicle HEARTBEAT")
+    mark("heartbeat")
     try:
         command(ad, MAV_CMD_SET_MESSAGE_INTERVAL, (MSG_LOCAL_POSITION_NED, 1e6 / t.telemetry_hz),
                 t)
@@ -122,10 +128,12 @@ def connect(ad: MavlinkAdapter, t: StartupTimeouts) -> VehicleState:
         command(ad, MAV_CMD_REQUEST_MESSAGE, (MSG_HOME_POSITION,), t)
         state = wait_until(ad, lambda _s: ad.home_amsl_m is not None, t.position_s,
                            "home altitude")
+    mark("position")
     return state
 
 
-def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts) -> VehicleState:
+def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts,
+             mark: Callable[[str], None] = _no_mark) -> VehicleState:
     """Arm and climb to altitude_m above home; skipped when already there."""
     if ad.state.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m and ad.state.armed:
         return ad.state
@@ -136,17 +144,24 @@ def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts) -> Vehic
         assert ad.home_amsl_m is not None
         alt_param = ad.home_amsl_m + altitude_m
     command(ad, MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), t)
+    mark("armed")
     command(ad, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, math.nan, math.nan, math.nan, alt_param), t)
-    return wait_until(ad, lambda s: s.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m,
-                      t.takeoff_s, f"take-off to {altitude_m:.1f} m")
+    mark("takeoff_accepted")
+    state = wait_until(ad, lambda s: s.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m,
+                       t.takeoff_s, f"take-off to {altitude_m:.1f} m")
+    mark("at_altitude")
+    return state
 
 
-def start_offboard(ad: MavlinkAdapter, altitude_m: float,
-                   t: StartupTimeouts | None = None) -> VehicleState:
-    """The whole start-up sequence; returns once the vehicle flies our velocity setpoints."""
+def start_offboard(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts | None = None,
+                   mark: Callable[[str], None] = _no_mark) -> VehicleState:
+    """The whole start-up sequence; returns once the vehicle flies our velocity setpoints.
+
+    `mark(phase)` is called as each phase ends (agents.phases): heartbeat, position,
+    armed, takeoff_accepted, at_altitude, offboard."""
     t = t or StartupTimeouts()
-    connect(ad, t)
-    take_off(ad, altitude_m, t)
+    connect(ad, t, mark)
+    take_off(ad, altitude_m, t, mark)
     assert ad.flavour is not None
     wanted = OFFBOARD_MODE[ad.flavour]
     deadline = ad.clock() + t.stream_s
@@ -154,5 +169,6 @@ def start_offboard(ad: MavlinkAdapter, altitude_m: float,
                t.setpoint_hz)
     if ad.state.mode != wanted:
         set_mode(ad, wanted, t, t.setpoint_hz)
+    mark("offboard")
     log.info("vehicle %s in %s at %.1f m", ad.sysid, wanted, ad.state.pos_enu_m[2])
     return ad.state
