@@ -44,6 +44,11 @@ def mark(phase: str) -> None:
     _stamps.setdefault(phase, time.monotonic())
 
 
+def reset() -> None:
+    """Forget every stamp: a process forked from another starts its own (deploy.forked)."""
+    _stamps.clear()
+
+
 def stamps() -> dict[str, float]:
     """All phases so far, `exec` first, in the order they were marked."""
     start = process_exec_s()

@@ -72,15 +72,17 @@ def load_run_scenario(args: argparse.Namespace) -> Scenario:
     return apply_network_arguments(load_scenario(args.scenario), args)
 
 
-def open_bus(args: argparse.Namespace) -> Bus:
+def open_bus(args: argparse.Namespace, arrival_stamps: bool = False) -> Bus:
     """The process's bus; with no --listen it listens on an OS-chosen port of the run's
-    link protocol (`[network] link`, or --link), so that every link of the mesh uses it."""
+    link protocol (`[network] link`, or --link), so that every link of the mesh uses it.
+    `arrival_stamps`: stamp each sample's arrival (one-way latency, transport.link_stats)."""
     cfg = ZenohConfig(
         listen=tuple(args.listen),
         connect=tuple(args.connect),
         user_config_path=args.zenoh_config,
         link=load_run_scenario(args).network.link,
         identity=None if args.credentials is None else Identity.load(args.credentials),
+        arrival_stamps=arrival_stamps,
     )
     bus = ZenohBus(cfg)
     mark("bus_open")  # the session is up: its first link (TLS handshake included) is made

@@ -96,7 +96,9 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
     if args.signing_key is not None:  # link id: the vehicle's number, one stream per agent
         cfg = replace(cfg, signing_key=load_key(args.signing_key), signing_link_id=vehicle & 0xFF)
     keys = SwarmKeys(args.swarm)
-    with stop_on_signals() as stop, open_bus(args) as bus, MavlinkAdapter(cfg, bus.now_s) as mav:
+    stamps = role == "follower" and bool(getattr(args, "latency_stamps", False))
+    with stop_on_signals() as stop, open_bus(args, stamps) as bus, \
+            MavlinkAdapter(cfg, bus.now_s) as mav:
         node = make_node(bus, mav)
         node.status.set("starting")
         stop.interrupt = True

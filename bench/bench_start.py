@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from agents.phases import parse_phases  # noqa: E402
+from agents.phases import parse_phases
 
 FOLLOWER_PHASES = ("spawn", "exec", "main", "bus_open", "heartbeat", "position", "armed",
                    "takeoff_accepted", "at_altitude", "offboard", "linked")

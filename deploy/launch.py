@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from agents.errors import DeployError
-from agents.phases import mark, stamps
 from agents.network_args import network_overrides
+from agents.phases import mark, stamps
 from agents.scenario import Scenario
 from agents.scenario_faults import parse_fault_flag
 from deploy.faults import FaultRunner
@@ -92,6 +92,7 @@ class Launch:
                 str(self.args.noise_std_m),
                 *self.secrets.args_for("sim"),
             ],
+            fork=True,
         )
         joins = [*c, "--connect", self.endpoint]
         sec = self.secrets.args_for
@@ -100,10 +101,10 @@ class Launch:
         )
         for i in range(s.n):
             argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
-            self.sup.start(f"follower-{i}", "agents.follower", argv)
+            self.sup.start(f"follower-{i}", "agents.follower", argv, fork=True)
         for j in range(s.m):
             argv = [*joins, *mav, "--index", str(j), *sec(f"target-{j}")]
-            self.sup.start(f"target-{j}", "agents.target", argv)
+            self.sup.start(f"target-{j}", "agents.target", argv, fork=True)
 
     def expected_tokens(self) -> set[str]:
         k, s = self.keys, self.scenario
@@ -156,7 +157,7 @@ class Launch:
         t0 = time.monotonic()
         interrupted = False
         s = self.scenario
-        self.secrets = RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure)
+        self.secrets = RunSecrets.make_apart(self.out, self.keys, s.n, s.m, self.args.insecure)
         mark("credentials")
         try:
             self.start_all()

@@ -14,6 +14,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from deploy.forked import ForkedProcess, fork_main
+
 log = logging.getLogger(__name__)
 Clock = Callable[[], float]
 
@@ -23,7 +25,7 @@ class Child:
     name: str
     argv: list[str]
     log_path: Path
-    proc: subprocess.Popen[bytes] | None = None
+    proc: subprocess.Popen[bytes] | ForkedProcess | None = None
     exit_code: int | None = None
     restarts: int = 0
     spawned_s: float | None = None  # CLOCK_MONOTONIC at the last spawn (agents.phases)
@@ -53,10 +55,17 @@ class Supervisor:
     children: list[Child] = field(default_factory=list)
     clock: Clock = time.monotonic
 
-    def start(self, name: str, module: str, args: Sequence[str]) -> Child:
+    def start(self, name: str, module: str, args: Sequence[str], fork: bool = False) -> Child:
+        """Start `python -m module args`; with `fork`, as a fork of this process that runs
+        `module.main(args)` (deploy.forked: no interpreter start-up, no imports).  A
+        restart always starts a fresh interpreter."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         child = Child(name, [sys.executable, "-m", module, *args], self.log_dir / f"{name}.log")
-        self._spawn(child, "wb")
+        if fork:
+            child.spawned_s = time.monotonic()
+            child.proc = fork_main(module, list(args), child.log_path)
+        else:
+            self._spawn(child, "wb")
         self.children.append(child)
         self._write_pids()
         log.debug("started %s pid %d: %s", name, child.pid, " ".join(child.argv))

@@ -23,6 +23,7 @@ MAV_CMD_DO_SET_MODE = 176
 MAV_CMD_COMPONENT_ARM_DISARM = 400
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_CMD_REQUEST_MESSAGE = 512
+MSG_HEARTBEAT = 0
 MSG_LOCAL_POSITION_NED = 32
 MSG_HOME_POSITION = 242
 ACCEPTED, TEMPORARILY_REJECTED, IN_PROGRESS = 0, 1, 5
@@ -116,7 +117,7 @@ def _no_mark(phase: str) -> None:
 def connect(ad: MavlinkAdapter, t: StartupTimeouts,
             mark: Callable[[str], None] = _no_mark) -> VehicleState:
     """Wait for the vehicle's heartbeat and its first position; ask for fast position telemetry."""
-    wait_until(ad, lambda _s: ad.flavour is not None, t.heartbeat_s, "vehicle HEARTBEAT")
+    wait_heartbeat(ad, t)
     mark("heartbeat")
     try:
         command(ad, MAV_CMD_SET_MESSAGE_INTERVAL, (MSG_LOCAL_POSITION_NED, 1e6 / t.telemetry_hz),
@@ -132,9 +133,32 @@ def connect(ad: MavlinkAdapter, t: StartupTimeouts,
     return state
 
 
+def wait_heartbeat(ad: MavlinkAdapter, t: StartupTimeouts) -> None:
+    """Wait for the vehicle's first HEARTBEAT (its flavour and mode).
+
+    Autopilots send it at 1 Hz: when the vehicle's address is known (PX4 SITL's ports),
+    ask for one (REQUEST_MESSAGE, as PX4 and ArduPilot answer it) every `retry_s` instead
+    of waiting up to a second for the next.  Unanswered requests cost nothing."""
+    deadline = ad.clock() + t.heartbeat_s
+    while ad.flavour is None:
+        if ad.remote is not None and ad.sysid is not None:
+            ad.send_command(MAV_CMD_REQUEST_MESSAGE, (MSG_HEARTBEAT,))
+        left = deadline - ad.clock()
+        if left <= 0.0:
+            raise MavlinkError(f"timed out after {t.heartbeat_s:.1f} s waiting for vehicle "
+                               "HEARTBEAT")
+        try:
+            wait_until(ad, lambda _s: ad.flavour is not None, min(left, t.retry_s),
+                       "vehicle HEARTBEAT")
+        except MavlinkError:
+            continue
+
+
 def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts,
              mark: Callable[[str], None] = _no_mark) -> VehicleState:
-    """Arm and climb to altitude_m above home; skipped when already there."""
+    """Arm and climb to altitude_m above home; skipped when already there.
+
+    Streams zero-velocity setpoints while climbing: offboard then needs no further wait."""
     if ad.state.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m and ad.state.armed:
         return ad.state
     if ad.flavour == ARDUPILOT:
@@ -148,7 +172,7 @@ def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts,
     command(ad, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, math.nan, math.nan, math.nan, alt_param), t)
     mark("takeoff_accepted")
     state = wait_until(ad, lambda s: s.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m,
-                       t.takeoff_s, f"take-off to {altitude_m:.1f} m")
+                       t.takeoff_s, f"take-off to {altitude_m:.1f} m", t.setpoint_hz)
     mark("at_altitude")
     return state
 
@@ -161,10 +185,13 @@ def start_offboard(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts | N
     armed, takeoff_accepted, at_altitude, offboard."""
     t = t or StartupTimeouts()
     connect(ad, t, mark)
+    climb_from = ad.clock()
     take_off(ad, altitude_m, t, mark)
     assert ad.flavour is not None
     wanted = OFFBOARD_MODE[ad.flavour]
-    deadline = ad.clock() + t.stream_s
+    # Setpoints must flow before offboard is asked for; the climb streamed them (if the
+    # vehicle had to climb), and counts (most of it: the arm and take-off ACKs did not).
+    deadline = max(ad.clock(), climb_from + t.stream_s)
     wait_until(ad, lambda _s: ad.clock() >= deadline, t.stream_s + 1.0, "setpoint stream",
                t.setpoint_hz)
     if ad.state.mode != wanted:
