@@ -58,6 +58,9 @@ def _child(run: Callable[[], int | None], log_path: Path | None, mode: int) -> N
             os.dup2(fd, 1)
             os.dup2(fd, 2)
             os.close(fd)
+            # Fresh, line-buffered writers on the new fds (the launcher's may be wrapped).
+            sys.stdout = open(1, "w", buffering=1, closefd=False)  # noqa: SIM115
+            sys.stderr = open(2, "w", buffering=1, closefd=False)  # noqa: SIM115
         null = os.open(os.devnull, os.O_RDONLY)
         os.dup2(null, 0)
         os.close(null)

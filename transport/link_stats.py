@@ -165,7 +165,10 @@ class LinkDecoder(Decoder):
         inbound = super().decode(rec)
         if inbound is not None:
             msg = inbound.message
-            if isinstance(msg, RunControl) and msg.command == "start":
+            # The launcher repeats its start word every second (same start stamp): only
+            # a new start begins new histograms, or they would hold the last second only.
+            if isinstance(msg, RunControl) and msg.command == "start" and \
+                    msg.start_stamp_s != self.ages_from_s:
                 self.ages_from_s = msg.start_stamp_s
                 for t in self.tallies.values():
                     t.ages, t.latencies = AgeHistogram(), None
