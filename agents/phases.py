@@ -19,6 +19,7 @@ import time
 log = logging.getLogger(__name__)
 LOG_PREFIX = "start-up phases "
 _stamps: dict[str, float] = {}
+_cpu_s: dict[str, float] = {}  # the process's CPU time at each stamp
 
 
 def process_exec_s() -> float | None:
@@ -41,12 +42,15 @@ def process_exec_s() -> float | None:
 def mark(phase: str) -> None:
     """Stamp the end of `phase` (the first stamp of a name wins: restarts of a phase
     later in the process's life are not its start-up)."""
-    _stamps.setdefault(phase, time.monotonic())
+    if phase not in _stamps:
+        _stamps[phase] = time.monotonic()
+        _cpu_s[phase] = time.process_time()
 
 
 def reset() -> None:
     """Forget every stamp: a process forked from another starts its own (deploy.forked)."""
     _stamps.clear()
+    _cpu_s.clear()
 
 
 def stamps() -> dict[str, float]:
@@ -65,7 +69,8 @@ def log_phases(who: str) -> None:
     )
     cpu_s = time.process_time()
     log.info("%s: %s; %.2f s of CPU", who, durations, cpu_s)
-    record = {"t": {k: round(v, 6) for k, v in s.items()}, "cpu_s": round(cpu_s, 4)}
+    record = {"t": {k: round(v, 6) for k, v in s.items()}, "cpu_s": round(cpu_s, 4),
+              "cpu_at": {k: round(v, 4) for k, v in _cpu_s.items()}}
     log.info("%s%s", LOG_PREFIX, json.dumps(record))
 
 

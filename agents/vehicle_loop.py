@@ -101,6 +101,7 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
             MavlinkAdapter(cfg, bus.now_s) as mav:
         node = make_node(bus, mav)
         node.status.set("starting")
+        mark("node")  # subscriptions, publishers and first status declared
         stop.interrupt = True
         try:
             start_offboard(mav, scenario.vehicle.altitude_m, mark=mark)

@@ -37,7 +37,7 @@ def ring_scenario(n: int, duration_s: float) -> str:
              "[pattern]", "rho_d_m = 8.0", "w_d_rad_s = 0.2",
              f"angles_deg = [{', '.join([f'{angle:.6f}'] * n)}]", "", GAINS,
              "[graph]",
-             f"edges = [{', '.join(f'[{i + 1}, {i % n + 2 if i < n - 1 else 1}]' for i in range(n))}]",
+             f"edges = [{', '.join(f'[{i + 1}, {(i + 1) % n + 1}]' for i in range(n))}]",
              "", "[run]", f"duration_s = {duration_s}", "dt_s = 0.001", "rate_hz = 50.0", ""]
     for i in range(n):
         th = 2 * math.pi * i / n

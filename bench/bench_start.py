@@ -32,7 +32,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from agents.phases import parse_phases
 
-FOLLOWER_PHASES = ("spawn", "exec", "main", "bus_open", "heartbeat", "position", "armed",
+FOLLOWER_PHASES = ("spawn", "exec", "main", "bus_open", "node", "heartbeat", "position", "armed",
                    "takeoff_accepted", "at_altitude", "offboard", "linked")
 LAUNCHER_PHASES = ("exec", "credentials", "spawned", "bus_open", "linked")
 
@@ -47,12 +47,27 @@ def proc_kb(pid: int, field: str) -> int | None:
     return None
 
 
+def rollup_kb(pid: int) -> dict[str, int]:
+    """Pss and private (USS) kB: the memory a process costs beyond what it shares."""
+    out = {"pss_kb": 0, "uss_kb": 0}
+    try:
+        for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines():
+            key, _, rest = line.partition(":")
+            if key == "Pss":
+                out["pss_kb"] = int(rest.split()[0])
+            elif key in ("Private_Clean", "Private_Dirty"):
+                out["uss_kb"] += int(rest.split()[0])
+    except (OSError, ValueError, IndexError):
+        pass
+    return out
+
+
 def role_of(name: str) -> str:
     return name.split("-")[0]
 
 
 def sample_memory(proc: subprocess.Popen[bytes], out: Path) -> dict[str, dict[str, int]]:
-    """Per child: max VmRSS seen and last VmHWM, in kB, until the run ends."""
+    """Per child: max VmRSS, VmHWM, Pss and USS seen, in kB, until the run ends."""
     mem: dict[str, dict[str, int]] = {}
     while proc.poll() is None:
         pids_file = out / "logs" / "pids.json"
@@ -63,8 +78,10 @@ def sample_memory(proc: subprocess.Popen[bytes], out: Path) -> dict[str, dict[st
         for name, pid in pids.items():
             rss, hwm = proc_kb(pid, "VmRSS"), proc_kb(pid, "VmHWM")
             if rss is not None and hwm is not None:
-                m = mem.setdefault(name, {"rss_kb": 0, "hwm_kb": 0})
-                m["rss_kb"], m["hwm_kb"] = max(m["rss_kb"], rss), max(m["hwm_kb"], hwm)
+                m = mem.setdefault(name, {"rss_kb": 0, "hwm_kb": 0, "pss_kb": 0, "uss_kb": 0})
+                now = {"rss_kb": rss, "hwm_kb": hwm, **rollup_kb(pid)}
+                for key, value in now.items():
+                    m[key] = max(m[key], value)
         time.sleep(0.25)
     return mem
 
@@ -127,9 +144,9 @@ def run_once(case: str, duration_s: float, out: Path, insecure: bool) -> dict[st
     summary = summarise(launch, procs, t0)
     roles: dict[str, dict[str, float]] = {}
     for name, m in mem.items():
-        r = roles.setdefault(role_of(name), {"rss_mb_max": 0.0, "hwm_mb_max": 0.0})
-        r["rss_mb_max"] = max(r["rss_mb_max"], round(m["rss_kb"] / 1024, 1))
-        r["hwm_mb_max"] = max(r["hwm_mb_max"], round(m["hwm_kb"] / 1024, 1))
+        r = roles.setdefault(role_of(name), {})
+        for key in ("rss", "hwm", "pss", "uss"):
+            r[f"{key}_mb_max"] = max(r.get(f"{key}_mb_max", 0.0), round(m[f"{key}_kb"] / 1024, 1))
     return {"exit_code": proc.returncode, **summary, "memory": roles}
 
 
@@ -148,14 +165,15 @@ def main() -> None:
             out = (args.out / f"{case}-{k}").resolve()
             result = run_once(case, args.duration, out, args.insecure)
             print(f"== {case} run {k + 1}: {out}")
-            print(json.dumps(result, indent=1), flush=True)
+            print(json.dumps(result), flush=True)
             runs.append(result)
         for key in ("linked_and_armed_excl_takeoff_s", "command_to_all_linked_s",
                     "all_followers_armed_s"):
             vals = sorted(round(r[key], 2) for r in runs)
             print(f"{case}: {key} median {statistics.median(vals):.2f} s, runs {vals}")
-        fol = [r["memory"].get("follower", {}).get("rss_mb_max", 0.0) for r in runs]
-        print(f"{case}: follower VmRSS max {max(fol):.1f} MB (runs {fol})", flush=True)
+        for key in ("rss", "hwm", "pss", "uss"):
+            fol = [r["memory"].get("follower", {}).get(f"{key}_mb_max", 0.0) for r in runs]
+            print(f"{case}: follower {key} max {max(fol):.1f} MB (runs {fol})", flush=True)
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ import sys
 from collections.abc import Sequence
 
 from agents.errors import EncloseError
+from agents.phases import mark
 
 # Each module exposes `register(subparsers)`, which adds its subparser and sets `func(args) -> int`.
 # Keyed by the command it registers: `enclose run` imports only deploy.cmd_run (not the
@@ -41,6 +42,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser(argv).parse_args(argv)
+    mark("imports")  # the subcommand's module is imported
     level = logging.WARNING - 10 * min(args.verbose, 2) + 10 * 0
     logging.basicConfig(
         level=min(level, logging.INFO) if args.verbose else logging.INFO,

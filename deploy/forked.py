@@ -96,21 +96,36 @@ def _fork(run: Callable[[], int | None], log_path: Path | None, mode: int) -> in
     return pid
 
 
-def fork_main(module: str, argv: Sequence[str], log_path: Path) -> ForkedProcess:
-    """Fork a child that runs `module.main(argv)` with its output in `log_path` (new file)."""
-    entry = importlib.import_module(module).main  # imported here, once, before the fork
-    return ForkedProcess(_fork(lambda: int(entry(list(argv))), log_path, os.O_TRUNC))
+def fork_main(module: str, argv: Sequence[str], log_path: Path,
+              import_in_child: bool = False) -> ForkedProcess:
+    """Fork a child that runs `module.main(argv)` with its output in `log_path` (new file).
+
+    The module is imported here, once, before the fork, unless `import_in_child`: then
+    the child imports it, and what it alone needs stays out of this process (and of the
+    children forked after it)."""
+    def run() -> int:
+        return int(importlib.import_module(module).main(list(argv)))
+
+    if not import_in_child:
+        importlib.import_module(module)
+    return ForkedProcess(_fork(run, log_path, os.O_TRUNC))
 
 
-def call_forked(fn: Callable[[], None], what: str) -> None:
+def call_forked(fn: Callable[[], None], what: str,
+                meanwhile: Callable[[], None] | None = None) -> None:
     """Run `fn` in a short-lived fork, so that what it imports (e.g. `cryptography`, to
-    make credentials) does not stay in this process and in every child forked later."""
+    make credentials) does not stay in this process and in every child forked later;
+    this process runs `meanwhile` in the mean time."""
     def run() -> int:
         fn()
         return 0
 
     pid = _fork(run, None, 0)
-    _, status = os.waitpid(pid, 0)
+    try:
+        if meanwhile is not None:
+            meanwhile()
+    finally:
+        _, status = os.waitpid(pid, 0)
     code = os.waitstatus_to_exitcode(status)
     if code != 0:
         raise DeployError(f"{what} failed in its helper process (exit code {code})")

@@ -96,8 +96,10 @@ class Launch:
         )
         joins = [*c, "--connect", self.endpoint]
         sec = self.secrets.args_for
+        # It imports what it alone needs (MCAP, its outputs) after the fork: not in the movers.
         self.sup.start(
-            "recorder", "deploy.recorder", [*joins, "--out", str(self.out), *sec("recorder")]
+            "recorder", "deploy.recorder", [*joins, "--out", str(self.out), *sec("recorder")],
+            fork=True,
         )
         for i in range(s.n):
             argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
@@ -157,7 +159,8 @@ class Launch:
         t0 = time.monotonic()
         interrupted = False
         s = self.scenario
-        self.secrets = RunSecrets.make_apart(self.out, self.keys, s.n, s.m, self.args.insecure)
+        self.secrets = RunSecrets.make_apart(self.out, self.keys, s.n, s.m, self.args.insecure,
+                                             meanwhile=self.sup.preload)
         mark("credentials")
         try:
             self.start_all()

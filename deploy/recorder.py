@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from agents.errors import EncloseError
+from agents.phases import log_phases, mark
 from agents.process import add_bus_arguments, load_run_scenario, open_bus, stop_on_signals
 from deploy.recording.loop import Recorder
 
@@ -38,6 +39,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    mark("main")
     args = parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s recorder: %(message)s")
@@ -45,6 +47,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         scenario = load_run_scenario(args)
         with stop_on_signals() as stop, open_bus(args) as bus:
             recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index)
+            mark("linked")  # its liveliness token is declared
+            log_phases("recorder")
             try:
                 recorder.run(lambda: stop.raised)
             except Exception:  # a bug in the loop must still leave a finished MCAP behind

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,15 +41,19 @@ class RunSecrets:
         return cls(cred_dir)
 
     @classmethod
-    def make_apart(cls, out: Path, keys: SwarmKeys, n: int, m: int, insecure: bool) -> RunSecrets:
-        """`make`, in a short-lived fork when secure: `cryptography` (~10 MB) then stays out
-        of the launcher, and of the swarm processes it forks (deploy.forked)."""
+    def make_apart(cls, out: Path, keys: SwarmKeys, n: int, m: int, insecure: bool,
+                   meanwhile: Callable[[], None]) -> RunSecrets:
+        """`make`, in a short-lived fork when secure, while this process runs `meanwhile`:
+        `cryptography` (~10 MB) then stays out of the launcher, and of the swarm processes
+        it forks (deploy.forked)."""
         if insecure:
+            meanwhile()
             return cls.make(out, keys, n, m, insecure)
+
         def make() -> None:
             cls.make(out, keys, n, m, insecure)
 
-        call_forked(make, "making the run's credentials")
+        call_forked(make, "making the run's credentials", meanwhile)
         return cls(out / "credentials")
 
     def identity(self, name: str) -> Identity | None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import importlib
 import json
 import logging
 import os
@@ -18,6 +19,7 @@ from deploy.forked import ForkedProcess, fork_main
 
 log = logging.getLogger(__name__)
 Clock = Callable[[], float]
+FORKED_MODULES = ("deploy.swarm_sim", "agents.follower", "agents.target")
 
 
 @dataclass
@@ -55,15 +57,22 @@ class Supervisor:
     children: list[Child] = field(default_factory=list)
     clock: Clock = time.monotonic
 
+    def preload(self) -> None:
+        """Import the modules of the processes the launcher forks, before it forks them."""
+        for module in FORKED_MODULES:
+            importlib.import_module(module)
+
     def start(self, name: str, module: str, args: Sequence[str], fork: bool = False) -> Child:
         """Start `python -m module args`; with `fork`, as a fork of this process that runs
-        `module.main(args)` (deploy.forked: no interpreter start-up, no imports).  A
-        restart always starts a fresh interpreter."""
+        `module.main(args)` (deploy.forked: no interpreter start-up, no imports; a module
+        not in FORKED_MODULES is imported by its child alone).  A restart always starts a
+        fresh interpreter."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         child = Child(name, [sys.executable, "-m", module, *args], self.log_dir / f"{name}.log")
         if fork:
             child.spawned_s = time.monotonic()
-            child.proc = fork_main(module, list(args), child.log_path)
+            child.proc = fork_main(module, list(args), child.log_path,
+                                   import_in_child=module not in FORKED_MODULES)
         else:
             self._spawn(child, "wb")
         self.children.append(child)

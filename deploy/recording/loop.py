@@ -20,7 +20,6 @@ from agents.scenario import Scenario
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.links import FINAL_STATES, link_report
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog
-from deploy.recording.outputs import write_final_outputs
 from deploy.recording.progress import PROGRESS_FILE, live_errors, write_json_atomic
 from deploy.recording.resume import newest_part, read_back
 from deploy.rundir import RunInfo
@@ -172,6 +171,10 @@ class Recorder:
         self._set_state("stopping")
         self.mcap.close()
         try:
+            # Imported here: its figures need matplotlib (~1 s of imports), which would
+            # otherwise delay the recorder's start, and so every run's (issue 15).
+            from deploy.recording.outputs import write_final_outputs
+
             metrics = write_final_outputs(self.run_dir, self.scenario, self.asm, self.counters(),
                                           self.membership)
         except Exception:
