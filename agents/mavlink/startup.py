@@ -38,6 +38,7 @@ class StartupTimeouts:
     takeoff_s: float = 60.0
     offboard_s: float = 5.0
     retry_s: float = 0.5
+    heartbeat_request_s: float = 0.1  # HEARTBEAT asked for again (wait_heartbeat)
     stream_s: float = 0.5
     setpoint_hz: float = 20.0
     altitude_tolerance_m: float = 0.3
@@ -137,8 +138,9 @@ def wait_heartbeat(ad: MavlinkAdapter, t: StartupTimeouts) -> None:
     """Wait for the vehicle's first HEARTBEAT (its flavour and mode).
 
     Autopilots send it at 1 Hz: when the vehicle's address is known (PX4 SITL's ports),
-    ask for one (REQUEST_MESSAGE, as PX4 and ArduPilot answer it) every `retry_s` instead
-    of waiting up to a second for the next.  Unanswered requests cost nothing."""
+    ask for one (REQUEST_MESSAGE, as PX4 and ArduPilot answer it) every
+    `heartbeat_request_s` instead of waiting up to a second for the next (the vehicle may
+    not listen yet when we start).  Unanswered requests cost nothing."""
     deadline = ad.clock() + t.heartbeat_s
     while ad.flavour is None:
         if ad.remote is not None and ad.sysid is not None:
@@ -148,8 +150,8 @@ def wait_heartbeat(ad: MavlinkAdapter, t: StartupTimeouts) -> None:
             raise MavlinkError(f"timed out after {t.heartbeat_s:.1f} s waiting for vehicle "
                                "HEARTBEAT")
         try:
-            wait_until(ad, lambda _s: ad.flavour is not None, min(left, t.retry_s),
-                       "vehicle HEARTBEAT")
+            wait_until(ad, lambda _s: ad.flavour is not None,
+                       min(left, t.heartbeat_request_s), "vehicle HEARTBEAT")
         except MavlinkError:
             continue
 
