@@ -20,12 +20,21 @@ import logging
 import os
 import signal
 import sys
+import threading
 import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from agents import phases
 from agents.errors import DeployError
+
+
+def fork_is_safe() -> bool:
+    """True while this process runs no thread of its own but the main one and holds no
+    Zenoh session (whose runtime threads a child would not have)."""
+    from transport.zenoh_bus import ZenohBus
+
+    return threading.active_count() == 1 and ZenohBus.open_sessions == 0
 
 
 class ForkedProcess:

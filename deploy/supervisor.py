@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from deploy.forked import ForkedProcess, fork_main
+from deploy.forked import ForkedProcess, fork_is_safe, fork_main
 
 log = logging.getLogger(__name__)
 Clock = Callable[[], float]
@@ -65,11 +65,11 @@ class Supervisor:
     def start(self, name: str, module: str, args: Sequence[str], fork: bool = False) -> Child:
         """Start `python -m module args`; with `fork`, as a fork of this process that runs
         `module.main(args)` (deploy.forked: no interpreter start-up, no imports; a module
-        not in FORKED_MODULES is imported by its child alone).  A restart always starts a
-        fresh interpreter."""
+        not in FORKED_MODULES is imported by its child alone), when that is safe (no other
+        thread, no Zenoh session here yet); else, and on a restart, a fresh interpreter."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         child = Child(name, [sys.executable, "-m", module, *args], self.log_dir / f"{name}.log")
-        if fork:
+        if fork and fork_is_safe():
             child.spawned_s = time.monotonic()
             child.proc = fork_main(module, list(args), child.log_path,
                                    import_in_child=module not in FORKED_MODULES)

@@ -147,6 +147,8 @@ class ZenohAliveWatch:
 class ZenohBus(BusBase):
     """A Zenoh session configured by `ZenohConfig`."""
 
+    open_sessions = 0  # in this process: forking is unsafe while any is open (deploy.forked)
+
     def __init__(self, cfg: ZenohConfig, clock: Clock = time.time) -> None:
         super().__init__()
         self.cfg = cfg
@@ -156,6 +158,7 @@ class ZenohBus(BusBase):
             self.session = zenoh.open(build_zenoh_config(cfg))
         except zenoh.ZError as exc:
             raise TransportError(f"cannot open Zenoh session: {exc}") from exc
+        ZenohBus.open_sessions += 1
         self.closed = False
         log.debug("zenoh session %s listen=%s connect=%s", self.zid, cfg.listen, cfg.connect)
 
@@ -208,3 +211,4 @@ class ZenohBus(BusBase):
         self._owned.clear()
         self._publishers.clear()
         self.session.close()
+        ZenohBus.open_sessions -= 1

@@ -121,3 +121,25 @@ def test_no_latency_without_arrival_stamps() -> None:
     d = LinkDecoder()
     d.decode(rec(0, 100.0, None, 100.0))
     assert not any("lat" in k for k in d.counters())
+
+
+@pytest.mark.timeout(30)
+def test_no_fork_while_a_thread_runs(tmp_path: Path) -> None:
+    import threading
+
+    from deploy.forked import ForkedProcess, fork_is_safe
+    from deploy.supervisor import Supervisor
+
+    assert fork_is_safe()
+    stop = threading.Event()
+    helper = threading.Thread(target=stop.wait)
+    helper.start()
+    try:
+        assert not fork_is_safe()
+        sup = Supervisor(tmp_path)
+        child = sup.start("c", "tests.child_proc", ["exit", "0"], fork=True)
+        assert child.proc is not None and not isinstance(child.proc, ForkedProcess)
+        assert sup.wait([child], 20.0) and child.poll() == 0
+    finally:
+        stop.set()
+        helper.join()
