@@ -25,6 +25,9 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--duplicate", type=float, default=None, help="probability of a duplicate")
     g.add_argument("--reorder", type=float, default=None, help="probability of a reordering")
     g.add_argument("--impair-seed", type=int, default=None, help="seed of the impairment")
+    g.add_argument("--latency-stamps", action="store_true", default=None,
+                   help="stamp every sample's arrival: one-way latency per link in the "
+                        "followers' status (lat_p50_us_f<j>; bench/bench_latency.py)")
 
 
 def network_overrides(args: argparse.Namespace) -> list[str]:
@@ -34,7 +37,7 @@ def network_overrides(args: argparse.Namespace) -> list[str]:
         value = getattr(args, dest, None)
         if value is not None:
             argv += ["--" + dest.replace("_", "-"), str(value)]
-    return argv
+    return argv + (["--latency-stamps"] if getattr(args, "latency_stamps", None) else [])
 
 
 def apply_network_arguments(scenario: Scenario, args: argparse.Namespace) -> Scenario:

@@ -18,6 +18,7 @@ from types import FrameType
 
 from agents.errors import EncloseError
 from agents.network_args import add_network_arguments, apply_network_arguments
+from agents.phases import mark
 from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
 from transport.bus import Bus
@@ -76,9 +77,10 @@ def load_run_scenario(args: argparse.Namespace) -> Scenario:
     return apply_network_arguments(load_scenario(args.scenario), args)
 
 
-def open_bus(args: argparse.Namespace) -> Bus:
+def open_bus(args: argparse.Namespace, arrival_stamps: bool = False) -> Bus:
     """The process's bus; with no --listen it listens on an OS-chosen port of the run's
-    link protocol (`[network] link`, or --link), so that every link of the mesh uses it."""
+    link protocol (`[network] link`, or --link), so that every link of the mesh uses it.
+    `arrival_stamps`: stamp each sample's arrival (one-way latency, transport.link_stats)."""
     cfg = ZenohConfig(
         listen=tuple(args.listen),
         connect=tuple(args.connect),
@@ -86,8 +88,10 @@ def open_bus(args: argparse.Namespace) -> Bus:
         link=load_run_scenario(args).network.link,
         identity=None if args.credentials is None else Identity.load(args.credentials),
         mode=getattr(args, "mode", "peer"),
+        arrival_stamps=arrival_stamps,
     )
     bus = ZenohBus(cfg)
+    mark("bus_open")  # the session is up: its first link (TLS handshake included) is made
     if getattr(args, "clock_id", None):
         bus.start_clock_sync(SwarmKeys(args.swarm), args.clock_id)
     return bus
@@ -100,6 +104,7 @@ def process_main(
     name: Callable[[argparse.Namespace], str],
 ) -> int:
     """Parse, set up logging, run; a named error becomes a logged line and exit code 2."""
+    mark("main")  # the entry point's imports are done
     args = parser.parse_args(argv)
     setup_logging(args.log_level, name(args))
     try:

@@ -15,6 +15,7 @@ from agents.mavlink.modes import HOLD_MODE, OFFBOARD_MODE
 from agents.mavlink.offboard import OffboardKeeper
 from agents.mavlink.signing import load_key
 from agents.mavlink.startup import start_offboard
+from agents.phases import log_phases, mark
 from agents.process import StatusReporter, StopFlag, Ticker, open_bus, stop_on_signals
 from agents.scenario import Scenario
 from transport.bus import Bus
@@ -101,12 +102,15 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
     if args.signing_key is not None:  # link id: the vehicle's number, one stream per agent
         cfg = replace(cfg, signing_key=load_key(args.signing_key), signing_link_id=vehicle & 0xFF)
     keys = SwarmKeys(args.swarm)
-    with stop_on_signals() as stop, open_bus(args) as bus, MavlinkAdapter(cfg, bus.now_s) as mav:
+    stamps = role == "follower" and bool(getattr(args, "latency_stamps", False))
+    with stop_on_signals() as stop, open_bus(args, stamps) as bus, \
+            MavlinkAdapter(cfg, bus.now_s) as mav:
         node = make_node(bus, mav)
         node.status.set("starting")
+        mark("node")  # subscriptions, publishers and first status declared
         stop.interrupt = True
         try:
-            start_offboard(mav, scenario.vehicle.altitude_m)
+            start_offboard(mav, scenario.vehicle.altitude_m, mark=mark)
         except KeyboardInterrupt:
             log.info("%s %d stopped during start-up", role, index)
             node.close()
@@ -114,6 +118,8 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         stop.interrupt = False
         token = bus.declare_token(keys.alive(role, index))
         node.status.set("linked")
+        mark("linked")
+        log_phases(f"{role} {index}")
         period = 1.0 / scenario.run.rate_hz
         # Neighbouring followers tick half a period apart (Scenario.tick_group).
         group = scenario.tick_group(index) if role == "follower" else 0

@@ -78,7 +78,7 @@ class HostLaunch(Launch):
             argv = ["--listen", self.router(k), "--swarm", self.keys.swarm,
                     *(a for j in range(k) for a in ("--connect", self.router(j))),
                     *self.secrets.args_for(f"router-{k}")]
-            self.sup.start(f"router-{k}", "deploy.router", argv, self.prefix(k))
+            self.sup.start(f"router-{k}", "deploy.router", argv, prefix=self.prefix(k))
         mav = ["--mav-local-base", str(self.adapter_base),
                "--mav-vehicle-base", str(self.vehicle_base)]
         for k in self.local:
@@ -92,13 +92,14 @@ class HostLaunch(Launch):
             self.sup.start(name, "deploy.swarm_sim", [
                 *argv, "--mav-host", "0.0.0.0", "--base-port", str(self.vehicle_base),
                 "--send-base-port", str(self.adapter_base),
-                "--noise-std-m", str(self.args.noise_std_m)], pre)
+                "--noise-std-m", str(self.args.noise_std_m)], prefix=pre)
         elif name == "recorder":
-            self.sup.start(name, "deploy.recorder", [*argv, "--out", str(self.out)], pre)
+            self.sup.start(name, "deploy.recorder", [*argv, "--out", str(self.out)], prefix=pre)
         elif name != "launcher":
             role, _, idx = name.rpartition("-")
             extra = ["--mav-vehicle-host", self.sim_address] if remote else []
-            self.sup.start(name, f"agents.{role}", [*argv, *mav, *extra, "--index", idx], pre)
+            self.sup.start(name, f"agents.{role}", [*argv, *mav, *extra, "--index", idx],
+                           prefix=pre)
 
     def open_bus(self) -> ZenohBus:
         k = self.dep.host_of("launcher")

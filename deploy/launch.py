@@ -13,6 +13,7 @@ from typing import Any
 
 from agents.errors import DeployError
 from agents.network_args import network_overrides
+from agents.phases import mark, stamps
 from agents.scenario import Scenario
 from agents.scenario_faults import parse_fault_flag
 from deploy.faults import FaultRunner
@@ -102,19 +103,22 @@ class Launch:
                 str(self.args.noise_std_m),
                 *self.secrets.args_for("sim"),
             ],
+            fork=True,
         )
         joins = [*c, "--connect", self.endpoint]
         sec = self.secrets.args_for
+        # It imports what it alone needs (MCAP, its outputs) after the fork: not in the movers.
         self.sup.start(
             "recorder", "deploy.recorder",
             [*joins, "--out", str(self.out), *sec("recorder"), *recorder_live_argv(self.args)],
+            fork=True,
         )
         for i in range(s.n):
             argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
-            self.sup.start(f"follower-{i}", "agents.follower", argv)
+            self.sup.start(f"follower-{i}", "agents.follower", argv, fork=True)
         for j in range(s.m):
             argv = [*joins, *mav, "--index", str(j), *sec(f"target-{j}")]
-            self.sup.start(f"target-{j}", "agents.target", argv)
+            self.sup.start(f"target-{j}", "agents.target", argv, fork=True)
 
     def expected_tokens(self) -> set[str]:
         k, s = self.keys, self.scenario
@@ -167,11 +171,15 @@ class Launch:
         t0 = time.monotonic()
         interrupted = False
         self.secrets = self.make_secrets()
+        mark("credentials")
         try:
             self.start_all()
+            mark("spawned")
             with self.open_bus() as bus:
+                mark("bus_open")
                 self.board.subscription = bus.subscribe(self.keys.all_status())
                 self.wait_linked(bus, t0)
+                mark("linked")
                 self.timings["link_s"] = time.monotonic() - t0
                 self.timings["linked_wall_s"] = time.time()
                 log.info(
@@ -205,7 +213,8 @@ class Launch:
 
     def make_secrets(self) -> RunSecrets:
         s = self.scenario
-        return RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure)
+        return RunSecrets.make_apart(self.out, self.keys, s.n, s.m, self.args.insecure,
+                                     meanwhile=self.sup.preload)
 
     def open_bus(self) -> ZenohBus:
         """The launcher's own session (deploy.host_launch: a client of its host's router)."""
@@ -289,8 +298,10 @@ class Launch:
             "duration_s": self.duration_s,
             "live_url": self.live_url,
             **self.timings,
+            "start_phases": stamps(),  # CLOCK_MONOTONIC s (agents.phases; bench/bench_start.py)
             "processes": {
-                c.name: {"pid": c.pid, "exit_code": c.poll(), "restarts": c.restarts}
+                c.name: {"pid": c.pid, "exit_code": c.poll(), "restarts": c.restarts,
+                         "spawned_s": c.spawned_s}
                 for c in self.sup.children
             },
             "restart_policy": self.policy.as_dict(),

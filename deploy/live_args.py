@@ -36,8 +36,8 @@ def add_live_arguments(p: Any) -> None:
 
 
 def recorder_live_argv(args: argparse.Namespace) -> list[str]:
-    if getattr(args, "no_live", False):
-        return []
+    if getattr(args, "no_live", False) or not hasattr(args, "live_port"):
+        return []  # `enclose host` has no live view: its recorder may be in a namespace
     return ["--live-port", str(args.live_port), "--live-host", args.live_host]
 
 

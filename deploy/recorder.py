@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from agents.errors import EncloseError
+from agents.phases import log_phases, mark
 from agents.process import add_bus_arguments, load_run_scenario, open_bus, stop_on_signals
 from deploy.recording.live_server import DEFAULT_HOST, LiveServer
 from deploy.recording.loop import Recorder
@@ -62,6 +63,7 @@ def start_live(args: argparse.Namespace) -> LiveServer | None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    mark("main")
     args = parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s recorder: %(message)s")
@@ -70,6 +72,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         with stop_on_signals() as stop, open_bus(args) as bus:
             live = start_live(args)
             recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index, live=live)
+            mark("linked")  # its liveliness token is declared
+            log_phases("recorder")
             try:
                 recorder.run(lambda: stop.raised)
             except Exception:  # a bug in the loop must still leave a finished MCAP behind

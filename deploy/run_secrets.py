@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import argparse
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from agents.mavlink.signing import write_key
 from agents.scenario_file import load_scenario
+from deploy.forked import call_forked
 from transport.credentials import Identity, identity_file, make_credentials
 from transport.keys import SwarmKeys
 
@@ -38,6 +40,22 @@ class RunSecrets:
         cred_dir = make_credentials(out / "credentials", keys, n, m, n_routers=n_routers)
         write_key(cred_dir / SIGNING_KEY_FILE)
         return cls(cred_dir)
+
+    @classmethod
+    def make_apart(cls, out: Path, keys: SwarmKeys, n: int, m: int, insecure: bool,
+                   meanwhile: Callable[[], None]) -> RunSecrets:
+        """`make`, in a short-lived fork when secure, while this process runs `meanwhile`:
+        `cryptography` (~10 MB) then stays out of the launcher, and of the swarm processes
+        it forks (deploy.forked)."""
+        if insecure:
+            meanwhile()
+            return cls.make(out, keys, n, m, insecure)
+
+        def make() -> None:
+            cls.make(out, keys, n, m, insecure)
+
+        call_forked(make, "making the run's credentials", meanwhile)
+        return cls(out / "credentials")
 
     def identity(self, name: str) -> Identity | None:
         return None if self.cred_dir is None else Identity.load(identity_file(self.cred_dir, name))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import importlib
 import json
 import logging
 import os
@@ -14,8 +15,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from deploy.forked import ForkedProcess, fork_is_safe, fork_main
+
 log = logging.getLogger(__name__)
 Clock = Callable[[], float]
+FORKED_MODULES = ("deploy.swarm_sim", "agents.follower", "agents.target")
 
 
 @dataclass
@@ -23,9 +27,10 @@ class Child:
     name: str
     argv: list[str]
     log_path: Path
-    proc: subprocess.Popen[bytes] | None = None
+    proc: subprocess.Popen[bytes] | ForkedProcess | None = None
     exit_code: int | None = None
     restarts: int = 0
+    spawned_s: float | None = None  # CLOCK_MONOTONIC at the last spawn (agents.phases)
 
     @property
     def pid(self) -> int | None:
@@ -52,13 +57,27 @@ class Supervisor:
     children: list[Child] = field(default_factory=list)
     clock: Clock = time.monotonic
 
-    def start(self, name: str, module: str, args: Sequence[str],
+    def preload(self) -> None:
+        """Import the modules of the processes the launcher forks, before it forks them."""
+        for module in FORKED_MODULES:
+            importlib.import_module(module)
+
+    def start(self, name: str, module: str, args: Sequence[str], fork: bool = False,
               prefix: Sequence[str] = ()) -> Child:
-        """Start `python -m module args`, after `prefix` (e.g. `ip netns exec NS env K=V`)."""
+        """Start `python -m module args`, after `prefix` (e.g. `ip netns exec NS env K=V`);
+        with `fork` (and no prefix), as a fork of this process that runs `module.main(args)`
+        (deploy.forked: no interpreter start-up, no imports; a module not in FORKED_MODULES
+        is imported by its child alone), when that is safe (no other thread, no Zenoh
+        session here yet); else, and on a restart, a fresh interpreter."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         argv = [*prefix, sys.executable, "-m", module, *args]
         child = Child(name, argv, self.log_dir / f"{name}.log")
-        self._spawn(child, "wb")
+        if fork and not prefix and fork_is_safe():
+            child.spawned_s = time.monotonic()
+            child.proc = fork_main(module, list(args), child.log_path,
+                                   import_in_child=module not in FORKED_MODULES)
+        else:
+            self._spawn(child, "wb")
         self.children.append(child)
         self._write_pids()
         log.debug("started %s pid %d: %s", name, child.pid, " ".join(child.argv))
@@ -75,6 +94,7 @@ class Supervisor:
         log.info("restarted %s (restart %d) pid %d", child.name, child.restarts, child.pid)
 
     def _spawn(self, child: Child, mode: str) -> None:
+        child.spawned_s = time.monotonic()
         with open(child.log_path, mode) as out:
             child.proc = subprocess.Popen(
                 child.argv,

@@ -20,6 +20,7 @@ from agents.frames import ned_to_enu
 from agents.liveness import MembershipWatch
 from agents.mavlink.signing import load_key
 from agents.membership import membership
+from agents.phases import log_phases, mark
 from agents.process import (
     StatusReporter,
     add_bus_arguments,
@@ -152,6 +153,8 @@ def run(args: argparse.Namespace) -> int:
         sim.on_tick.append(report)
         token = bus.declare_token(keys.alive("sim", 0))
         status.set("running")
+        mark("linked")
+        log_phases("sim")
         try:
             stats = sim.run(lambda: stop.raised)
         finally:

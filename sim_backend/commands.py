@@ -32,7 +32,8 @@ INT32_MAX = 2**31 - 1
 RELATIVE_ALT_FRAMES = (3, 6)  # GLOBAL_RELATIVE_ALT(_INT)
 MSG_MESSAGE_INTERVAL = 244
 Params = tuple[float, ...]
-Outcome = tuple[int, bytes, str]  # MAV_RESULT, reply bytes, reason when not ACCEPTED
+# MAV_RESULT, the reply (bytes, or what packs it after the ACK), reason when not ACCEPTED
+Outcome = tuple[int, bytes | Callable[[], bytes], str]
 CommandHandler = Callable[["VehicleEndpoint", Params, "Rx"], Outcome]
 
 
@@ -76,7 +77,7 @@ def on_command(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
         reply, why = b"", ap.reason
     ack = ep.mav.command_ack_encode(cmd, result, 0, 0, msg.get_srcSystem(),
                                     msg.get_srcComponent())
-    out = encode(ep.mav, ack) + reply
+    out = encode(ep.mav, ack) + (reply() if callable(reply) else reply)
     if result != ACCEPTED:
         ep.counters["commands_not_accepted"] += 1
         out += ep.statustext(SEVERITY_WARNING, why or f"command {cmd}: result {result}")
@@ -100,7 +101,7 @@ def _request_message(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
         if wanted is None:
             return DENIED, b"", "REQUEST_MESSAGE MESSAGE_INTERVAL: param2 is no message id"
         return _get_interval(ep, (float(wanted),), rx)
-    reply = ep.build(msg_id, rx.row)
+    reply = ep.packer(msg_id, rx.row)
     if reply is None:
         return DENIED, b"", f"REQUEST_MESSAGE: message {msg_id} not available"
     return ACCEPTED, reply, ""
@@ -108,7 +109,7 @@ def _request_message(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
 
 def _reply_of(msg_id: int) -> CommandHandler:
     def handler(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
-        reply = ep.build(msg_id, rx.row)
+        reply = ep.packer(msg_id, rx.row)
         return (ACCEPTED, reply, "") if reply else (UNSUPPORTED, b"", "not available")
     return handler
 
@@ -137,8 +138,7 @@ def _get_interval(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
     # -1: stream off; 0: not produced as a stream.
     us = 0 if interval is None else (-1 if interval <= 0 else min(round(interval * 1e6),
                                                                   INT32_MAX))
-    reply = encode(ep.mav, ep.mav.message_interval_encode(msg_id, us))
-    return ACCEPTED, reply, ""
+    return ACCEPTED, lambda: encode(ep.mav, ep.mav.message_interval_encode(msg_id, us)), ""
 
 
 def _reposition(ep: VehicleEndpoint, p: Params, frame: int, rx: Rx) -> Outcome:

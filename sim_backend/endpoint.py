@@ -159,14 +159,21 @@ class VehicleEndpoint:
     # ---- send ---------------------------------------------------------------------------
     def build(self, msg_id: int, row: tm.Row) -> bytes | None:
         """One packed message of id msg_id describing `row`, or None if not produced here."""
+        pack = self.packer(msg_id, row)
+        return None if pack is None else pack()
+
+    def packer(self, msg_id: int, row: tm.Row) -> Callable[[], bytes] | None:
+        """What packs that message when called, or None: a command's reply is packed after
+        its ACK, so that its signing timestamp and sequence number follow the ACK's (a
+        verifying receiver drops a frame stamped before one it has seen: a replay)."""
         if msg_id in tm.FAST_IDS:
-            return tm.fast_bytes(self.mav, msg_id, row, self.home)
+            return lambda: tm.fast_bytes(self.mav, msg_id, row, self.home)
         if msg_id == tm.MSG_PROTOCOL_VERSION:
-            return tm.protocol_version(self.mav)
+            return lambda: tm.protocol_version(self.mav)
         ap = self.autopilot
         msg = tm.status_message(self.mav, msg_id, row, self.home, ap.flavour, ap.mode, ap.armed,
                                 self.sysid, ap.home_ned_m)
-        return None if msg is None else encode(self.mav, msg)
+        return None if msg is None else (lambda: encode(self.mav, msg))
 
     def statustext(self, severity: int, text: str) -> bytes:
         msg = self.mav.statustext_encode(severity, text.encode()[:50])

@@ -1,9 +1,19 @@
-"""A stand-in child for supervisor tests: `sleep S` or `exit CODE`."""
+"""A stand-in child for supervisor tests: `sleep S`, `exit CODE` or `print TEXT`.
+
+Runs as `python -m tests.child_proc ...` or forked (deploy.forked calls `main(argv)`)."""
 
 import sys
 import time
+from collections.abc import Sequence
+
+
+def main(argv: Sequence[str]) -> int:
+    if argv[0] == "sleep":
+        time.sleep(float(argv[1]))
+    if argv[0] == "print":
+        print(argv[1])
+    return int(argv[1]) if argv[0] == "exit" else 0
+
 
 if __name__ == "__main__":
-    if sys.argv[1] == "sleep":
-        time.sleep(float(sys.argv[2]))
-    sys.exit(int(sys.argv[2]) if sys.argv[1] == "exit" else 0)
+    sys.exit(main(sys.argv[1:]))

@@ -50,6 +50,9 @@ class Received:
     recv_stamp_s: float  # receiver's bus clock when the sample was drained
     hlc_stamp_s: float | None = None  # Zenoh HLC stamp of the publisher, if any
     hlc_source: str | None = None  # id of the session that stamped it
+    # Receiver's bus clock when the sample reached this process (not when drained), if the
+    # bus stamps arrivals (ZenohConfig.arrival_stamps): one-way latency = arrival - HLC.
+    arrival_s: float | None = None
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,11 @@ that reach the agent.  Its `counters()` add, for each link L seen:
   "start" passes through the decoder, only messages stamped from the experiment's start on
   count: the backlog a process drains after its start-up (seconds old) says nothing of
   the link.
+- `lat_p50_us_L`, `lat_p99_us_L`: one-way latency of the same messages, when the bus
+  stamps arrivals (ZenohConfig.arrival_stamps): arrival in this process minus the
+  sender's Zenoh HLC stamp, taken as its session put the sample (10 µs resolution);
+  `nbr_lat_p50_us`, `nbr_lat_p99_us`, `nbr_lat_n`: the same over every follower link.
+  Processes on one host read one clock, so this needs no clock sync.
 """
 
 from __future__ import annotations
@@ -36,6 +41,8 @@ from transport.messages import RunControl
 SENSOR = "sensor"
 AGE_BIN_S = 1e-4
 AGE_MAX_S = 10.0  # older deliveries land in the last bin
+LATENCY_BIN_S = 1e-5
+LATENCY_MAX_S = 0.1  # slower arrivals land in the last bin
 SEEN_WINDOW = 4096  # sequence numbers remembered per stream, to recognise copies
 
 
@@ -72,15 +79,16 @@ class AgeHistogram:
 
     BLOCK = 100
 
-    def __init__(self) -> None:
-        n_bins = round(AGE_MAX_S / AGE_BIN_S)
+    def __init__(self, bin_s: float = AGE_BIN_S, max_s: float = AGE_MAX_S) -> None:
+        self.bin_s = bin_s
+        n_bins = round(max_s / bin_s)
         self.bins = np.zeros(n_bins, dtype=np.int64)
         self.blocks = np.zeros(n_bins // self.BLOCK, dtype=np.int64)
         self.count = 0
         self.sum_s = 0.0
 
     def add(self, age_s: float) -> None:
-        k = min(max(int(age_s / AGE_BIN_S), 0), len(self.bins) - 1) if age_s == age_s else 0
+        k = min(max(int(age_s / self.bin_s), 0), len(self.bins) - 1) if age_s == age_s else 0
         self.bins[k] += 1
         self.blocks[k // self.BLOCK] += 1
         self.count += 1
@@ -102,7 +110,7 @@ class AgeHistogram:
         before = int(block_cum[b - 1]) if b > 0 else 0
         inner = np.cumsum(self.bins[b * self.BLOCK:(b + 1) * self.BLOCK])
         k = b * self.BLOCK + int(np.searchsorted(inner, rank - before))
-        return (k + 0.5) * AGE_BIN_S
+        return (k + 0.5) * self.bin_s
 
 
 @dataclass
@@ -115,11 +123,12 @@ class LinkTally:
     seq_first: int | None = None
     seq_last: int | None = None
     ages: AgeHistogram = field(default_factory=AgeHistogram)
+    latencies: AgeHistogram | None = None  # only when arrivals are stamped
     _seen: set[int] = field(default_factory=set)
     _floor: int = -1
 
-    def observe(self, seq: int, age_s: float | None) -> None:
-        """One delivery; `age_s` None: counted, but its age is not of interest."""
+    def observe(self, seq: int, age_s: float | None, latency_s: float | None = None) -> None:
+        """One delivery; `age_s` None: counted, but its age (and latency) not of interest."""
         # Sequence numbers below the floor were pruned from `_seen`; one arriving that
         # late (thousands of messages) can only be a copy.
         if seq < self._floor or seq in self._seen:
@@ -134,6 +143,14 @@ class LinkTally:
         self.seq_last = seq if self.seq_last is None else max(self.seq_last, seq)
         if age_s is not None:
             self.ages.add(age_s)
+            if latency_s is not None:
+                if self.latencies is None:
+                    self.latencies = latency_histogram()
+                self.latencies.add(latency_s)
+
+
+def latency_histogram() -> AgeHistogram:
+    return AgeHistogram(LATENCY_BIN_S, LATENCY_MAX_S)
 
 
 def _us(value_s: float | None) -> int | None:
@@ -159,7 +176,7 @@ class LinkDecoder(Decoder):
                     and msg.start_stamp_s != self.ages_from_s):
                 self.ages_from_s = msg.start_stamp_s
                 for t in self.tallies.values():
-                    t.ages = AgeHistogram()
+                    t.ages, t.latencies = AgeHistogram(), None
             tally = self.tallies.get(rec.key)
             if tally is None:
                 link = link_of(rec.key)
@@ -168,7 +185,12 @@ class LinkDecoder(Decoder):
             if tally is not None:
                 head = msg.header
                 age_s = rec.recv_stamp_s - head.stamp_s
-                tally.observe(head.seq, age_s if head.stamp_s >= self.ages_from_s else None)
+                latency_s = None
+                if rec.arrival_s is not None:
+                    latency_s = rec.arrival_s - (head.stamp_s if rec.hlc_stamp_s is None
+                                                 else rec.hlc_stamp_s)
+                tally.observe(head.seq, age_s if head.stamp_s >= self.ages_from_s else None,
+                              latency_s)
         return inbound
 
     def forget(self, key: str) -> None:
@@ -190,15 +212,28 @@ class LinkDecoder(Decoder):
                 pick = min if name == "seq_first" else max
                 setattr(into, name, theirs if mine is None else pick(mine, theirs))
             into.ages.merge(tally.ages)
+            if tally.latencies is not None:
+                into.latencies = into.latencies or latency_histogram()
+                into.latencies.merge(tally.latencies)
         out: dict[str, int] = {}
+        neighbours = latency_histogram()
         for name, t in sorted(merged.items()):
+            lat = t.latencies
             values = {
                 "rx": t.rx, "rx_dup": t.rx_dup, "seq_first": t.seq_first,
                 "seq_last": t.seq_last, "age_p50_us": _us(t.ages.percentile_s(50)),
                 "age_p99_us": _us(t.ages.percentile_s(99)),
                 "age_n": t.ages.count, "age_sum_us": _us(t.ages.sum_s),
+                "lat_p50_us": None if lat is None else _us(lat.percentile_s(50)),
+                "lat_p99_us": None if lat is None else _us(lat.percentile_s(99)),
             }
             out.update({f"{k}_{name}": v for k, v in values.items() if v is not None})
+            if lat is not None and name != SENSOR:
+                neighbours.merge(lat)
+        p50, p99 = neighbours.percentile_s(50), neighbours.percentile_s(99)
+        if p50 is not None and p99 is not None:
+            out.update({"nbr_lat_p50_us": round(p50 * 1e6), "nbr_lat_p99_us": round(p99 * 1e6),
+                        "nbr_lat_n": neighbours.count})
         return out
 
     def counters(self) -> dict[str, int]:

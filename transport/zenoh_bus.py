@@ -9,6 +9,7 @@ everything and closes the session; use the bus as a context manager.
 from __future__ import annotations
 
 import logging
+from collections import deque
 from typing import TypeVar, Union
 
 import zenoh
@@ -39,23 +40,49 @@ def _hlc(sample: zenoh.Sample) -> tuple[float | None, str | None]:
 
 
 class ZenohSubscription:
+    """A ring of the newest `capacity` samples.  With arrival stamps (ZenohConfig), a
+    callback stamps each sample on its way in; it runs on zenoh-python's own Python
+    thread (never a Zenoh network thread) and only appends to a bounded deque."""
+
     def __init__(self, bus: ZenohBus, key_expr: str, capacity: int) -> None:
         self.key_expr = key_expr
         self._bus = bus
-        self._sub = bus.session.declare_subscriber(key_expr, zenoh.handlers.RingChannel(capacity))
+        self._arrived: deque[tuple[float, zenoh.Sample]] | None = None
+        self._ring: zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]] | None = None
+        self._sub: zenoh.Subscriber[None] | zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]
+        if bus.cfg.arrival_stamps:
+            arrived = self._arrived = deque(maxlen=capacity)
+            clock = bus.now_s
+
+            def arrive(sample: zenoh.Sample) -> None:
+                arrived.append((clock(), sample))
+
+            self._sub = bus.session.declare_subscriber(key_expr, zenoh.handlers.Callback(arrive))
+        else:
+            self._sub = self._ring = bus.session.declare_subscriber(
+                key_expr, zenoh.handlers.RingChannel(capacity))
+
+    def _next(self) -> tuple[float | None, zenoh.Sample | None]:
+        if self._ring is not None:
+            return None, self._ring.try_recv()
+        assert self._arrived is not None
+        try:
+            return self._arrived.popleft()
+        except IndexError:
+            return None, None
 
     def drain(self, max_items: int | None = None) -> list[Received]:
         out: list[Received] = []
         now = self._bus.now_s()
         while max_items is None or len(out) < max_items:
-            sample = self._sub.try_recv()
+            arrival_s, sample = self._next()
             if sample is None:
                 break
             if sample.kind != zenoh.SampleKind.PUT:
                 continue
             hlc_s, source = _hlc(sample)
             payload = sample.payload.to_bytes()
-            out.append(Received(str(sample.key_expr), payload, now, hlc_s, source))
+            out.append(Received(str(sample.key_expr), payload, now, hlc_s, source, arrival_s))
         return out
 
     def close(self) -> None:
@@ -121,6 +148,8 @@ class ZenohAliveWatch:
 class ZenohBus(BusBase):
     """A Zenoh session configured by `ZenohConfig`."""
 
+    open_sessions = 0  # in this process: forking is unsafe while any is open (deploy.forked)
+
     def __init__(self, cfg: ZenohConfig, clock: Clock | None = None) -> None:
         super().__init__()
         self.cfg = cfg
@@ -131,6 +160,7 @@ class ZenohBus(BusBase):
             self.session = zenoh.open(build_zenoh_config(cfg))
         except zenoh.ZError as exc:
             raise TransportError(f"cannot open Zenoh session: {exc}") from exc
+        ZenohBus.open_sessions += 1
         self.closed = False
         log.debug("zenoh session %s listen=%s connect=%s", self.zid, cfg.listen, cfg.connect)
 
@@ -191,3 +221,4 @@ class ZenohBus(BusBase):
         self._owned.clear()
         self._publishers.clear()
         self.session.close()
+        ZenohBus.open_sessions -= 1

@@ -42,6 +42,9 @@ class ZenohConfig:
     lowlatency: bool = False  # `transport/unicast/lowlatency`; also turns QoS off
     link: str = "tcp"  # protocol of the default listen endpoint (scenario `[network] link`)
     identity: Identity | None = None  # None: unauthenticated (`--insecure`)
+    # Stamp each sample as it arrives (transport.zenoh_bus): a Python thread per
+    # subscription wakes for every sample, so off unless latency is being measured.
+    arrival_stamps: bool = False
 
     def __post_init__(self) -> None:
         if self.mode not in _MODES:

@@ -23,6 +23,7 @@ MAV_CMD_DO_SET_MODE = 176
 MAV_CMD_COMPONENT_ARM_DISARM = 400
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_CMD_REQUEST_MESSAGE = 512
+MSG_HEARTBEAT = 0
 MSG_LOCAL_POSITION_NED = 32
 MSG_HOME_POSITION = 242
 ACCEPTED, TEMPORARILY_REJECTED, IN_PROGRESS = 0, 1, 5
@@ -37,6 +38,7 @@ class StartupTimeouts:
     takeoff_s: float = 60.0
     offboard_s: float = 5.0
     retry_s: float = 0.5
+    heartbeat_request_s: float = 0.1  # HEARTBEAT asked for again (wait_heartbeat)
     stream_s: float = 0.5
     setpoint_hz: float = 20.0
     altitude_tolerance_m: float = 0.3
@@ -109,9 +111,15 @@ def set_mode(ad: MavlinkAdapter, name: str, t: StartupTimeouts, keepalive_hz: fl
                keepalive_hz)
 
 
-def connect(ad: MavlinkAdapter, t: StartupTimeouts) -> VehicleState:
+def _no_mark(phase: str) -> None:
+    """The default `mark`: phases are not timed."""
+
+
+def connect(ad: MavlinkAdapter, t: StartupTimeouts,
+            mark: Callable[[str], None] = _no_mark) -> VehicleState:
     """Wait for the vehicle's heartbeat and its first position; ask for fast position telemetry."""
-    wait_until(ad, lambda _s: ad.flavour is not None, t.heartbeat_s, "vehicle HEARTBEAT")
+    wait_heartbeat(ad, t)
+    mark("heartbeat")
     try:
         command(ad, MAV_CMD_SET_MESSAGE_INTERVAL, (MSG_LOCAL_POSITION_NED, 1e6 / t.telemetry_hz),
                 t)
@@ -122,11 +130,37 @@ def connect(ad: MavlinkAdapter, t: StartupTimeouts) -> VehicleState:
         command(ad, MAV_CMD_REQUEST_MESSAGE, (MSG_HOME_POSITION,), t)
         state = wait_until(ad, lambda _s: ad.home_amsl_m is not None, t.position_s,
                            "home altitude")
+    mark("position")
     return state
 
 
-def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts) -> VehicleState:
-    """Arm and climb to altitude_m above home; skipped when already there."""
+def wait_heartbeat(ad: MavlinkAdapter, t: StartupTimeouts) -> None:
+    """Wait for the vehicle's first HEARTBEAT (its flavour and mode).
+
+    Autopilots send it at 1 Hz: when the vehicle's address is known (PX4 SITL's ports),
+    ask for one (REQUEST_MESSAGE, as PX4 and ArduPilot answer it) every
+    `heartbeat_request_s` instead of waiting up to a second for the next (the vehicle may
+    not listen yet when we start).  Unanswered requests cost nothing."""
+    deadline = ad.clock() + t.heartbeat_s
+    while ad.flavour is None:
+        if ad.remote is not None and ad.sysid is not None:
+            ad.send_command(MAV_CMD_REQUEST_MESSAGE, (MSG_HEARTBEAT,))
+        left = deadline - ad.clock()
+        if left <= 0.0:
+            raise MavlinkError(f"timed out after {t.heartbeat_s:.1f} s waiting for vehicle "
+                               "HEARTBEAT")
+        try:
+            wait_until(ad, lambda _s: ad.flavour is not None,
+                       min(left, t.heartbeat_request_s), "vehicle HEARTBEAT")
+        except MavlinkError:
+            continue
+
+
+def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts,
+             mark: Callable[[str], None] = _no_mark) -> VehicleState:
+    """Arm and climb to altitude_m above home; skipped when already there.
+
+    Streams zero-velocity setpoints while climbing: offboard then needs no further wait."""
     if ad.state.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m and ad.state.armed:
         return ad.state
     if ad.flavour == ARDUPILOT:
@@ -136,23 +170,34 @@ def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts) -> Vehic
         assert ad.home_amsl_m is not None
         alt_param = ad.home_amsl_m + altitude_m
     command(ad, MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), t)
+    mark("armed")
     command(ad, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, math.nan, math.nan, math.nan, alt_param), t)
-    return wait_until(ad, lambda s: s.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m,
-                      t.takeoff_s, f"take-off to {altitude_m:.1f} m")
+    mark("takeoff_accepted")
+    state = wait_until(ad, lambda s: s.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m,
+                       t.takeoff_s, f"take-off to {altitude_m:.1f} m", t.setpoint_hz)
+    mark("at_altitude")
+    return state
 
 
-def start_offboard(ad: MavlinkAdapter, altitude_m: float,
-                   t: StartupTimeouts | None = None) -> VehicleState:
-    """The whole start-up sequence; returns once the vehicle flies our velocity setpoints."""
+def start_offboard(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts | None = None,
+                   mark: Callable[[str], None] = _no_mark) -> VehicleState:
+    """The whole start-up sequence; returns once the vehicle flies our velocity setpoints.
+
+    `mark(phase)` is called as each phase ends (agents.phases): heartbeat, position,
+    armed, takeoff_accepted, at_altitude, offboard."""
     t = t or StartupTimeouts()
-    connect(ad, t)
-    take_off(ad, altitude_m, t)
+    connect(ad, t, mark)
+    climb_from = ad.clock()
+    take_off(ad, altitude_m, t, mark)
     assert ad.flavour is not None
     wanted = OFFBOARD_MODE[ad.flavour]
-    deadline = ad.clock() + t.stream_s
+    # Setpoints must flow before offboard is asked for; the climb streamed them (if the
+    # vehicle had to climb), and counts (most of it: the arm and take-off ACKs did not).
+    deadline = max(ad.clock(), climb_from + t.stream_s)
     wait_until(ad, lambda _s: ad.clock() >= deadline, t.stream_s + 1.0, "setpoint stream",
                t.setpoint_hz)
     if ad.state.mode != wanted:
         set_mode(ad, wanted, t, t.setpoint_hz)
+    mark("offboard")
     log.info("vehicle %s in %s at %.1f m", ad.sysid, wanted, ad.state.pos_enu_m[2])
     return ad.state

@@ -22,7 +22,6 @@ from deploy.recording.link_history import LinkHistory
 from deploy.recording.links import FINAL_STATES, link_report
 from deploy.recording.live_server import LiveServer
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
-from deploy.recording.outputs import write_final_outputs
 from deploy.recording.progress import PROGRESS_FILE, live_errors, write_json_atomic
 from deploy.recording.resume import newest_part, read_back
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
@@ -225,6 +224,10 @@ class Recorder:
             self.live.stop()
         self.mcap.close()
         try:
+            # Imported here: its figures need matplotlib (~1 s of imports), which would
+            # otherwise delay the recorder's start, and so every run's (issue 15).
+            from deploy.recording.outputs import write_final_outputs
+
             metrics = write_final_outputs(self.run_dir, self.scenario, self.asm, self.counters(),
                                           self.membership, self.link_history)
         except Exception:

@@ -88,3 +88,23 @@ def test_sim_time_advances_by_fixed_ticks_and_hooks_see_state(sim: Simulator) ->
     snap = sim.snapshot()
     assert snap.pos_ned_m.shape == (2, 3) and snap.modes == ("HOLD", "HOLD")
     assert np.all(snap.pos_ned_m[:, 2] == 0.0)
+
+
+def test_a_signed_vehicle_answers_a_request_with_frames_a_verifier_accepts(sim: Simulator) -> None:
+    """The reply to REQUEST_MESSAGE follows its ACK on the wire: it must be packed after
+    it too, or a verifying agent drops it as a replay (it did: the agents' first HEARTBEAT
+    then waited for the 1 Hz stream, issue 15)."""
+    from agents.mavlink.signing import SignatureVerifier
+    from agents.mavlink.wire import frame_bytes, sign_outgoing
+
+    key = bytes(range(1, 33))
+    sim.endpoints[1].enforce_signing(key)
+    gcs = new_codec(255, 190)
+    sign_outgoing(gcs, key, 0, SignatureVerifier(key).now_ticks())
+    verifier = SignatureVerifier(key, allowed_unsigned=frozenset())
+    for wanted, name in ((0, "HEARTBEAT"), (148, "AUTOPILOT_VERSION")):
+        got = deliver(sim, 1, gcs.command_long_encode(2, 1, 512, 0, wanted, 0, 0, 0, 0, 0, 0)
+                      .pack(gcs))
+        assert [m.get_type() for m in got] == ["COMMAND_ACK", name]
+        assert [verifier.check(frame_bytes(m), m.get_msgId(), m.get_srcSystem(),
+                               m.get_srcComponent()) for m in got] == [None, None]

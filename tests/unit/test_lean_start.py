@@ -1,0 +1,145 @@
+"""Issue 15 (fast start, lean processes): what stays out of a follower, forked children,
+start-up phase stamps, and one-way latency from stamped arrivals."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from agents import phases
+from agents.errors import DeployError
+from deploy.forked import call_forked, fork_main
+from transport.bus import Received
+from transport.codec import encode
+from transport.keys import SwarmKeys
+from transport.link_stats import LinkDecoder
+from transport.messages import FollowerState, Header, RunControl
+
+K = SwarmKeys("lean")
+# Heavy packages a follower (or `enclose run` before its swarm starts) never needs.
+NOT_IN_A_FOLLOWER = ("cryptography", "matplotlib", "mcap", "numba", "scipy", "pandas")
+
+
+def imported_by(code: str) -> set[str]:
+    out = subprocess.run(
+        [sys.executable, "-c", f"{code}\nimport sys; print(' '.join(sys.modules))"],
+        capture_output=True, text=True, check=True, timeout=60,
+    ).stdout
+    return {m.split(".")[0] for m in out.split()}
+
+
+@pytest.mark.timeout(90)
+def test_a_follower_and_the_launcher_import_none_of_the_heavy_packages() -> None:
+    follower = imported_by("import agents.follower, agents.target, deploy.swarm_sim")
+    assert "numpy" in follower and "zenoh" in follower  # the check can fail
+    assert not follower & set(NOT_IN_A_FOLLOWER)
+    launcher = imported_by("from deploy.cli import build_parser; build_parser(['run'])")
+    assert "deploy" in launcher
+    assert not launcher & set(NOT_IN_A_FOLLOWER)
+
+
+def wait_exit(proc: object, timeout_s: float = 20.0) -> int | None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        code = proc.poll()  # type: ignore[attr-defined]
+        if code is not None:
+            return int(code)
+        time.sleep(0.01)
+    return None
+
+
+@pytest.mark.timeout(30)
+def test_a_forked_child_runs_main_with_its_own_log_pid_and_exit_code(tmp_path: Path) -> None:
+    log = tmp_path / "child.log"
+    proc = fork_main("tests.child_proc", ["print", "hello"], log)
+    assert proc.pid != os.getpid()
+    assert wait_exit(proc) == 0
+    assert log.read_text().strip() == "hello"
+    failing = fork_main("tests.child_proc", ["exit", "3"], tmp_path / "f.log")
+    assert wait_exit(failing) == 3
+
+
+@pytest.mark.timeout(30)
+def test_call_forked_reports_a_failure(tmp_path: Path) -> None:
+    call_forked(lambda: (tmp_path / "made").write_text("x") and None, "making")
+    assert (tmp_path / "made").read_text() == "x"  # ran, in another process
+
+    def fail() -> None:
+        raise ValueError("no")
+
+    with pytest.raises(DeployError, match="making"):
+        call_forked(fail, "making")
+
+
+def test_phase_stamps_round_trip_through_a_log_line(caplog: pytest.LogCaptureFixture) -> None:
+    phases.reset()
+    phases.mark("main")
+    phases.mark("bus_open")
+    phases.mark("main")  # the first stamp of a phase wins
+    with caplog.at_level("INFO"):
+        phases.log_phases("test")
+    parsed = [p for p in map(phases.parse_phases, caplog.messages) if p is not None]
+    assert len(parsed) == 1
+    stamps, cpu_s = parsed[0]
+    assert list(stamps)[-2:] == ["main", "bus_open"] and stamps["main"] <= stamps["bus_open"]
+    assert stamps.get("exec", 0.0) <= stamps["main"] <= time.monotonic() and cpu_s > 0
+    assert phases.parse_phases("start-up phases {not json") is None
+    phases.reset()
+
+
+def rec(seq: int, stamp_s: float, arrival_s: float | None, hlc_s: float | None) -> Received:
+    z = (0.0, 0.0)
+    payload = encode(FollowerState(Header("follower-0", seq, stamp_s), 0, z, z, z, z, z, z, 0.0))
+    return Received(K.follower_state(0), payload, stamp_s + 0.01, hlc_s, None, arrival_s)
+
+
+def start(stamp_s: float, seq: int) -> Received:
+    word = encode(RunControl(Header("launcher-0", seq, stamp_s), "start", 100.0, 10.0))
+    return Received(K.control(), word, stamp_s)
+
+
+def test_latency_is_arrival_minus_the_senders_put_and_survives_repeated_start_words() -> None:
+    d = LinkDecoder()
+    d.decode(start(99.0, 0))
+    for k in range(100):  # put 0.2 ms after the header stamp, arrived 0.15 ms later
+        t = 100.0 + 0.02 * k
+        d.decode(rec(k, t, t + 0.00035, t + 0.0002))
+        if k % 50 == 49:
+            d.decode(start(t, k + 1))  # the launcher's repeats: same start stamp
+    c = d.counters()
+    assert 140 <= c["lat_p50_us_f0"] <= 160 and 140 <= c["lat_p99_us_f0"] <= 160
+    assert c["nbr_lat_n"] == 100 and 140 <= c["nbr_lat_p50_us"] <= 160
+    assert 9_900 <= c["age_p50_us_f0"] <= 10_100  # still counted from the first start word
+
+
+def test_no_latency_without_arrival_stamps() -> None:
+    d = LinkDecoder()
+    d.decode(rec(0, 100.0, None, 100.0))
+    assert not any("lat" in k for k in d.counters())
+
+
+@pytest.mark.timeout(30)
+def test_no_fork_while_a_thread_runs(tmp_path: Path) -> None:
+    import threading
+
+    from deploy.forked import ForkedProcess, fork_is_safe
+    from deploy.supervisor import Supervisor
+
+    assert fork_is_safe()
+    stop = threading.Event()
+    helper = threading.Thread(target=stop.wait)
+    helper.start()
+    try:
+        assert not fork_is_safe()
+        sup = Supervisor(tmp_path)
+        child = sup.start("c", "tests.child_proc", ["exit", "0"], fork=True)
+        assert child.proc is not None and not isinstance(child.proc, ForkedProcess)
+        assert sup.wait([child], 20.0) and child.poll() == 0
+    finally:
+        stop.set()
+        helper.join()
