@@ -26,7 +26,8 @@ from pathlib import Path
 from agents.errors import EncloseError
 from agents.phases import log_phases, mark
 from agents.process import add_bus_arguments, load_run_scenario, open_bus, stop_on_signals
-from deploy.recording.live_server import DEFAULT_HOST, LiveServer
+from deploy.recording.live_defaults import DEFAULT_HOST
+from deploy.recording.live_server import LiveServer
 from deploy.recording.loop import Recorder
 
 log = logging.getLogger("deploy.recorder")

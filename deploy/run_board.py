@@ -69,6 +69,8 @@ def error_cells(view: BoardView) -> Iterator[tuple[str, str, str, bool | None]]:
         shown = "-" if value is None else f"{value:.4g}{u}"
         yield label, shown, f"< {bound:g}{u}", None if value is None else value < bound
 
+SILENT_NAMED = 4
+
 
 def link_text(progress: dict[str, Any]) -> str:
     links = progress.get("links")
@@ -80,8 +82,10 @@ def link_text(progress: dict[str, Any]) -> str:
         parts.append(f"worst delivered {links['min_delivered']:.2f} ({worst})")
     if _num(links.get("max_age_ms")) is not None:
         parts.append(f"oldest {links['max_age_ms']:.1f} ms ({links['max_age_link']})")
-    if links.get("silent"):
-        parts.append(f"silent: {', '.join(links['silent'])}")
+    silent = links.get("silent") or []
+    if silent:  # a big ring can have dozens: name a few, count the rest
+        more = f" (+{len(silent) - SILENT_NAMED} more)" if len(silent) > SILENT_NAMED else ""
+        parts.append(f"silent {len(silent)}: {', '.join(silent[:SILENT_NAMED])}{more}")
     return ", ".join(parts)
 
 

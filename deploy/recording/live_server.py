@@ -16,11 +16,10 @@ import logging
 import foxglove
 
 from agents.errors import DeployError
+from deploy.recording.live_defaults import DEFAULT_HOST, DEFAULT_PORT
 from deploy.recording.view import ViewFrame
 
 log = logging.getLogger(__name__)
-DEFAULT_PORT = 8765
-DEFAULT_HOST = "127.0.0.1"
 PORT_TRIES = 20
 SERVER_NAME = "enclose"
 SUBPROTOCOL = "foxglove.sdk.v1"

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from deploy.run_board import BoardView, LiveBoard, ProcessView, board_line, render_board
+from deploy.run_board import BoardView, LiveBoard, ProcessView, board_line, link_text, render_board
 from deploy.verdict import announce, print_verdict, read_verdict, verdict_json
 
 ESC = "\x1b"
@@ -53,7 +53,7 @@ def test_the_board_shows_time_errors_against_bounds_processes_links_and_live_url
     assert rows["estimator"].rstrip().endswith("ok")
     assert rows["radius"].rstrip().endswith("over")  # 0.25 m is above 0.0999 m
     assert "restarting" in rows["follower-1"] and "sim" in rows
-    assert "worst delivered 0.80 (f0->f1)" in text and "silent: f3->f0" in text
+    assert "worst delivered 0.80 (f0->f1)" in text and "silent 1: f3->f0" in text
     assert "live view: ws://127.0.0.1:8765" in text and "died signal=SIGKILL" in text
 
 
@@ -179,3 +179,10 @@ def test_process_health_and_state_as_the_board_shows_them(tmp_path: Path) -> Non
         ("sim", "up", "running"), ("follower-0", "paused", "running"),
         ("follower-1", "killed (9)", ""), ("follower-2", "exited 0", ""),
         ("target-0", "restarting", "")]
+
+
+def test_a_long_list_of_silent_links_is_cut_to_a_few_names() -> None:
+    silent = [f"f{i}->f{i + 1}" for i in range(30)]
+    text = link_text({"links": {"count": 48, "silent": silent}})
+    assert "silent 30: f0->f1, f1->f2, f2->f3, f3->f4 (+26 more)" in text
+    assert "f4->f5" not in text
