@@ -19,6 +19,7 @@ from deploy.cmd_run import _interrupt
 from deploy.deployment import load_deployment
 from deploy.host_launch import HostLaunch
 from deploy.restarts import add_supervision_arguments
+from deploy.verdict import add_json_argument
 
 
 def register(sub: Any) -> None:
@@ -38,6 +39,7 @@ def register(sub: Any) -> None:
                    help="seconds to wait for the whole swarm to link")
     p.add_argument("--insecure", action="store_true",
                    help="no mTLS/ACL, no MAVLink signing (not recommended)")
+    add_json_argument(p)
     add_supervision_arguments(p)
     p.set_defaults(func=_main)
 

@@ -318,7 +318,8 @@ class Launch:
         for c in failed:
             log.error("%s exited with code %s (log: %s)", c.name, c.exit_code, c.log_path)
         title = f"enclose run {self.scenario.name}"
-        announce(self.out, title, self.args.json, "interrupted" if interrupted else "")
+        announce(self.out, title, getattr(self.args, "json", False),
+                 "interrupted" if interrupted else "")
         if interrupted:
             return 130
         if failed:
