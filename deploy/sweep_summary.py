@@ -8,13 +8,12 @@ settles has no settle time, and leaving it out of the mean alone would flatter t
 
 from __future__ import annotations
 
-import csv
 import statistics
 from collections.abc import Sequence
 from pathlib import Path
 
 from deploy.sweep_spec import SweepSpec, Value, format_value
-from deploy.sweep_table import DELIVERED, METRICS, Row
+from deploy.sweep_table import DELIVERED, METRICS, Row, write_csv_atomic
 
 SUMMARY_CSV = "results_summary.csv"
 
@@ -62,12 +61,7 @@ def write_summary(spec: SweepSpec, rows: Sequence[Row], md_path: Path) -> Path:
     """`results_summary.csv`, and its table (mean ± std) appended to results.md."""
     cols, table = summary(spec, rows)
     path = spec.out / SUMMARY_CSV
-    tmp = path.with_suffix(".csv.tmp")
-    with open(tmp, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=cols)
-        writer.writeheader()
-        writer.writerows(table)
-    tmp.replace(path)
+    write_csv_atomic(path, cols, table)
     metrics = metrics_of(rows)
     shown = [*spec.axes, "done", "settled", *metrics]
     lines = [

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -159,12 +160,7 @@ def write_tables(spec: SweepSpec, rows: list[Row]) -> tuple[Path, Path]:
     table = [row_values(spec, r, cols) for r in rows]
     spec.out.mkdir(parents=True, exist_ok=True)
     csv_path, md_path = spec.out / "results.csv", spec.out / "results.md"
-    tmp = csv_path.with_suffix(".csv.tmp")
-    with open(tmp, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=cols)
-        writer.writeheader()
-        writer.writerows(table)
-    tmp.replace(csv_path)
+    write_csv_atomic(csv_path, cols, table)
     short = [row_values(spec, r, cols, digits=4) for r in rows]
     md_path.write_text(markdown(spec, rows, cols, short))
     return csv_path, md_path
@@ -185,3 +181,13 @@ def markdown(spec: SweepSpec, rows: list[Row], cols: list[str], table: list[dict
     lines = ["| " + " | ".join(shown) + " |", "|" + "---|" * len(shown)]
     lines += ["| " + " | ".join(r[c] or "-" for c in shown) + " |" for r in table]
     return "\n".join([*head, "", *lines, ""])
+
+
+def write_csv_atomic(path: Path, cols: Sequence[str], table: Sequence[dict[str, Any]]) -> None:
+    """A CSV that a reader never sees half-written (a sweep may be resumed or read any time)."""
+    tmp = path.with_suffix(".csv.tmp")
+    with open(tmp, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(cols))
+        writer.writeheader()
+        writer.writerows(table)
+    tmp.replace(path)

@@ -34,9 +34,11 @@ loss = [0.0, 0.1]
 """
 
 # A stand-in launcher: counts the SIGINTs it gets, takes a moment to stop, exits 130.
+# Its run directory: `--out DIR` as `enclose run` gets it (a parallel sweep), else argv[1].
 FAKE_LAUNCHER = """
 import pathlib, signal, sys, time
-out = pathlib.Path(sys.argv[1])
+args = sys.argv[1:]
+out = pathlib.Path(args[args.index("--out") + 1] if "--out" in args else args[0])
 got = []
 signal.signal(signal.SIGINT, lambda *a: got.append(1))
 (out / "ready").write_text("")
@@ -149,25 +151,10 @@ def test_a_cell_over_its_time_is_stopped_and_reported(tmp_path: Path) -> None:
     assert (out / "sigints").read_text() == "1"
 
 
-# A stand-in `enclose run` for a parallel sweep: finds its --out, then behaves as above.
-FAKE_CELL = """
-import pathlib, signal, sys, time
-out = pathlib.Path(sys.argv[sys.argv.index("--out") + 1])
-got = []
-signal.signal(signal.SIGINT, lambda *a: got.append(1))
-(out / "ready").write_text("")
-while not got:
-    time.sleep(0.02)
-time.sleep(0.5)
-(out / "sigints").write_text(str(len(got)))
-sys.exit(130)
-"""
-
-
 @pytest.mark.timeout(60)
 def test_ctrl_c_stops_every_running_cell_of_a_parallel_sweep_once(tmp_path: Path) -> None:
     script = tmp_path / "launcher.py"
-    script.write_text(FAKE_CELL)
+    script.write_text(FAKE_LAUNCHER)
     sweep_file = tmp_path / "s.toml"
     sweep_file.write_text(SWEEP.replace("[0.0, 0.1]", "[0.0, 0.1, 0.2]"))
     spec = load_sweep(sweep_file)
