@@ -27,6 +27,7 @@ from typing import Any
 
 from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
+from deploy.json_files import read_json as read_json_or_none
 from deploy.netns import probe
 
 METRICS = ("estimator_error_m", "radius_error_m", "angle_error", "command_jump_m_s")
@@ -35,11 +36,7 @@ COLUMNS = ("link", "os_loss", "exit", "link_s", "kernel_loss", *METRICS, "nbr_rx
 
 
 def read_json(path: Path) -> dict[str, Any]:
-    try:
-        value = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
-    return value if isinstance(value, dict) else {}
+    return read_json_or_none(path) or {}
 
 
 def neighbour_view(status: dict[str, dict[str, int]], scenario: Scenario) -> dict[str, Any]:

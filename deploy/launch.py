@@ -17,11 +17,12 @@ from agents.phases import mark, stamps
 from agents.scenario import Scenario
 from agents.scenario_faults import parse_fault_flag
 from deploy.faults import FaultRunner
+from deploy.json_files import write_json_atomic
 from deploy.live_args import announce_live_url, pin_live_port, recorder_live_argv
 from deploy.ports import mavlink_bases, parse_port_range, ports_in_range, rendezvous_endpoint
 from deploy.restarts import EXIT_SOMETHING_DIED, RestartPolicy, Watchdog
 from deploy.run_board import BoardView, LiveBoard
-from deploy.run_monitor import StatusBoard, launch_view, write_json_atomic
+from deploy.run_monitor import StatusBoard, launch_view
 from deploy.run_secrets import RunSecrets
 from deploy.supervisor import Child, Supervisor
 from deploy.verdict import announce

@@ -24,6 +24,11 @@ def free_udp_port(host: str = HOST) -> int:
         return int(sock.getsockname()[1])
 
 
+def _protocol(link: str, secure: bool) -> str:
+    """An authenticated run's TCP is TLS (mTLS: transport.credentials)."""
+    return "tls" if secure and link == "tcp" else link
+
+
 def rendezvous_endpoint(link: str, avoid: Sequence[range] = (), secure: bool = False) -> str:
     """The endpoint the simulator listens on and everyone connects to, in the run's protocol
     (`tls` over a TCP port for an authenticated run).
@@ -33,7 +38,7 @@ def rendezvous_endpoint(link: str, avoid: Sequence[range] = (), secure: bool = F
     for _ in range(50):
         port = free_udp_port() if link == "udp" else free_tcp_port()
         if link != "udp" or not any(port in r for r in avoid):
-            return loopback_endpoint(port, "tls" if secure and link == "tcp" else link)
+            return loopback_endpoint(port, _protocol(link, secure))
     raise DeployError(f"no free {link} port on {HOST} outside the MAVLink blocks")
 
 
@@ -96,5 +101,4 @@ def ports_in_range(ports: range, count: int, link: str, secure: bool) -> tuple[i
             sock.bind((HOST, rendezvous))
         except OSError as exc:
             raise DeployError(f"--port-range: {link} port {rendezvous} is in use") from exc
-    proto = "tls" if secure and link == "tcp" else link
-    return vehicle, adapter, loopback_endpoint(rendezvous, proto)
+    return vehicle, adapter, loopback_endpoint(rendezvous, _protocol(link, secure))

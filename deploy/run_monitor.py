@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import time
 from collections.abc import Collection, Sequence
 from pathlib import Path
@@ -78,11 +77,6 @@ def event_text(e: dict[str, Any]) -> str:
     return f"{e.get('t_s', 0.0):.1f} s {e.get('process', '?')} {e.get('event', '?')} {rest}"
 
 
-def write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
-    """Readers (the recorder draws launch.json's events) never see half a file."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(payload, indent=2) + "\n")
-    os.replace(tmp, path)
 
 
 def launch_view(launch: Launch) -> BoardView:

@@ -26,13 +26,14 @@ from typing import Any
 from rich.console import Console
 
 from agents.errors import ConfigError
+from deploy.json_files import read_json
 from deploy.sweep_figures import write_figures
 from deploy.sweep_parallel import StopSignals, run_parallel
 from deploy.sweep_progress import SweepProgress
 from deploy.sweep_runner import HOST_FILE, CellRunner, SubprocessRunner
 from deploy.sweep_spec import Cell, SweepSpec, load_sweep
 from deploy.sweep_summary import write_summary
-from deploy.sweep_table import RECORD, CellState, cell_state, collect, read_json, write_tables
+from deploy.sweep_table import RECORD, CellState, cell_state, collect, write_tables
 from deploy.sweep_verdict import print_sweep_verdict
 
 log = logging.getLogger("enclose.sweep")

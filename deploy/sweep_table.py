@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import csv
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from deploy.json_files import read_json
 from deploy.sweep_spec import Cell, SweepSpec, format_value
 
 RECORD = "sweep_cell.json"  # written by the sweep: the cell's argv, exit code, wall time
@@ -45,14 +45,6 @@ def comparable(argv: list[str]) -> list[str]:
             out.append(arg)
         skip = arg == "--out"
     return out
-
-
-def read_json(path: Path) -> dict[str, Any] | None:
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-    return doc if isinstance(doc, dict) else None
 
 
 def launch_ok(launch: dict[str, Any] | None) -> bool:

@@ -17,6 +17,8 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from deploy.json_files import read_json
+
 # metrics.json key -> (label, unit, run.json key of its bound)
 BOUNDED = (
     ("estimator_error_m", "estimator error |r-LAP|", "m", "eps_rho_m"),
@@ -65,11 +67,7 @@ class Verdict:
 
 
 def _read(path: Path) -> dict[str, Any]:
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
-    return doc if isinstance(doc, dict) else {}
+    return read_json(path) or {}
 
 
 def _num(v: Any) -> float | None:

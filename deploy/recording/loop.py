@@ -17,12 +17,13 @@ from typing import Any
 from agents.errors import CodecError, TransportError
 from agents.liveness import MembershipWatch
 from agents.scenario import Scenario
+from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.link_history import LinkHistory
 from deploy.recording.links import FINAL_STATES, link_report
 from deploy.recording.live_server import LiveServer
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
-from deploy.recording.progress import PROGRESS_FILE, live_errors, write_json_atomic
+from deploy.recording.progress import PROGRESS_FILE, live_errors
 from deploy.recording.resume import newest_part, read_back
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
 from deploy.rundir import RunInfo

@@ -11,9 +11,9 @@ from agents.core.metrics import Metrics
 from agents.errors import DeployError
 from agents.membership_metrics import membership_phases, phase_report
 from agents.scenario import Scenario
+from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import Assembly, RunAssembler, assembly_extra
 from deploy.recording.link_history import LINKS_CSV, LinkHistory
-from deploy.recording.progress import write_json_atomic
 from deploy.report import write_run_outputs
 from deploy.rundir import METRICS_FILE, RunInfo
 
