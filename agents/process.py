@@ -109,13 +109,13 @@ def process_main(
     args = parser.parse_args(argv)
     setup_logging(args.log_level, name(args))
     try:
-        return _profiled(run, args, name(args))
+        return profiled(run, args, name(args))
     except EncloseError as exc:
         logging.getLogger(f"enclose.{name(args)}").error("%s: %s", type(exc).__name__, exc)
         return 2
 
 
-def _profiled(run: Callable[[argparse.Namespace], int], args: argparse.Namespace,
+def profiled(run: Callable[[argparse.Namespace], int], args: argparse.Namespace,
               name: str) -> int:
     """`run`, under cProfile when ENCLOSE_PROFILE_DIR names a folder: the profile of each
     process lands in <folder>/<name>.prof (read it with `python -m pstats`)."""

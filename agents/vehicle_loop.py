@@ -131,7 +131,8 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
 
         def extra() -> dict[str, int]:
             signing = {k: v for k, v in mav.counters.items() if k.startswith("signing_")}
-            return {"overruns": ticker.overruns, "offboard_requests": keeper.requests,
+            return {"overruns": ticker.overruns, "ticks": ticker.ticks,
+                    "offboard_requests": keeper.requests,
                     **mav.clock_counters(), **signing, **node.counters()}
 
         def heartbeat() -> None:

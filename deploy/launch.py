@@ -16,6 +16,7 @@ from agents.network_args import network_overrides
 from agents.phases import mark, stamps
 from agents.scenario import Scenario
 from agents.scenario_faults import parse_fault_flag
+from deploy.cpu_load import CpuSampler, overrun_summary
 from deploy.faults import FaultRunner
 from deploy.json_files import write_json_atomic
 from deploy.live_args import announce_live_url, pin_live_port, recorder_live_argv
@@ -61,6 +62,7 @@ class Launch:
         self.live_url: str | None = None
         self.started_s = time.monotonic()
         self.t0_s = float("inf")  # monotonic time of the experiment's start, once known
+        self.cpu = CpuSampler()  # what each process cost, sampled while flying
 
     def _ports(self) -> tuple[int, int, str]:
         """MAVLink blocks and the Zenoh rendezvous: inside `--port-range` when given (a
@@ -246,8 +248,19 @@ class Launch:
                 if bus.now_s() >= next_word:  # same start stamp: a repeat changes nothing
                     next_word += START_REPEAT_S
                     bus.publish(self.keys.control(), word())
+                    self._sample_cpu()
                 board.tick()
                 time.sleep(0.05)
+
+    def _sample_cpu(self) -> None:
+        self.cpu.sample(time.monotonic(), {c.name: c.pid for c in self.sup.children})
+
+    def load_report(self) -> dict[str, Any]:
+        """CPU per process and machine busy over the steady half (deploy.cpu_load), and the
+        followers' late ticks: the load an accuracy figure was measured under."""
+        steady_from = self.t0_s + 0.5 * self.duration_s
+        cpu = self.cpu.summary(steady_from if steady_from < time.monotonic() else self.t0_s)
+        return {**cpu, "ticks": overrun_summary(self.board.as_dict())}
 
     def view(self) -> BoardView:
         """What the live board shows now (deploy.run_board)."""
@@ -309,6 +322,7 @@ class Launch:
             "faults": [f.__dict__ for f in self.faults],
             "events": [] if self.watchdog is None else self.watchdog.events,
             "status": self.board.as_dict(),
+            "load": self.load_report(),
         }
 
     def exit_code(self, interrupted: bool) -> int:

@@ -25,7 +25,13 @@ from pathlib import Path
 
 from agents.errors import EncloseError
 from agents.phases import log_phases, mark
-from agents.process import add_bus_arguments, load_run_scenario, open_bus, stop_on_signals
+from agents.process import (
+    add_bus_arguments,
+    load_run_scenario,
+    open_bus,
+    profiled,
+    stop_on_signals,
+)
 from deploy.recording.live_defaults import DEFAULT_HOST
 from deploy.recording.live_server import LiveServer
 from deploy.recording.loop import Recorder
@@ -68,6 +74,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s recorder: %(message)s")
+    return profiled(_record, args, "recorder")
+
+
+def _record(args: argparse.Namespace) -> int:
     try:
         scenario = load_run_scenario(args)
         with stop_on_signals() as stop, open_bus(args) as bus:

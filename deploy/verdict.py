@@ -17,6 +17,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from deploy.cpu_load import load_line, overrun_line
 from deploy.json_files import read_json
 
 # metrics.json key -> (label, unit, run.json key of its bound)
@@ -60,6 +61,8 @@ class Verdict:
     files: tuple[str, ...]
     note: str = ""  # e.g. "interrupted"
     networked: bool = False  # a launch.json exists: processes to report on
+    load: str | None = None  # CPU per process and machine busy (deploy.cpu_load)
+    ticks: str | None = None  # the followers' late control ticks
 
     @property
     def inside(self) -> bool:
@@ -72,6 +75,10 @@ def _read(path: Path) -> dict[str, Any]:
 
 def _num(v: Any) -> float | None:
     return float(v) if isinstance(v, int | float) and not isinstance(v, bool) else None
+
+
+def _dict(v: Any) -> dict[str, Any]:
+    return v if isinstance(v, dict) else {}
 
 
 def process_lines(launch: dict[str, Any]) -> tuple[str, ...]:
@@ -118,12 +125,14 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
         for key, label, unit, bound in BOUNDED
     )
     live = launch.get("live_url")
+    load = _dict(launch.get("load"))
+    ticks = _dict(load.get("ticks"))
     return Verdict(
         title, run_dir, checks, None if error is None else str(error), metrics,
         process_lines(launch), link_summary(metrics),
         live if isinstance(live, str) and live else None,
         tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
-        bool(launch),
+        bool(launch), load_line(load), overrun_line(ticks),
     )
 
 
@@ -136,6 +145,8 @@ def verdict_json(v: Verdict) -> dict[str, Any]:
                    for c in v.checks},
         "processes": list(v.processes),
         "live_url": v.live_url,
+        "load": v.load,
+        "late_ticks": v.ticks,
         "run_dir": str(v.run_dir),
     }}
 
@@ -167,6 +178,8 @@ def print_verdict(console: Console, v: Verdict) -> None:
     if v.networked:
         rows.append(("processes", "; ".join(v.processes) or "none died, restarted or failed"))
     rows += [("links", v.links)] if v.links else []
+    rows += [("late ticks", v.ticks)] if v.ticks else []
+    rows += [("CPU", v.load)] if v.load else []
     rows += [("live view", v.live_url)] if v.live_url else []
     rows.append(("files", f"{v.run_dir}/ ({', '.join(v.files) or 'none'})"))
     for label, value in rows:

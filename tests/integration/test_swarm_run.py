@@ -140,7 +140,11 @@ def test_paper_case_forms_the_formation_and_every_process_exits_cleanly(tmp_path
         output, _ = proc.communicate(timeout=200)
     assert proc.returncode == 0, output
     check_live_view(watcher, out)
-    assert json.loads((out / "launch.json").read_text())["live_url"].startswith("ws://127.0.0.1:")
+    launch = json.loads((out / "launch.json").read_text())
+    assert launch["live_url"].startswith("ws://127.0.0.1:")
+    # What the run cost: every process's CPU over the steady half, and late ticks counted.
+    assert set(launch["load"]["process_cpu_pct"]) >= {"sim", "recorder", "follower-0"}
+    assert launch["load"]["ticks"]["ticks"] > 4 * 20 * 50 * 0.9  # 4 followers, >= 20 s at 50 Hz
     codes = assert_all_exited(out)
     assert set(codes) == {"sim", "recorder", "follower-0", "follower-1", "follower-2",
                           "follower-3", "target-0", "target-1"}
@@ -158,6 +162,7 @@ def test_paper_case_forms_the_formation_and_every_process_exits_cleanly(tmp_path
     # Piped: board lines, no escape codes, and the verdict at the end instead of metrics.json.
     assert "\x1b" not in output
     assert "processes 8/8 up" in output and "agents on UDP" in output
+    assert "of follower ticks late" in output and "machine" in output
     tail = "\n".join(output.rstrip().splitlines()[-15:])
     assert "enclose run paper: INSIDE the paper's bounds" in tail, tail
     assert "none died, restarted or failed" in tail and f"files        {out}/" in tail

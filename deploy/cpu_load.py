@@ -1,0 +1,153 @@
+"""What the run cost the machine: CPU per process and how busy the machine was.
+
+Issue 15's figures (and any accuracy figure) depend on machine load: a swarm that fills
+both cores overruns its ticks and its errors are no longer the design's.  The launcher
+samples every child's CPU time (/proc/<pid>/stat) and the machine's busy time
+(/proc/stat) a few times a minute; `CpuSampler.summary` gives each process's mean CPU,
+in % of one core, over a window (the steady half of the run), the machine's busy %, in %
+of all its cores, and its mean 1-minute load average.  Linux only: elsewhere every
+reading is None and the summary is empty.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from itertools import pairwise
+from pathlib import Path
+
+PROC = Path("/proc")
+_TICKS_PER_S = float(os.sysconf("SC_CLK_TCK")) if hasattr(os, "sysconf") else 100.0
+
+
+def process_cpu_s(pid: int, proc: Path = PROC) -> float | None:
+    """User + system CPU seconds of process `pid` so far (all its threads); None if gone."""
+    try:
+        text = (proc / str(pid) / "stat").read_text()
+    except OSError:
+        return None
+    # The command name (field 2) may hold spaces and parentheses: split after its last ')'.
+    fields = text.rpartition(")")[2].split()
+    try:
+        return (int(fields[11]) + int(fields[12])) / _TICKS_PER_S
+    except (IndexError, ValueError):
+        return None
+
+
+def machine_ticks(proc: Path = PROC) -> tuple[int, int] | None:
+    """(busy, total) clock ticks of all CPUs since boot; None when unreadable."""
+    try:
+        first = (proc / "stat").read_text().split("\n", 1)[0].split()
+        values = [int(v) for v in first[1:9]]  # user nice system idle iowait irq softirq steal
+    except (OSError, ValueError):
+        return None
+    idle = values[3] + values[4]
+    return sum(values) - idle, sum(values)
+
+
+def load_1min(proc: Path = PROC) -> float | None:
+    try:
+        return float((proc / "loadavg").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+@dataclass
+class CpuSampler:
+    """Readings over time; `sample` is cheap (a few /proc reads per process)."""
+
+    proc: Path = PROC
+    # name -> [(t_s, pid, cpu_s)]; a restart shows as a new pid (its CPU starts from 0)
+    processes: dict[str, list[tuple[float, int, float]]] = field(default_factory=dict)
+    machine: list[tuple[float, int, int, float | None]] = field(default_factory=list)
+
+    def sample(self, t_s: float, pids: dict[str, int | None]) -> None:
+        for name, pid in pids.items():
+            cpu = None if pid is None else process_cpu_s(pid, self.proc)
+            if pid is not None and cpu is not None:
+                self.processes.setdefault(name, []).append((t_s, pid, cpu))
+        ticks = machine_ticks(self.proc)
+        if ticks is not None:
+            self.machine.append((t_s, ticks[0], ticks[1], load_1min(self.proc)))
+
+    def summary(self, from_s: float, cores: int | None = None) -> dict[str, object]:
+        """{"process_cpu_pct": {name: % of a core}, "machine_busy_pct", "load_1min", "cores"}
+        over the samples at or after `from_s` (only what was sampled twice or more)."""
+        out: dict[str, object] = {}
+        per = {name: pct for name, rows in sorted(self.processes.items())
+               if (pct := _mean_pct(rows, from_s)) is not None}
+        if per:
+            out["process_cpu_pct"] = per
+        rows = [m for m in self.machine if m[0] >= from_s]
+        if len(rows) >= 2 and rows[-1][2] > rows[0][2]:
+            busy = rows[-1][1] - rows[0][1]
+            out["machine_busy_pct"] = round(100.0 * busy / (rows[-1][2] - rows[0][2]), 1)
+            loads = [m[3] for m in rows if m[3] is not None]
+            if loads:
+                out["load_1min"] = round(sum(loads) / len(loads), 2)
+            out["cores"] = cores or os.cpu_count() or 1
+        return out
+
+
+def _mean_pct(rows: list[tuple[float, int, float]], from_s: float) -> float | None:
+    """CPU % of one core over the window, summed over the pid's stretches (restarts)."""
+    cpu_s = wall_s = 0.0
+    window = [r for r in rows if r[0] >= from_s]
+    for (t0, pid0, c0), (t1, pid1, c1) in pairwise(window):
+        if pid0 == pid1 and t1 > t0 and c1 >= c0:
+            cpu_s, wall_s = cpu_s + c1 - c0, wall_s + t1 - t0
+    return round(100.0 * cpu_s / wall_s, 1) if wall_s > 0 else None
+
+
+def load_line(cpu: dict[str, object]) -> str | None:
+    """One line for the verdict: followers' mean and max, the others, the machine."""
+    per = cpu.get("process_cpu_pct")
+    if not isinstance(per, dict) or not per:
+        return None
+    followers = {k: v for k, v in per.items() if k.startswith("follower-")}
+    parts = []
+    if followers:
+        worst = max(followers, key=followers.__getitem__)
+        mean = sum(followers.values()) / len(followers)
+        parts.append(f"followers {mean:.1f} % of a core each (max {followers[worst]:.1f} "
+                     f"{worst})")
+    others = sorted((k, v) for k, v in per.items() if k not in followers)
+    parts += [f"{k} {v:.0f} %" for k, v in others if not k.startswith("target-")]
+    targets = [v for k, v in per.items() if k.startswith("target-")]
+    if targets:
+        parts.append(f"targets {sum(targets) / len(targets):.0f} % each")
+    busy = cpu.get("machine_busy_pct")
+    if isinstance(busy, int | float):
+        load = cpu.get("load_1min")
+        tail = f", load {load:g}" if isinstance(load, int | float) else ""
+        parts.append(f"machine {busy:.0f} % busy ({cpu.get('cores')} cores{tail})")
+    return "; ".join(parts)
+
+
+def overrun_summary(status: dict[str, object]) -> dict[str, object]:
+    """Followers' late control ticks from their last status counters (launch.json "status"):
+    {"overruns", "ticks", "overrun_pct", "worst", "worst_pct"}; empty when none reported."""
+    total_late = total_ticks = 0
+    worst, worst_pct = None, -1.0
+    for name, counters in sorted(status.items()):
+        if not name.startswith("follower-") or not isinstance(counters, dict):
+            continue
+        late, ticks = counters.get("overruns"), counters.get("ticks")
+        if not isinstance(late, int) or not isinstance(ticks, int) or ticks <= 0:
+            continue
+        total_late, total_ticks = total_late + late, total_ticks + ticks
+        if 100.0 * late / ticks > worst_pct:
+            worst, worst_pct = name, 100.0 * late / ticks
+    if total_ticks == 0:
+        return {}
+    return {"overruns": total_late, "ticks": total_ticks,
+            "overrun_pct": round(100.0 * total_late / total_ticks, 2),
+            "worst": worst, "worst_pct": round(worst_pct, 2)}
+
+
+def overrun_line(summary: dict[str, object]) -> str | None:
+    if not summary:
+        return None
+    return (f"{summary['overrun_pct']:.2f} % of follower ticks late "
+            f"({summary['overruns']} of {summary['ticks']}; worst {summary['worst']} "
+            f"{summary['worst_pct']:.2f} %)")

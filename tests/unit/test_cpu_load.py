@@ -1,0 +1,83 @@
+"""deploy.cpu_load: CPU per process from the real /proc, late ticks, the verdict's lines."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+
+from deploy.cpu_load import (
+    CpuSampler,
+    load_line,
+    machine_ticks,
+    overrun_line,
+    overrun_summary,
+    process_cpu_s,
+)
+
+pytestmark = [pytest.mark.timeout(30),
+              pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="Linux /proc")]
+
+
+def _burn(seconds: float) -> None:
+    end = time.process_time() + seconds
+    while time.process_time() < end:
+        pass
+
+
+def test_a_busy_process_reads_as_busy_and_a_gone_one_as_nothing() -> None:
+    sampler = CpuSampler()
+    pid = os.getpid()
+    t0 = time.monotonic()
+    sampler.sample(t0, {"me": pid, "gone": 2**22 + 12345, "unstarted": None})
+    _burn(0.3)
+    sampler.sample(time.monotonic(), {"me": pid})
+    summary = sampler.summary(t0)
+    per = summary["process_cpu_pct"]
+    assert isinstance(per, dict) and set(per) == {"me"}
+    assert per["me"] > 40.0  # busy-looping, on a loaded 2-core machine at worst shared
+    assert summary["cores"] == os.cpu_count()
+    assert 0.0 < float(str(summary["machine_busy_pct"])) <= 100.0
+
+
+def test_a_restart_is_a_new_stretch_not_a_negative_cpu() -> None:
+    sampler = CpuSampler()
+    sampler.processes["follower-1"] = [(0.0, 10, 5.0), (1.0, 10, 5.5), (2.0, 11, 0.0),
+                                       (3.0, 11, 0.1)]
+    per = sampler.summary(0.0)["process_cpu_pct"]
+    assert per == {"follower-1": 30.0}  # (0.5 + 0.1) s of CPU over 2 s sampled in one pid
+
+
+def test_readers_of_proc() -> None:
+    cpu = process_cpu_s(os.getpid())
+    assert cpu is not None and cpu > 0.0
+    ticks = machine_ticks()
+    assert ticks is not None and 0 <= ticks[0] <= ticks[1]
+
+
+def test_late_ticks_from_status_counters() -> None:
+    status = {
+        "follower-0": {"state": "done", "overruns": 2, "ticks": 1000},
+        "follower-1": {"state": "done", "overruns": 30, "ticks": 1000},
+        "follower-2": {"state": "done", "overruns": 1},  # an older follower: no tick count
+        "sim-0": {"overruns": 500, "ticks": 1000},  # not a follower's control loop
+        "recorder-0": "garbage",
+    }
+    summary = overrun_summary(status)
+    assert summary == {"overruns": 32, "ticks": 2000, "overrun_pct": 1.6,
+                       "worst": "follower-1", "worst_pct": 3.0}
+    line = overrun_line(summary)
+    assert line is not None and "1.60 %" in line and "follower-1" in line
+    assert overrun_summary({}) == {} and overrun_line({}) is None
+
+
+def test_load_line_names_followers_and_the_machine() -> None:
+    line = load_line({"process_cpu_pct": {"follower-0": 4.0, "follower-1": 6.0, "sim": 12.0,
+                                          "target-0": 3.0, "target-1": 5.0},
+                      "machine_busy_pct": 71.0, "load_1min": 3.2, "cores": 2})
+    assert line is not None
+    assert "followers 5.0 % of a core each (max 6.0 follower-1)" in line
+    assert "sim 12 %" in line and "targets 4 % each" in line
+    assert "machine 71 % busy (2 cores, load 3.2)" in line
+    assert load_line({}) is None
