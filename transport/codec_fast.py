@@ -15,9 +15,7 @@ Finiteness without a call per number: the sum of a message's floats is finite wh
 one is (a NaN or an infinity makes it NaN or infinite, and then `s - s` is NaN, not 0.0);
 a sum that overflowed from finite terms only sends the message to the reference.
 
-Decoded messages are built without their dataclass `__init__` (frozen: one
-`object.__setattr__` per field, 2.7 µs for a FollowerState): a new instance gets its
-field dict whole, every field given, as `__init__` would have set them (0.8 µs).
+Decoded messages are built without their dataclass `__init__` (transport.fastbuild).
 
 Each twin is written for one schema: `transport.codec_twins.TWINS` says which, and the
 codec uses a twin only while SCHEMAS still says exactly that (and CODEC_VERSION is
@@ -29,6 +27,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from transport.fastbuild import NEW, SET
 from transport.messages import (
     FollowerState,
     Header,
@@ -41,8 +40,6 @@ VERSION = 2  # the codec version the twins write and read
 MAX_STR = 256
 MAX_ITEMS = 256
 _NAN = float("nan")
-NEW = object.__new__
-SET = object.__setattr__
 Wire = list[Any]
 Encoder = Callable[[Any], Wire | None]
 Decoder = Callable[[Wire], Message | None]

@@ -8,8 +8,6 @@ from typing import Any
 from transport.codec_fast import (
     MAX_ITEMS,
     MAX_STR,
-    NEW,
-    SET,
     VERSION,
     Decoder,
     Encoder,
@@ -23,6 +21,7 @@ from transport.codec_fast import (
     head_ok,
     header,
 )
+from transport.fastbuild import NEW, SET
 from transport.messages import (
     PROCESS_STATES,
     RUN_COMMANDS,
