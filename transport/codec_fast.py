@@ -90,13 +90,6 @@ def _vec3s_sum(vecs: Any, seq_type: Any) -> float:
     return s
 
 
-def _flow_sum(j: Any, fx: Any, fy: Any, rx: Any, ry: Any) -> float:
-    if (type(j) is int and j >= 0 and type(fx) is float and type(fy) is float
-            and type(rx) is float and type(ry) is float):
-        return fx + fy + rx + ry
-    return _NAN
-
-
 # ---- FollowerState, TargetObservation, TruthSnapshot: 50-200 Hz -----------------------------
 def enc_follower_state(m: FollowerState) -> Wire | None:
     h = m.header
@@ -104,11 +97,30 @@ def enc_follower_state(m: FollowerState) -> Wire | None:
     r, dr, phi, pos, vel, u = m.r_m, m.dr_m_s, m.phi_m, m.pos_m, m.vel_m_s, m.u_m_s
     flows = m.link_flows
     if not (head_ok(sid, seq, st) and type(idx) is int and idx >= 0 and type(vst) is float
+            and type(r) is tuple and type(dr) is tuple and type(phi) is tuple
+            and type(pos) is tuple and type(vel) is tuple and type(u) is tuple
             and type(flows) is tuple and len(flows) <= MAX_ITEMS):
         return None
-    s = _vec2s_sum((r, dr, phi, pos, vel, u), tuple) + st + vst
+    r0, r1 = r
+    dr0, dr1 = dr
+    phi0, phi1 = phi
+    pos0, pos1 = pos
+    vel0, vel1 = vel
+    u0, u1 = u
+    if not (type(r0) is float and type(r1) is float and type(dr0) is float
+            and type(dr1) is float and type(phi0) is float and type(phi1) is float
+            and type(pos0) is float and type(pos1) is float and type(vel0) is float
+            and type(vel1) is float and type(u0) is float and type(u1) is float):
+        return None
+    s = st + vst + r0 + r1 + dr0 + dr1 + phi0 + phi1 + pos0 + pos1 + vel0 + vel1 + u0 + u1
     for f in flows:
-        s += _flow_sum(*f) if type(f) is tuple else _NAN
+        if type(f) is not tuple:
+            return None
+        j, fx, fy, rx, ry = f
+        if not (type(j) is int and j >= 0 and type(fx) is float and type(fy) is float
+                and type(rx) is float and type(ry) is float):
+            return None
+        s += fx + fy + rx + ry
     if s - s != 0.0:
         return None
     return [VERSION, 1, sid, seq, st, idx, r, dr, phi, pos, vel, u, vst, flows]
@@ -133,7 +145,10 @@ def dec_follower_state(o: Wire) -> FollowerState | None:
     s = st + vst + r0 + r1 + dr0 + dr1 + phi0 + phi1 + pos0 + pos1 + vel0 + vel1 + u0 + u1
     out_flows = []
     for j, fx, fy, rx, ry in flows:
-        s += _flow_sum(j, fx, fy, rx, ry)
+        if not (type(j) is int and j >= 0 and type(fx) is float and type(fy) is float
+                and type(rx) is float and type(ry) is float):
+            return None
+        s += fx + fy + rx + ry
         out_flows.append((j, fx, fy, rx, ry))
     if s - s != 0.0:
         return None
