@@ -1,13 +1,15 @@
 """The cheap per-message checks and tallies pinned to the generic code they replace.
 
-`check` (transport.checks) sums a message's numbers instead of testing each one, and
-`AgeHistogram.add` (transport.link_stats) counts bins in a dict until read: here both
-are compared with the code before issue 15, kept below as the reference, on random and
+`check` (transport.checks) sums a message's numbers instead of testing each one,
+`AgeHistogram.add` (transport.link_stats) counts bins in a dict until read, and
+`ClockBook.to_local` copies field dicts instead of `dataclasses.replace`: here each is
+compared with the code before issue 15, kept below as the reference, on random and
 hostile values (NaN, inf, huge, ints, bools, strings, wrong lengths).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterable
 from typing import Any
@@ -30,6 +32,7 @@ from transport.messages import (
     TargetObservation,
     TruthSnapshot,
 )
+from transport.peer_clock import _STAMP_FIELDS, ClockBook, ClockSample
 
 pytestmark = pytest.mark.timeout(120)
 KEYS = SwarmKeys("chk")
@@ -187,3 +190,21 @@ def test_age_histogram_infinite_age_lands_in_the_last_bin() -> None:
     other.add(0.00015)
     hist.merge(other)
     assert hist.count == 3 and hist.bins[1] == 1 and hist.percentile_s(1) == pytest.approx(1.5e-4)
+
+
+@settings(max_examples=200, deadline=None)
+@given(MESSAGES, st.floats(-10.0, 10.0).filter(bool))
+def test_to_local_same_as_replace(msg: Message, offset_s: float) -> None:
+    book = ClockBook()
+    book.add(msg.header.sender_id, 1.0, ClockSample(offset_s, 0.001, 5.0))
+    header = dataclasses.replace(msg.header, stamp_s=msg.header.stamp_s - offset_s)
+    try:
+        extra = {f: getattr(msg, f) - offset_s for f in _STAMP_FIELDS.get(type(msg), ())}
+    except TypeError:  # a stamp that is not a number: both raise
+        with pytest.raises(TypeError):
+            book.to_local(msg)
+        return
+    expected = msg if isinstance(msg, ClockProbe) else dataclasses.replace(
+        msg, header=header, **extra)
+    local = book.to_local(msg)
+    assert repr(local) == repr(expected) and type(local) is type(expected)
