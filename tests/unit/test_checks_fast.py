@@ -163,7 +163,7 @@ def test_key_caches_are_bounded() -> None:
     assert parse_key.cache_info().currsize <= info.maxsize
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(st.lists(st.floats() | st.sampled_from([0.0, 1e-4, 9.99995, 10.0, 1e9, -1.0]),
                 max_size=60), st.booleans())
 def test_age_histogram_same_as_reference(ages: list[float], latency: bool) -> None:
@@ -192,7 +192,7 @@ def test_age_histogram_infinite_age_lands_in_the_last_bin() -> None:
     assert hist.count == 3 and hist.bins[1] == 1 and hist.percentile_s(1) == pytest.approx(1.5e-4)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(MESSAGES, st.floats(-10.0, 10.0).filter(bool))
 def test_to_local_same_as_replace(msg: Message, offset_s: float) -> None:
     book = ClockBook()

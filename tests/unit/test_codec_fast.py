@@ -131,7 +131,7 @@ def test_every_message_type_has_a_live_twin() -> None:
         assert codec.FAST_DECODERS[obj[1]][1](obj) == msg
 
 
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(MESSAGES)
 def test_valid_messages_same_bytes_and_same_message(msg: Message) -> None:
     payload = encode(msg)
@@ -161,7 +161,7 @@ def test_mutated_wire_arrays_same_outcome(msg: Message, data: st.DataObject) -> 
     same_decode(bytes(msgpack.packb(wire)))
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(MESSAGES)
 def test_older_and_newer_versions_same_outcome(msg: Message) -> None:
     wire = msgpack.unpackb(encode_reference(msg))
@@ -171,7 +171,7 @@ def test_older_and_newer_versions_same_outcome(msg: Message) -> None:
         assert same_decode(bytes(msgpack.packb([1, *wire[1:-1]])))[0] == "ok"
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(st.lists(JUNK, max_size=12) | JUNK | st.binary(max_size=64))
 def test_random_payloads_same_outcome(junk: Any) -> None:
     same_decode(junk if isinstance(junk, bytes) else bytes(msgpack.packb(junk)))
