@@ -10,13 +10,20 @@ process holding the right key could still send wrong -- or what arrives with `--
 - values: every number finite, positions within `max_pos_m` of the origin, speeds below
   `max_speed_m_s` (no vehicle flies faster: a value beyond is a forgery or a fault).
 A refusal is a short reason string, counted by the decoder as `drop_rejected_<reason>`.
+
+Every message a process accepts passes here, so the common case is cheap: the numbers of
+a message are summed (finite iff every one is finite, unless the sum overflows) and the
+generic, exact test (`_finite`, `_follower_reason_exact`) runs only when the sum is not
+a finite float.  The two agree on every message of ints, floats and bools -- what the
+codec makes (tests/unit/test_checks_fast.py pins them).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from functools import lru_cache
 
 from transport.keys import parse_key
 from transport.messages import (
@@ -51,6 +58,7 @@ def _bounded(vectors: Iterable[tuple[float, ...]], bound: float) -> bool:
     return all(math.hypot(*v) <= bound for v in vectors)
 
 
+@lru_cache(maxsize=1024)  # keys come from the network: bounded
 def _owner(key: str) -> str | None:
     """The sender id that may publish on `key`; None when any may (foreign keys)."""
     info = parse_key(key)
@@ -82,6 +90,11 @@ def check(msg: Message, key: str, now_s: float, lim: Limits = DEFAULT_LIMITS) ->
     owner = _owner(key)
     if owner is not None and msg.header.sender_id != owner:
         return "sender"
+    # The message types are disjoint: the most frequent ones are tested first.
+    if isinstance(msg, FollowerState):
+        return _time_reason(msg.header.stamp_s, now_s, lim) or _follower_reason(msg, now_s, lim)
+    if isinstance(msg, TargetObservation):
+        return _time_reason(msg.header.stamp_s, now_s, lim) or _observation_reason(msg, lim)
     if isinstance(msg, ProcessStatus):
         return None  # counters for people; never steers anything
     if isinstance(msg, RunControl):
@@ -90,19 +103,62 @@ def check(msg: Message, key: str, now_s: float, lim: Limits = DEFAULT_LIMITS) ->
     reason = _time_reason(msg.header.stamp_s, now_s, lim)
     if reason is not None:
         return reason
-    if isinstance(msg, FollowerState):
-        return _follower_reason(msg, now_s, lim)
-    if isinstance(msg, TargetObservation):
-        if not _finite((*msg.pos_m, msg.observed_stamp_s)):
-            return "nonfinite"
-        return None if _bounded([msg.pos_m], lim.max_pos_m) else "impossible"
     if isinstance(msg, TruthSnapshot):
         vecs = [*msg.follower_pos_m, *msg.follower_vel_m_s, *msg.target_pos_m, *msg.target_vel_m_s]
-        return None if all(_finite(v) for v in vecs) else "nonfinite"
+        fine = _finite_sum(lambda: sum(map(sum, vecs), 0.0))
+        return None if fine or all(_finite(v) for v in vecs) else "nonfinite"
     return None
 
 
+def _finite_sum(total: Callable[[], object]) -> bool:
+    """Is the sum of some numbers that `total` adds up a finite float?  Then every one of
+    them was finite.  False also when they are not numbers (the exact test says more)."""
+    try:
+        s = total()
+    except (TypeError, ValueError, OverflowError):
+        return False
+    return type(s) is float and s - s == 0.0
+
+
+def _observation_reason(msg: TargetObservation, lim: Limits) -> str | None:
+    pos = msg.pos_m
+    if not _finite_sum(lambda: sum(pos, msg.observed_stamp_s)) \
+            and not _finite((*pos, msg.observed_stamp_s)):
+        return "nonfinite"
+    return None if math.hypot(*pos) <= lim.max_pos_m else "impossible"
+
+
 def _follower_reason(msg: FollowerState, now_s: float, lim: Limits) -> str | None:
+    """As _follower_reason_exact, in straight-line code when every number is finite."""
+    try:
+        r0, r1 = msg.r_m
+        p0, p1 = msg.phi_m
+        x0, x1 = msg.pos_m
+        d0, d1 = msg.dr_m_s
+        v0, v1 = msg.vel_m_s
+        u0, u1 = msg.u_m_s
+        vst = msg.vehicle_stamp_s
+        s = r0 + r1 + p0 + p1 + x0 + x1 + d0 + d1 + v0 + v1 + u0 + u1 + vst
+        for _, fx, fy, rx, ry in msg.link_flows:
+            s += fx + fy + rx + ry
+    except (TypeError, ValueError, OverflowError):  # not numbers, or not pairs
+        return _follower_reason_exact(msg, now_s, lim)
+    if not (type(s) is float and s - s == 0.0):
+        return _follower_reason_exact(msg, now_s, lim)
+    if vst > now_s + lim.future_s:
+        return "future_stamp"
+    hypot, pos_max, speed_max = math.hypot, lim.max_pos_m, lim.max_speed_m_s
+    if not (hypot(r0, r1) <= pos_max and hypot(p0, p1) <= pos_max and hypot(x0, x1) <= pos_max
+            and hypot(d0, d1) <= speed_max and hypot(v0, v1) <= speed_max
+            and hypot(u0, u1) <= speed_max):
+        return "impossible"
+    for _, fx, fy, rx, ry in msg.link_flows:
+        if not (hypot(fx, fy) <= pos_max and hypot(rx, ry) <= speed_max):
+            return "impossible"
+    return None
+
+
+def _follower_reason_exact(msg: FollowerState, now_s: float, lim: Limits) -> str | None:
     positions = [msg.r_m, msg.phi_m, msg.pos_m]
     speeds = [msg.dr_m_s, msg.vel_m_s, msg.u_m_s]
     flows = [f[1:] for f in msg.link_flows]

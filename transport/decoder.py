@@ -21,6 +21,7 @@ from agents.errors import CodecError
 from transport.bus import Received, Subscription
 from transport.checks import Limits, check
 from transport.codec import decode
+from transport.fastbuild import build
 from transport.keys import parse_key
 from transport.messages import FollowerState, Message, TargetObservation
 from transport.peer_clock import PROCESS_BOOK, ClockBook
@@ -90,7 +91,8 @@ class Decoder:
                 self.dropped[f"rejected_{reason}"] += 1
                 return None
         self.accepted += 1
-        return Inbound(msg, rec, self._track(msg.header.sender_id, rec.key, msg.header.seq))
+        stale = self._track(msg.header.sender_id, rec.key, msg.header.seq)
+        return build(Inbound, {"message": msg, "received": rec, "stale": stale})
 
     def _track(self, sender: str, key: str, seq: int) -> bool:
         last = self._last_seq.get((sender, key))

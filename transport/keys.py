@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from functools import lru_cache
 
 from agents.errors import ConfigError
 
@@ -127,6 +128,9 @@ class KeyInfo:
     index: int | None = None
 
 
+# Every received message's key is parsed (its sender, its index): a process hears a few
+# dozen keys, so a cache answers; bounded, since keys come from the network.
+@lru_cache(maxsize=1024)
 def parse_key(key: str) -> KeyInfo | None:
     """Decompose a concrete swarm key (e.g. to find the sender of a link); None if foreign."""
     parts = key.split("/")

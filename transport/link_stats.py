@@ -29,6 +29,7 @@ that reach the agent.  Its `counters()` add, for each link L seen:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -58,6 +59,7 @@ def follower_link(j: int) -> str:
     return f"f{j}"
 
 
+@lru_cache(maxsize=1024)  # asked for every message; keys come from the network: bounded
 def link_of(key: str) -> Link | None:
     """The link a sample on `key` travels, or None for keys that are never impaired."""
     info = parse_key(key)
@@ -75,6 +77,8 @@ class AgeHistogram:
 
     Bins are grouped in blocks with running block totals, so a percentile scans about
     a thousand numbers rather than the 100k bins (it is asked for every loop tick).
+    A sample only counts its bin in a dict; the numpy bins take the counts when read
+    (a numpy scalar increment costs more than the rest of `add`).
     """
 
     BLOCK = 100
@@ -82,21 +86,46 @@ class AgeHistogram:
     def __init__(self, bin_s: float = AGE_BIN_S, max_s: float = AGE_MAX_S) -> None:
         self.bin_s = bin_s
         n_bins = round(max_s / bin_s)
-        self.bins = np.zeros(n_bins, dtype=np.int64)
-        self.blocks = np.zeros(n_bins // self.BLOCK, dtype=np.int64)
+        self._last = n_bins - 1
+        self._bins = np.zeros(n_bins, dtype=np.int64)
+        self._blocks = np.zeros(n_bins // self.BLOCK, dtype=np.int64)
+        self._pending: dict[int, int] = {}  # bin -> samples not yet in _bins
         self.count = 0
         self.sum_s = 0.0
 
     def add(self, age_s: float) -> None:
-        k = min(max(int(age_s / self.bin_s), 0), len(self.bins) - 1) if age_s == age_s else 0
-        self.bins[k] += 1
-        self.blocks[k // self.BLOCK] += 1
+        if age_s > 0.0:  # NaN and negative ages land in the first bin, and add nothing
+            q = age_s / self.bin_s
+            k = int(q) if q < self._last else self._last
+            self.sum_s += age_s if age_s < AGE_MAX_S else AGE_MAX_S
+        else:
+            k = 0
+        pending = self._pending
+        pending[k] = pending.get(k, 0) + 1
         self.count += 1
-        self.sum_s += min(max(age_s, 0.0), AGE_MAX_S) if age_s == age_s else 0.0
+
+    def _flush(self) -> None:
+        if self._pending:
+            k = np.fromiter(self._pending.keys(), dtype=np.int64, count=len(self._pending))
+            n = np.fromiter(self._pending.values(), dtype=np.int64, count=len(self._pending))
+            np.add.at(self._bins, k, n)
+            np.add.at(self._blocks, k // self.BLOCK, n)
+            self._pending.clear()
+
+    @property
+    def bins(self) -> np.ndarray:
+        self._flush()
+        return self._bins
+
+    @property
+    def blocks(self) -> np.ndarray:
+        self._flush()
+        return self._blocks
 
     def merge(self, other: AgeHistogram) -> None:
-        self.bins += other.bins
-        self.blocks += other.blocks
+        self._flush()
+        self._bins += other.bins
+        self._blocks += other.blocks
         self.count += other.count
         self.sum_s += other.sum_s
 
@@ -104,11 +133,12 @@ class AgeHistogram:
         """The q-th percentile (0..100), at the middle of its bin; None when empty."""
         if self.count == 0:
             return None
+        self._flush()
         rank = max(1, int(np.ceil(q / 100.0 * self.count)))
-        block_cum = np.cumsum(self.blocks)
+        block_cum = np.cumsum(self._blocks)
         b = int(np.searchsorted(block_cum, rank))
         before = int(block_cum[b - 1]) if b > 0 else 0
-        inner = np.cumsum(self.bins[b * self.BLOCK:(b + 1) * self.BLOCK])
+        inner = np.cumsum(self._bins[b * self.BLOCK:(b + 1) * self.BLOCK])
         k = b * self.BLOCK + int(np.searchsorted(inner, rank - before))
         return (k + 0.5) * self.bin_s
 
@@ -131,16 +161,19 @@ class LinkTally:
         """One delivery; `age_s` None: counted, but its age (and latency) not of interest."""
         # Sequence numbers below the floor were pruned from `_seen`; one arriving that
         # late (thousands of messages) can only be a copy.
-        if seq < self._floor or seq in self._seen:
+        seen = self._seen
+        if seq < self._floor or seq in seen:
             self.rx_dup += 1
             return
-        self._seen.add(seq)
-        if len(self._seen) > 2 * SEEN_WINDOW:
-            self._floor = max(self._seen) - SEEN_WINDOW
-            self._seen = {s for s in self._seen if s >= self._floor}
+        seen.add(seq)
+        if len(seen) > 2 * SEEN_WINDOW:
+            self._floor = max(seen) - SEEN_WINDOW
+            self._seen = {s for s in seen if s >= self._floor}
         self.rx += 1
-        self.seq_first = seq if self.seq_first is None else min(self.seq_first, seq)
-        self.seq_last = seq if self.seq_last is None else max(self.seq_last, seq)
+        if self.seq_first is None or seq < self.seq_first:
+            self.seq_first = seq
+        if self.seq_last is None or seq > self.seq_last:
+            self.seq_last = seq
         if age_s is not None:
             self.ages.add(age_s)
             if latency_s is not None:

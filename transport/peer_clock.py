@@ -28,16 +28,17 @@ sender without an estimate is taken to share our clock (one host: nothing change
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import threading
 from collections import deque
 from dataclasses import dataclass
 
+from transport.fastbuild import build
 from transport.messages import (
     ClockProbe,
     FollowerState,
+    Header,
     Message,
     RunControl,
     TargetObservation,
@@ -163,9 +164,14 @@ class ClockBook:
         offset = self.offset_s(msg.header.sender_id)
         if not offset:
             return msg
-        header = dataclasses.replace(msg.header, stamp_s=msg.header.stamp_s - offset)
-        extra = {f: getattr(msg, f) - offset for f in _STAMP_FIELDS.get(type(msg), ())}
-        return dataclasses.replace(msg, header=header, **extra)
+        # Every message a process receives comes through here: copied field dicts, not
+        # dataclasses.replace (which runs the frozen __init__ twice; transport.fastbuild).
+        head = msg.header
+        fields = {**msg.__dict__, "header": build(Header, {
+            "sender_id": head.sender_id, "seq": head.seq, "stamp_s": head.stamp_s - offset})}
+        for f in _STAMP_FIELDS.get(type(msg), ()):
+            fields[f] -= offset
+        return build(type(msg), fields)
 
     def summary(self) -> dict[str, float]:
         """Offsets in ms by sender, for logs and status."""

@@ -18,6 +18,7 @@ from agents.errors import TransportError
 from transport.bus import DEFAULT_CAPACITY, AliveEvent, BusBase, Clock, Congestion, Received
 from transport.clock import process_clock
 from transport.clock_sync import ClockSync
+from transport.fastbuild import build
 from transport.keys import SwarmKeys, validate_concrete
 from transport.zenoh_config import ZenohConfig, build_zenoh_config
 
@@ -32,11 +33,16 @@ _CONGESTION = {
 }
 
 
-def _hlc(sample: zenoh.Sample) -> tuple[float | None, str | None]:
+_PUT = zenoh.SampleKind.PUT
+
+
+def _received(sample: zenoh.Sample, now_s: float, arrival_s: float | None) -> Received:
     stamp = sample.timestamp
-    if stamp is None:
-        return None, None
-    return stamp.get_time_as_ntp64().as_secs_f64(), str(stamp.get_id())
+    hlc_s, source = (None, None) if stamp is None else (
+        stamp.get_time_as_ntp64().as_secs_f64(), str(stamp.get_id()))
+    return build(Received, {"key": str(sample.key_expr), "payload": sample.payload.to_bytes(),
+                            "recv_stamp_s": now_s, "hlc_stamp_s": hlc_s, "hlc_source": source,
+                            "arrival_s": arrival_s})
 
 
 class ZenohSubscription:
@@ -62,27 +68,34 @@ class ZenohSubscription:
             self._sub = self._ring = bus.session.declare_subscriber(
                 key_expr, zenoh.handlers.RingChannel(capacity))
 
-    def _next(self) -> tuple[float | None, zenoh.Sample | None]:
-        if self._ring is not None:
-            return None, self._ring.try_recv()
-        assert self._arrived is not None
-        try:
-            return self._arrived.popleft()
-        except IndexError:
-            return None, None
-
     def drain(self, max_items: int | None = None) -> list[Received]:
+        if self._ring is None:
+            return self._drain_arrived(max_items)
+        if max_items is not None and max_items <= 0:
+            return []
+        # Called for every subscription every tick, mostly empty: no clock read then.
+        try_recv = self._ring.try_recv
+        sample = try_recv()
+        if sample is None:
+            return []
         out: list[Received] = []
         now = self._bus.now_s()
-        while max_items is None or len(out) < max_items:
-            arrival_s, sample = self._next()
-            if sample is None:
-                break
-            if sample.kind != zenoh.SampleKind.PUT:
-                continue
-            hlc_s, source = _hlc(sample)
-            payload = sample.payload.to_bytes()
-            out.append(Received(str(sample.key_expr), payload, now, hlc_s, source, arrival_s))
+        while sample is not None:
+            if sample.kind == _PUT:
+                out.append(_received(sample, now, None))
+                if max_items is not None and len(out) >= max_items:
+                    break
+            sample = try_recv()
+        return out
+
+    def _drain_arrived(self, max_items: int | None) -> list[Received]:
+        assert self._arrived is not None
+        out: list[Received] = []
+        now = self._bus.now_s()
+        while self._arrived and (max_items is None or len(out) < max_items):
+            arrival_s, sample = self._arrived.popleft()
+            if sample.kind == _PUT:
+                out.append(_received(sample, now, arrival_s))
         return out
 
     def close(self) -> None:
