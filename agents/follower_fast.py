@@ -95,9 +95,12 @@ class FastSetup:
     observed: tuple[int, ...]
     angle_rad: float
     est_period_s: float
+    robust: bool
+    hold_s: float  # ref.hold_after_s
+    stale_s: float  # ref.stale_after_s
     peers: tuple[int, ...]  # neighbours and successor, sorted
     weights: tuple[tuple[int, float], ...]  # (target, weight) per observed target
-    nbr_steps: tuple[float, ...]  # edge fraction * estimator step, per neighbour
+    nbr_steps: tuple[tuple[int, float], ...]  # (neighbour, edge fraction * estimator step)
     rotation: complex  # e^(i angle): a missing successor stands where it should be
     target_names: tuple[tuple[int, str], ...]
     peer_names: tuple[tuple[int, str], ...]
@@ -108,9 +111,10 @@ class FastSetup:
         step = setup.est_period_s
         return FastSetup(
             setup, setup.index, setup.neighbours, setup.successor, setup.observed,
-            setup.angle_rad, step, peers,
+            setup.angle_rad, step, setup.robust, setup.hold_after_s, setup.stale_after_s, peers,
             tuple((j, float(setup.weights[j])) for j in setup.observed),
-            tuple(float(f) * step for f in setup.nbr_fractions),
+            tuple((j, float(f) * step)
+                  for j, f in zip(setup.neighbours, setup.nbr_fractions, strict=True)),
             complex(math.cos(setup.angle_rad), math.sin(setup.angle_rad)),
             tuple((j, f"target{j}") for j in setup.observed),
             tuple((j, f"follower{j}") for j in peers),
@@ -122,18 +126,21 @@ class FastSetup:
         return FastSetup.of(FollowerSetup.from_scenario(scenario, index, members))
 
 
+# A NamedTuple built without its Python-level __new__: half the cost, same object.
+_new = tuple.__new__
+
+
 def peer_view(msg: FollowerState, receiver: int) -> PeerView:
     """What `receiver` keeps of a neighbour's state (its robust link sum towards `receiver`)."""
     stamp = msg.header.stamp_s
     flow = None
     for f in msg.link_flows:
         if f[0] == receiver:
-            flow = Sample(complex(f[1], f[2]), complex(f[3], f[4]), stamp)
+            flow = _new(Sample, (complex(f[1], f[2]), complex(f[3], f[4]), stamp))
             break
-    r, dr, pos, vel = msg.r_m, msg.dr_m_s, msg.pos_m, msg.vel_m_s
-    return PeerView(Sample(complex(r[0], r[1]), complex(dr[0], dr[1]), stamp),
-                    Sample(complex(pos[0], pos[1]), complex(vel[0], vel[1]),
-                           msg.vehicle_stamp_s), flow)
+    return _new(PeerView, (_new(Sample, (complex(*msg.r_m), complex(*msg.dr_m_s), stamp)),
+                           _new(Sample, (complex(*msg.pos_m), complex(*msg.vel_m_s),
+                                         msg.vehicle_stamp_s)), flow))
 
 
 def observe_target(
@@ -144,17 +151,17 @@ def observe_target(
         return memory
     prev = memory.targets.get(target)
     if prev is None:
-        track = Sample(pos_m, 0j, stamp_s)
+        track = _new(Sample, (pos_m, 0j, stamp_s))
     elif stamp_s <= prev.stamp_s:
         return memory  # duplicate or reordered: the newer sample stands
     else:
         vel = finite_difference_velocity(prev.value, prev.stamp_s, pos_m, stamp_s, prev.rate,
                                          setup.ref.target_vel_tau_s)
-        track = Sample(pos_m, vel, stamp_s)
+        track = _new(Sample, (pos_m, vel, stamp_s))
     m = memory
-    return FollowerMemory(m.phi_m, m.phi_rate_m_s, m.last_tick_s, m.peer_age_s,
-                          {**m.targets, target: track}, m.link_sums_m, m.link_rates_m_s,
-                          m.last_r, m.carry_m, m.rebase_pending)
+    return _new(FollowerMemory, (m.phi_m, m.phi_rate_m_s, m.last_tick_s, m.peer_age_s,
+                                 {**m.targets, target: track}, m.link_sums_m, m.link_rates_m_s,
+                                 m.last_r, m.carry_m, m.rebase_pending))
 
 
 def ready(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView]) -> bool:
@@ -165,7 +172,7 @@ def ready(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView
 
 def reference(memory: FollowerMemory, setup: FastSetup, now_s: float) -> tuple[complex, complex]:
     """p~_i and its rate at now_s (targets not heard yet count as zero)."""
-    p, rate, hold = 0j, 0j, setup.ref.hold_after_s
+    p, rate, hold = 0j, 0j, setup.hold_s
     targets = memory.targets
     for j, w in setup.weights:
         track = targets.get(j)
@@ -179,7 +186,7 @@ def reference(memory: FollowerMemory, setup: FastSetup, now_s: float) -> tuple[c
 
 def _stale(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView],
            now_s: float) -> tuple[str, ...]:
-    limit, targets = setup.ref.stale_after_s, memory.targets
+    limit, targets = setup.stale_s, memory.targets
     old = [name for j, name in setup.target_names
            if j not in targets or now_s - targets[j].stamp_s > limit]
     old += [name for j, name in setup.peer_names if now_s - peers[j].r.stamp_s > limit]
@@ -188,36 +195,32 @@ def _stale(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerVie
 
 def _ages(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView],
           now_s: float, dt: float) -> dict[int, float]:
-    ref = setup.ref
-    gain = 1.0 - math.exp(-dt / ref.age_tau_s)
+    gain = 1.0 - math.exp(-dt / setup.ref.age_tau_s)
     ages = dict(memory.peer_age_s)
+    limit = setup.stale_s
     for j in setup.peers:
-        age = min(now_s - peers[j].r.stamp_s, ref.stale_after_s)
+        age = min(now_s - peers[j].r.stamp_s, limit)
         old = ages.get(j)
         ages[j] = age if old is None else old + gain * (age - old)
     return ages
 
 
+Links = tuple[list[complex], list[float], list[bool], list[complex], list[complex]]
+
+
 def _links(setup: FastSetup, peers: Mapping[int, PeerView], now_s: float,
-           ages: Mapping[int, float]) -> tuple[list[complex], list[float], list[bool]]:
-    """Per neighbour: r_j carried to now_s, its step-limited edge fraction, and whether it
-    is live (follower_logic._estimate: the fraction shrinks with the age of the data)."""
-    hold, limit, step = setup.ref.hold_after_s, setup.ref.stale_after_s, setup.est_period_s
-    r_nbrs, fractions, live = [], [], []
-    for j, f_step in zip(setup.neighbours, setup.nbr_steps, strict=True):
-        value, rate, stamp = peers[j].r
+           ages: Mapping[int, float]) -> Links:
+    """Per neighbour: r_j carried to now_s, the step-limited edge fraction (it shrinks with
+    the age of the data), whether it is live, and (robust) its link sum and rate towards us."""
+    hold, limit, step = setup.hold_s, setup.stale_s, setup.est_period_s
+    r_nbrs, fractions, live, sums, rates = [], [], [], [], []
+    for j, f_step in setup.nbr_steps:
+        view = peers[j]
+        value, rate, stamp = view.r
         r_nbrs.append(value + rate * (min(now_s, stamp + hold) - stamp))
         fractions.append(f_step / max(ages[j], step))
         live.append(now_s - stamp <= limit)
-    return r_nbrs, fractions, live
-
-
-def _their_flows(setup: FastSetup, peers: Mapping[int, PeerView],
-                 now_s: float) -> tuple[list[complex], list[complex]]:
-    hold = setup.ref.hold_after_s
-    sums, rates = [], []
-    for j in setup.neighbours:
-        flow = peers[j].flow
+        flow = view.flow
         if flow is None:
             sums.append(0j)
             rates.append(0j)
@@ -225,38 +228,34 @@ def _their_flows(setup: FastSetup, peers: Mapping[int, PeerView],
             value, rate, stamp = flow
             sums.append(value + rate * (min(now_s, stamp + hold) - stamp))
             rates.append(rate if now_s - stamp <= hold else 0j)
-    return sums, rates
+    return r_nbrs, fractions, live, sums, rates
 
 
 def _advance(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView],
              now_s: float) -> tuple[FollowerMemory, complex, complex]:
     """The estimator over the time since its last step: new memory, r_i, dr_i/dt
     (follower_logic._advance and _estimate in one)."""
-    ref = setup.ref
     last = memory.last_tick_s
-    dt = 0.0 if last is None else min(max(now_s - last, 0.0), ref.max_gap_s)
+    dt = 0.0 if last is None else min(max(now_s - last, 0.0), setup.ref.max_gap_s)
     ages = _ages(memory, setup, peers, now_s, dt)
     p_tilde, p_tilde_rate = reference(memory, setup, now_s)
-    r_nbrs, fractions, live = _links(setup, peers, now_s, ages)
+    r_nbrs, fractions, live, their_sums, their_rates = _links(setup, peers, now_s, ages)
     resume = None
     if memory.rebase_pending and memory.last_r is not None:
-        resume = memory.last_r.held(now_s, ref.hold_after_s)
+        resume = memory.last_r.held(now_s, setup.hold_s)
     sums, rates = memory.link_sums_m, memory.link_rates_m_s
-    their_rates: list[complex] = []
-    if ref.robust:
-        d = len(setup.neighbours)
-        old_rates = (0j,) * d if rates is None else rates
-        sums = tuple([s + dt * f for s, f in
-                      zip((0j,) * d if sums is None else sums, old_rates, strict=True)])
-        their_sums, their_rates = _their_flows(setup, peers, now_s)
+    if setup.robust:
+        zeros = (0j,) * len(r_nbrs)
+        sums = tuple([s + dt * f for s, f in zip(sums or zeros, rates or zeros, strict=True)])
         phi = link_balance_c(sums, their_sums)
     else:
         phi = memory.phi_m + dt * memory.phi_rate_m_s
     carry = next_carry_c(memory.carry_m, phi + p_tilde, resume, dt)
-    flows = consensus_flows_c(phi + p_tilde + carry, r_nbrs, fractions, ref.estimator,
+    flows = consensus_flows_c(phi + p_tilde + carry, r_nbrs, fractions, setup.ref.estimator,
                               setup.est_period_s)
-    flows = [f if ok else 0j for f, ok in zip(flows, live, strict=True)]
-    if ref.robust:
+    if not all(live):
+        flows = [f if ok else 0j for f, ok in zip(flows, live, strict=True)]
+    if setup.robust:
         phi_rate = link_balance_c(flows, their_rates)
         rates = tuple(flows)
     else:
@@ -265,8 +264,8 @@ def _advance(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerV
     dr = phi_rate + p_tilde_rate - carry / REBASE_TAU_S
     # A target newly ours is not heard yet: p~_i lacks it, so r_i stays carried until it is.
     pending = memory.rebase_pending and not all(j in memory.targets for j in setup.observed)
-    new = FollowerMemory(phi, phi_rate, now_s, ages, memory.targets, sums, rates,
-                         Sample(r, dr, now_s), carry, pending)
+    new = _new(FollowerMemory, (phi, phi_rate, now_s, ages, memory.targets, sums, rates,
+                                _new(Sample, (r, dr, now_s)), carry, pending))
     return new, r, dr
 
 
@@ -295,7 +294,7 @@ def follower_tick(memory: FollowerMemory, setup: FastSetup, own: Sample,
         u, z, delta = 0j, math.nan, math.nan
     if not (math.isfinite(u.real) and math.isfinite(u.imag) and math.isfinite(z)):
         u = 0j  # never fly a NaN: hold, and let the caller count it
-    return new_memory, TickOutput(u, r, dr, z, delta, _stale(memory, setup, peers, now_s))
+    return new_memory, _new(TickOutput, (u, r, dr, z, delta, _stale(memory, setup, peers, now_s)))
 
 
 def link_flows(memory: FollowerMemory,
