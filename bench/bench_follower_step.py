@@ -1,6 +1,6 @@
 """A networked follower's per-step cost: the reference logic against its fast twin (issue 15).
 
-python bench/bench_follower_step.py [--calls 5000] [--repeat 5]
+python bench/bench_follower_step.py [--calls 2000] [--repeat 9]
 
 Prints µs per call of estimator_tick, follower_tick, peer_view and observe_target, for
 agents.follower_logic (before: numpy 2-vectors) and agents.follower_fast (after: complex
@@ -29,6 +29,8 @@ from transport.messages import FollowerState, Header
 
 
 def _per_call_us(fn: Callable[[], Any], calls: int, repeat: int) -> float:
+    for _ in range(calls):  # warm-up round, not counted
+        fn()
     best = float("inf")
     for _ in range(repeat):
         start = time.process_time()
@@ -79,6 +81,8 @@ def _case(name: str, estimator: str, calls: int, repeat: int) -> dict[str, tuple
         ("link_flows", lambda: ref.link_flows(r_mem, setup),
          lambda: fast.link_flows(f_mem, fsetup)),
     ]
+    print(f"<!-- {name}, {estimator}: follower 0, {len(setup.neighbours)} neighbours, "
+          f"{len(setup.observed)} observed target(s) -->")
     for label, before, after in timings:
         out[label] = (_per_call_us(before, calls, repeat), _per_call_us(after, calls, repeat))
     return out
@@ -86,8 +90,8 @@ def _case(name: str, estimator: str, calls: int, repeat: int) -> dict[str, tuple
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--calls", type=int, default=5000)
-    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--calls", type=int, default=2000)
+    parser.add_argument("--repeat", type=int, default=9)
     args = parser.parse_args()
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "
           f"best of {args.repeat} x {args.calls} calls, process CPU time, µs per call")
