@@ -42,3 +42,16 @@ def next_carry(
     if continue_from_m is not None:
         return np.asarray(continue_from_m, float) - raw_r_m
     return carry_m * math.exp(-dt_s / tau_s)
+
+
+def next_carry_c(
+    carry_m: complex,
+    raw_r_m: complex,
+    continue_from_m: complex | None,
+    dt_s: float,
+    tau_s: float = REBASE_TAU_S,
+) -> complex:
+    """`next_carry` with plane vectors as complex x + iy (agents.follower_fast)."""
+    if continue_from_m is not None:
+        return continue_from_m - raw_r_m
+    return carry_m * math.exp(-dt_s / tau_s)

@@ -16,18 +16,19 @@ from collections.abc import Sequence
 import numpy as np
 
 from agents.errors import EncloseError
-from agents.follower_logic import (
+from agents.follower_fast import (
+    FastSetup,
     FollowerMemory,
-    FollowerSetup,
     PeerView,
     Sample,
     estimator_tick,
     follower_tick,
     link_flows,
     observe_target,
+    peer_view,
     ready,
 )
-from agents.follower_membership import (
+from agents.follower_fast_membership import (
     join_running,
     regroup,
     standing_estimate,
@@ -59,22 +60,11 @@ PEER_QUEUE = 8
 JOIN_AFTER_S = 1.0
 
 
-def peer_view(msg: FollowerState, receiver: int) -> PeerView:
-    """What `receiver` keeps of a neighbour's state (its robust link sum towards `receiver`)."""
-    stamp = msg.header.stamp_s
-    flow = next(
-        (
-            Sample(np.array(f[1:3]), np.array(f[3:5]), stamp)
-            for f in msg.link_flows
-            if f[0] == receiver
-        ),
-        None,
-    )
-    return PeerView(
-        Sample(np.asarray(msg.r_m), np.asarray(msg.dr_m_s), stamp),
-        Sample(np.asarray(msg.pos_m), np.asarray(msg.vel_m_s), msg.vehicle_stamp_s),
-        flow,
-    )
+# The follower runs agents.follower_fast, the twin of agents.follower_logic with plane
+# vectors as complex x + iy (held to it by tests/unit/test_follower_fast.py): numpy's
+# per-call cost was most of a step's.
+def _xy(vec: complex) -> tuple[float, float]:
+    return (vec.real, vec.imag)
 
 
 class FollowerNode:
@@ -85,7 +75,7 @@ class FollowerNode:
         joining: bool = False,
     ) -> None:
         self.scenario = scenario
-        self.setup = FollowerSetup.from_scenario(scenario, index)
+        self.setup = FastSetup.from_scenario(scenario, index)
         self.members = frozenset(range(scenario.n))
         self.index, self.bus, self.vehicle = index, bus, vehicle
         self.altitude_m = scenario.vehicle.altitude_m
@@ -107,7 +97,7 @@ class FollowerNode:
         self.est_stamper = Stamper(f"follower-{index}", bus.now_s)
         self.est_phase_s = 0.5 * self.setup.est_period_s * scenario.tick_group(index)
         self.last_state: VehicleState | None = None
-        self.last_u = np.zeros(2)
+        self.last_u = 0j
         # Checked, not trusted (transport.checks); + per-link rx and age (transport.link_stats)
         self.decoder: Decoder = LinkDecoder(limits=DEFAULT_LIMITS)
         self.status = StatusReporter(bus, self.keys, "follower", index)
@@ -145,7 +135,7 @@ class FollowerNode:
         members = self.liveness.members(now_s) | {self.index}
         if self.start_s is None or members == self.members:
             return
-        new = FollowerSetup.from_scenario(self.scenario, self.index, members)
+        new = FastSetup.from_scenario(self.scenario, self.index, members)
         self.memory = regroup(self.memory, self.setup, new)
         # A departed peer's last state (and robust link sums) must not outlive it: if it
         # comes back, it is a new process whose links start from zero.
@@ -174,7 +164,7 @@ class FollowerNode:
                 self.memory,
                 self.setup,
                 msg.target_index,
-                np.asarray(msg.pos_m),
+                complex(msg.pos_m[0], msg.pos_m[1]),
                 msg.observed_stamp_s,
             )
         elif isinstance(msg, FollowerState) and msg.index in self.peer_subs:
@@ -195,10 +185,10 @@ class FollowerNode:
         # The law is computed for the instant its command leaves, not the tick's nominal
         # one: if we were descheduled since, our inputs are fresher than now_s.
         now_s = max(now_s, self.bus.now_s())
-        own = Sample(
-            np.asarray(state.pos_enu_m[:2]), np.asarray(state.vel_enu_m_s[:2]), state.stamp_s
-        )
-        r, dr, u = None, np.zeros(2), np.zeros(2)
+        pos, vel = state.pos_enu_m, state.vel_enu_m_s
+        own = Sample(complex(pos[0], pos[1]), complex(vel[0], vel[1]), state.stamp_s)
+        r: complex | None = None
+        dr, u = 0j, 0j
         running = self.start_s is not None and now_s >= self.start_s
         late = self.start_s is not None and now_s > self.start_s + JOIN_AFTER_S
         if running and (self.joining or late):
@@ -217,7 +207,7 @@ class FollowerNode:
             self.status.counters["ticks_not_ready"] += 1
         if not state.link_ok:
             self.status.counters["ticks_without_vehicle"] += 1
-            u = np.zeros(2)  # hover until our vehicle is heard again
+            u = 0j  # hover until our vehicle is heard again
         if r is None:  # not flying the law (yet, or for a moment after a change)
             r = standing_estimate(self.memory, self.setup, now_s)
         self._command(state, u)
@@ -253,30 +243,31 @@ class FollowerNode:
         if r is not None:
             self._publish(now_s, self.last_state, r.value, r.rate, self.last_u, estimate=True)
 
-    def _command(self, state: VehicleState, u: np.ndarray) -> None:
+    def _command(self, state: VehicleState, u: complex) -> None:
         climb = ALTITUDE_GAIN_PER_S * (self.altitude_m - state.pos_enu_m[2])
         if not math.isfinite(climb):
             climb = 0.0
-        if not self.vehicle.send_velocity_enu((float(u[0]), float(u[1]), climb)):
+        if not self.vehicle.send_velocity_enu((u.real, u.imag, climb)):
             self.status.counters["setpoints_refused"] += 1
 
     def _publish(
-        self, now_s: float, state: VehicleState, r: np.ndarray, dr: np.ndarray, u: np.ndarray,
+        self, now_s: float, state: VehicleState, r: complex, dr: complex, u: complex,
         estimate: bool = False,
     ) -> None:
-        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(state.pos_enu_m))):
+        if not (math.isfinite(r.real) and math.isfinite(r.imag)
+                and all(math.isfinite(v) for v in state.pos_enu_m)):
             self.status.counters["states_not_published"] += 1
             return
         stamper = self.est_stamper if estimate else self.stamper
         msg = FollowerState(
             stamper.header(now_s),
             self.index,
-            vec2(r),
-            vec2(dr),
-            vec2(self.memory.phi_m),
+            _xy(r),
+            _xy(dr),
+            _xy(self.memory.phi_m),
             vec2(state.pos_enu_m[:2]),
             vec2(state.vel_enu_m_s[:2]),
-            vec2(u),
+            _xy(u),
             state.stamp_s,
             link_flows(self.memory, self.setup),
         )

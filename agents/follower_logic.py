@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +41,9 @@ from agents.core.params import control_gains, estimator_params
 from agents.estimate_carry import REBASE_TAU_S, next_carry
 from agents.membership import membership
 from agents.scenario import Scenario
+
+if TYPE_CHECKING:
+    from transport.messages import FollowerState
 
 FloatArray = NDArray[np.float64]
 ZERO2 = np.zeros(2)
@@ -158,6 +162,24 @@ class TickOutput:
     z_m: float
     delta: float
     stale: tuple[str, ...]  # inputs older than stale_after_s (or missing)
+
+
+def peer_view(msg: FollowerState, receiver: int) -> PeerView:
+    """What `receiver` keeps of a neighbour's state (its robust link sum towards `receiver`)."""
+    stamp = msg.header.stamp_s
+    flow = next(
+        (
+            Sample(np.array(f[1:3]), np.array(f[3:5]), stamp)
+            for f in msg.link_flows
+            if f[0] == receiver
+        ),
+        None,
+    )
+    return PeerView(
+        Sample(np.asarray(msg.r_m), np.asarray(msg.dr_m_s), stamp),
+        Sample(np.asarray(msg.pos_m), np.asarray(msg.vel_m_s), msg.vehicle_stamp_s),
+        flow,
+    )
 
 
 def observe_target(

@@ -8,15 +8,19 @@ clocks or networks: time steps and neighbour values are arguments.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.core.geometry import limited_sig, rate_cap
+from agents.core.geometry import limited_sig, limited_sig_one, rate_cap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
+# A plane vector: a (2,) array, or x + iy (the networked follower's scalar twins).
+Vec = TypeVar("Vec", FloatArray, complex)
 
 
 def observation_weights(observation: FloatArray) -> FloatArray:
@@ -61,6 +65,24 @@ def consensus_flows(
     return limited_sig(r_nbrs_m - r_self_m, 1.0 / params.alpha1, params.k_e, cap)
 
 
+def consensus_flows_c(
+    r_self_m: complex,
+    r_nbrs_m: Sequence[complex],
+    nbr_fractions: Sequence[float],
+    params: EstimatorParams,
+    dt_s: float,
+) -> list[complex]:
+    """`consensus_flows` with plane vectors as complex x + iy (one list entry per link):
+    the same law, component by component, without numpy's per-call cost."""
+    base, exponent, gain = rate_cap(params.step_fraction, dt_s), 1.0 / params.alpha1, params.k_e
+    flows = []
+    for r_j, fraction in zip(r_nbrs_m, nbr_fractions, strict=True):
+        gap, cap = r_j - r_self_m, base * fraction
+        flows.append(complex(limited_sig_one(gap.real, exponent, gain, cap),
+                             limited_sig_one(gap.imag, exponent, gain, cap)))
+    return flows
+
+
 def consensus_rate(
     r_self_m: FloatArray,
     r_nbrs_m: FloatArray,
@@ -83,6 +105,14 @@ def link_balance(own_sums_m: FloatArray, their_sums_m: FloatArray) -> FloatArray
     paper's increments a lost or late message shifts the mean for good.
     """
     return np.asarray(0.5 * (own_sums_m - their_sums_m).sum(axis=0))
+
+
+def link_balance_c(own_sums_m: Sequence[complex], their_sums_m: Sequence[complex]) -> complex:
+    """`link_balance` with plane vectors as complex x + iy, one per link."""
+    total = 0j
+    for own, theirs in zip(own_sums_m, their_sums_m, strict=True):
+        total += own - theirs
+    return 0.5 * total
 
 
 @dataclass(frozen=True)
@@ -130,16 +160,17 @@ def step_phi(phi_m: FloatArray, phi_rate_m_s: FloatArray, dt_s: float) -> FloatA
 
 
 def finite_difference_velocity(
-    prev_pos_m: FloatArray,
+    prev_pos_m: Vec,
     prev_stamp_s: float,
-    pos_m: FloatArray,
+    pos_m: Vec,
     stamp_s: float,
-    prev_vel_m_s: FloatArray,
+    prev_vel_m_s: Vec,
     tau_s: float = 0.0,
-) -> FloatArray:
+) -> Vec:
     """Velocity from two timestamped observations, optionally low-passed with time constant tau.
 
     A zero or negative stamp difference (duplicate or reordered data) keeps the old estimate.
+    Vectors are (2,) arrays or complex x + iy: plain arithmetic, the same for both.
     """
     dt = stamp_s - prev_stamp_s
     if dt <= 0.0:

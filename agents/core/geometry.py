@@ -62,6 +62,13 @@ def limited_sig(
     return np.copysign(np.minimum(gain * mag**exponent, rate_cap_per_s * mag), x)
 
 
+def limited_sig_one(x: float, exponent: float, gain: float, rate_cap_per_s: float) -> float:
+    """`limited_sig` of one float (the networked follower's plane vectors are complex,
+    their components plain floats: numpy's per-call cost is most of a 2-vector's)."""
+    mag = abs(x)
+    return math.copysign(min(gain * mag**exponent, rate_cap_per_s * mag), x)
+
+
 def rate_cap(step_fraction: float, dt_s: float) -> float:
     """The cap of `limited_sig` for a step of dt: `NO_CAP_PER_S` when the fraction is <= 0."""
     return step_fraction / dt_s if step_fraction > 0.0 else NO_CAP_PER_S

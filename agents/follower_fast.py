@@ -1,0 +1,308 @@
+"""The networked follower's estimator and controller, cheap: a twin of agents.follower_logic.
+
+The same functions with the same arguments and the same laws, step for step, with plane
+vectors as complex numbers x + iy instead of (2,) arrays, and per-setup constants worked
+out once (`FastSetup`).  At 2-vectors numpy's per-call cost was most of a step's (issue 15:
+ring16's followers run ~200 estimator steps a second each, 16 on 2 cores).  The laws
+themselves are the core's scalar twins (agents.core: `consensus_flows_c`,
+`link_balance_c`, `enclosing_control_one`; agents.estimate_carry.next_carry_c);
+tests/unit/test_follower_fast.py pins every function here to follower_logic's over random
+inputs and sequences of steps.  agents.follower_logic stays the reference (and is what
+the lock-step harness tests/swarm_harness.py drives); agents.follower runs this one.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import TYPE_CHECKING, NamedTuple
+
+from agents.core.controller import enclosing_control_one
+from agents.core.estimator import (
+    consensus_flows_c,
+    finite_difference_velocity,
+    link_balance_c,
+)
+from agents.estimate_carry import REBASE_TAU_S, next_carry_c
+from agents.follower_logic import FollowerSetup
+from agents.scenario import Scenario
+
+if TYPE_CHECKING:
+    from transport.messages import FollowerState
+
+
+class Sample(NamedTuple):
+    """A timestamped position (or estimate) x + iy with its rate (follower_logic.Sample)."""
+
+    value: complex
+    rate: complex
+    stamp_s: float
+
+    def at(self, t_s: float) -> complex:
+        return self.value + self.rate * (t_s - self.stamp_s)
+
+    def held(self, t_s: float, limit_s: float) -> complex:
+        return self.value + self.rate * (min(t_s, self.stamp_s + limit_s) - self.stamp_s)
+
+    def held_rate(self, t_s: float, limit_s: float) -> complex:
+        return self.rate if t_s - self.stamp_s <= limit_s else 0j
+
+
+_NO_AGES: Mapping[int, float] = MappingProxyType({})
+_NO_TRACKS: Mapping[int, Sample] = MappingProxyType({})
+
+
+class PeerView(NamedTuple):
+    r: Sample
+    pos: Sample
+    flow: Sample | None = None
+
+
+class FollowerMemory(NamedTuple):
+    """follower_logic.FollowerMemory, vectors as complex; immutable (never mutate its maps)."""
+
+    phi_m: complex = 0j
+    phi_rate_m_s: complex = 0j
+    last_tick_s: float | None = None
+    peer_age_s: Mapping[int, float] = _NO_AGES
+    targets: Mapping[int, Sample] = _NO_TRACKS
+    link_sums_m: tuple[complex, ...] | None = None
+    link_rates_m_s: tuple[complex, ...] | None = None
+    last_r: Sample | None = None
+    carry_m: complex = 0j
+    rebase_pending: bool = False
+
+
+class TickOutput(NamedTuple):
+    u_m_s: complex
+    r_m: complex
+    dr_m_s: complex
+    z_m: float
+    delta: float
+    stale: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class FastSetup:
+    """A FollowerSetup (`ref`) and the constants the fast path derives from it once."""
+
+    ref: FollowerSetup
+    index: int
+    neighbours: tuple[int, ...]
+    successor: int
+    observed: tuple[int, ...]
+    angle_rad: float
+    est_period_s: float
+    robust: bool
+    hold_s: float  # ref.hold_after_s
+    stale_s: float  # ref.stale_after_s
+    peers: tuple[int, ...]  # neighbours and successor, sorted
+    weights: tuple[tuple[int, float], ...]  # (target, weight) per observed target
+    nbr_steps: tuple[tuple[int, float], ...]  # (neighbour, edge fraction * estimator step)
+    rotation: complex  # e^(i angle): a missing successor stands where it should be
+    target_names: tuple[tuple[int, str], ...]
+    peer_names: tuple[tuple[int, str], ...]
+
+    @staticmethod
+    def of(setup: FollowerSetup) -> FastSetup:
+        peers = tuple(sorted(set(setup.neighbours) | {setup.successor}))
+        step = setup.est_period_s
+        return FastSetup(
+            setup, setup.index, setup.neighbours, setup.successor, setup.observed,
+            setup.angle_rad, step, setup.robust, setup.hold_after_s, setup.stale_after_s, peers,
+            tuple((j, float(setup.weights[j])) for j in setup.observed),
+            tuple((j, float(f) * step)
+                  for j, f in zip(setup.neighbours, setup.nbr_fractions, strict=True)),
+            complex(math.cos(setup.angle_rad), math.sin(setup.angle_rad)),
+            tuple((j, f"target{j}") for j in setup.observed),
+            tuple((j, f"follower{j}") for j in peers),
+        )
+
+    @staticmethod
+    def from_scenario(scenario: Scenario, index: int,
+                      members: Iterable[int] | None = None) -> FastSetup:
+        return FastSetup.of(FollowerSetup.from_scenario(scenario, index, members))
+
+
+# A NamedTuple built without its Python-level __new__: half the cost, same object.
+_new = tuple.__new__
+
+
+def peer_view(msg: FollowerState, receiver: int) -> PeerView:
+    """What `receiver` keeps of a neighbour's state (its robust link sum towards `receiver`)."""
+    stamp = msg.header.stamp_s
+    flow = None
+    for f in msg.link_flows:
+        if f[0] == receiver:
+            flow = _new(Sample, (complex(f[1], f[2]), complex(f[3], f[4]), stamp))
+            break
+    return _new(PeerView, (_new(Sample, (complex(*msg.r_m), complex(*msg.dr_m_s), stamp)),
+                           _new(Sample, (complex(*msg.pos_m), complex(*msg.vel_m_s),
+                                         msg.vehicle_stamp_s)), flow))
+
+
+def observe_target(
+    memory: FollowerMemory, setup: FastSetup, target: int, pos_m: complex, stamp_s: float
+) -> FollowerMemory:
+    """Fold one observation in: position, and velocity by filtered finite difference."""
+    if target not in setup.observed:
+        return memory
+    prev = memory.targets.get(target)
+    if prev is None:
+        track = _new(Sample, (pos_m, 0j, stamp_s))
+    elif stamp_s <= prev.stamp_s:
+        return memory  # duplicate or reordered: the newer sample stands
+    else:
+        vel = finite_difference_velocity(prev.value, prev.stamp_s, pos_m, stamp_s, prev.rate,
+                                         setup.ref.target_vel_tau_s)
+        track = _new(Sample, (pos_m, vel, stamp_s))
+    m = memory
+    return _new(FollowerMemory, (m.phi_m, m.phi_rate_m_s, m.last_tick_s, m.peer_age_s,
+                                 {**m.targets, target: track}, m.link_sums_m, m.link_rates_m_s,
+                                 m.last_r, m.carry_m, m.rebase_pending))
+
+
+def ready(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView]) -> bool:
+    """True once every observed target and every neighbour and the successor was heard."""
+    targets = memory.targets
+    return all(j in targets for j in setup.observed) and all(j in peers for j in setup.peers)
+
+
+def reference(memory: FollowerMemory, setup: FastSetup, now_s: float) -> tuple[complex, complex]:
+    """p~_i and its rate at now_s (targets not heard yet count as zero)."""
+    p, rate, hold = 0j, 0j, setup.hold_s
+    targets = memory.targets
+    for j, w in setup.weights:
+        track = targets.get(j)
+        if track is not None:
+            value, track_rate, stamp = track
+            p += w * (value + track_rate * (min(now_s, stamp + hold) - stamp))
+            if now_s - stamp <= hold:
+                rate += w * track_rate
+    return p, rate
+
+
+def _stale(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView],
+           now_s: float) -> tuple[str, ...]:
+    limit, targets = setup.stale_s, memory.targets
+    old = [name for j, name in setup.target_names
+           if j not in targets or now_s - targets[j].stamp_s > limit]
+    old += [name for j, name in setup.peer_names if now_s - peers[j].r.stamp_s > limit]
+    return tuple(old)
+
+
+def _ages(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView],
+          now_s: float, dt: float) -> dict[int, float]:
+    gain = 1.0 - math.exp(-dt / setup.ref.age_tau_s)
+    ages = dict(memory.peer_age_s)
+    limit = setup.stale_s
+    for j in setup.peers:
+        age = min(now_s - peers[j].r.stamp_s, limit)
+        old = ages.get(j)
+        ages[j] = age if old is None else old + gain * (age - old)
+    return ages
+
+
+Links = tuple[list[complex], list[float], list[bool], list[complex], list[complex]]
+
+
+def _links(setup: FastSetup, peers: Mapping[int, PeerView], now_s: float,
+           ages: Mapping[int, float]) -> Links:
+    """Per neighbour: r_j carried to now_s, the step-limited edge fraction (it shrinks with
+    the age of the data), whether it is live, and (robust) its link sum and rate towards us."""
+    hold, limit, step = setup.hold_s, setup.stale_s, setup.est_period_s
+    r_nbrs, fractions, live, sums, rates = [], [], [], [], []
+    for j, f_step in setup.nbr_steps:
+        view = peers[j]
+        value, rate, stamp = view.r
+        r_nbrs.append(value + rate * (min(now_s, stamp + hold) - stamp))
+        fractions.append(f_step / max(ages[j], step))
+        live.append(now_s - stamp <= limit)
+        flow = view.flow
+        if flow is None:
+            sums.append(0j)
+            rates.append(0j)
+        else:
+            value, rate, stamp = flow
+            sums.append(value + rate * (min(now_s, stamp + hold) - stamp))
+            rates.append(rate if now_s - stamp <= hold else 0j)
+    return r_nbrs, fractions, live, sums, rates
+
+
+def _advance(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView],
+             now_s: float) -> tuple[FollowerMemory, complex, complex]:
+    """The estimator over the time since its last step: new memory, r_i, dr_i/dt
+    (follower_logic._advance and _estimate in one)."""
+    last = memory.last_tick_s
+    dt = 0.0 if last is None else min(max(now_s - last, 0.0), setup.ref.max_gap_s)
+    ages = _ages(memory, setup, peers, now_s, dt)
+    p_tilde, p_tilde_rate = reference(memory, setup, now_s)
+    r_nbrs, fractions, live, their_sums, their_rates = _links(setup, peers, now_s, ages)
+    resume = None
+    if memory.rebase_pending and memory.last_r is not None:
+        resume = memory.last_r.held(now_s, setup.hold_s)
+    sums, rates = memory.link_sums_m, memory.link_rates_m_s
+    if setup.robust:
+        zeros = (0j,) * len(r_nbrs)
+        sums = tuple([s + dt * f for s, f in zip(sums or zeros, rates or zeros, strict=True)])
+        phi = link_balance_c(sums, their_sums)
+    else:
+        phi = memory.phi_m + dt * memory.phi_rate_m_s
+    carry = next_carry_c(memory.carry_m, phi + p_tilde, resume, dt)
+    flows = consensus_flows_c(phi + p_tilde + carry, r_nbrs, fractions, setup.ref.estimator,
+                              setup.est_period_s)
+    if not all(live):
+        flows = [f if ok else 0j for f, ok in zip(flows, live, strict=True)]
+    if setup.robust:
+        phi_rate = link_balance_c(flows, their_rates)
+        rates = tuple(flows)
+    else:
+        phi_rate = sum(flows, 0j)
+    r = phi + p_tilde + carry
+    dr = phi_rate + p_tilde_rate - carry / REBASE_TAU_S
+    # A target newly ours is not heard yet: p~_i lacks it, so r_i stays carried until it is.
+    pending = memory.rebase_pending and not all(j in memory.targets for j in setup.observed)
+    new = _new(FollowerMemory, (phi, phi_rate, now_s, ages, memory.targets, sums, rates,
+                                _new(Sample, (r, dr, now_s)), carry, pending))
+    return new, r, dr
+
+
+def estimator_tick(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView],
+                   now_s: float) -> FollowerMemory:
+    """One estimator step at `now_s` between control ticks (follower_logic.estimator_tick)."""
+    return _advance(memory, setup, peers, now_s)[0]
+
+
+def follower_tick(memory: FollowerMemory, setup: FastSetup, own: Sample,
+                  peers: Mapping[int, PeerView], now_s: float) -> tuple[FollowerMemory, TickOutput]:
+    """One control cycle at `now_s` (follower_logic.follower_tick)."""
+    ref = setup.ref
+    new_memory, r, dr = _advance(memory, setup, peers, now_s)
+    own_pos = own.held(now_s, ref.hold_after_s)
+    succ = peers[setup.successor].pos
+    if now_s - succ.stamp_s <= ref.stale_after_s:
+        succ_pos = succ.value + succ.rate * (now_s - succ.stamp_s)
+    else:  # missing: where it should be, so that only radius and rotation act
+        succ_pos = r + (own_pos - r) * setup.rotation
+    try:
+        u, z, delta = enclosing_control_one(
+            own_pos, succ_pos, r, dr, setup.angle_rad, ref.control, ref.period_s,
+            new_memory.peer_age_s[setup.successor])
+    except ArithmeticError:  # numpy's inf where Python raises (|x| past 1e308)
+        u, z, delta = 0j, math.nan, math.nan
+    if not (math.isfinite(u.real) and math.isfinite(u.imag) and math.isfinite(z)):
+        u = 0j  # never fly a NaN: hold, and let the caller count it
+    return new_memory, _new(TickOutput, (u, r, dr, z, delta, _stale(memory, setup, peers, now_s)))
+
+
+def link_flows(memory: FollowerMemory,
+               setup: FastSetup) -> tuple[tuple[int, float, float, float, float], ...]:
+    """What the robust estimator publishes: (j, sum x, y, rate x, y) per neighbour."""
+    sums, rates = memory.link_sums_m, memory.link_rates_m_s
+    if sums is None or rates is None:
+        return ()
+    return tuple([(j, s.real, s.imag, f.real, f.imag)
+                  for j, s, f in zip(setup.neighbours, sums, rates, strict=True)])
+
