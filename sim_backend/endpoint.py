@@ -196,7 +196,8 @@ class VehicleEndpoint:
                 continue
             due = self.next_due[msg_id] + interval
             self.next_due[msg_id] = due if due > now_s else now_s + interval
-            data = self.build(msg_id, row)
+            data = (tm.fast_bytes(self.mav, msg_id, row, self.home) if msg_id in tm.FAST_IDS
+                    else self.build(msg_id, row))
             if data is not None:
                 out += data
         if out:

@@ -30,7 +30,7 @@ from agents.frames import enu_to_ned
 from agents.mavlink.modes import FLAVOURS
 from agents.scenario import HomeConfig, Scenario, VehicleConfig
 from sim_backend import model
-from sim_backend.autopilot import Autopilot
+from sim_backend.autopilot import Autopilot, ControlRow
 from sim_backend.endpoint import VehicleEndpoint
 from sim_backend.params import ParamStore, default_params
 from sim_backend.telemetry import Row
@@ -172,6 +172,7 @@ class Simulator:
 
     def _advance(self) -> None:
         now = self.sim_time_s
+        changed: list[tuple[int, ControlRow]] = []
         for i, ep in enumerate(self.endpoints):
             ap = ep.autopilot
             if ap.armed:
@@ -180,7 +181,9 @@ class Simulator:
                 ap.update(now, row.pos, row.landed)
                 self.counters["failsafes"] += ap.failsafes - failsafes
             if ap.dirty:
-                self._write_control(i, ap)
+                changed.append((i, ap.control()))
+        if changed:
+            self._write_control(changed)
         self.state = model.step(self.state, self.command, self.params, self.dt_s)
         self.sim_time_s = round(self.sim_time_s + self.dt_s, 9)
         self._rows = self._build_rows()
@@ -196,16 +199,19 @@ class Simulator:
             hook(self.sim_time_s, self.state)
         self.stats.ticks += 1
 
-    def _write_control(self, i: int, ap: Autopilot) -> None:
-        row = ap.control()
+    def _write_control(self, changed: list[tuple[int, ControlRow]]) -> None:
+        """The new control rows of the vehicles whose autopilot changed them: one numpy
+        write per field for all of them (with setpoints streaming, that is every vehicle)."""
+        idx = [i for i, _ in changed]
+        rows = [row for _, row in changed]
         c = self.command
-        c.motors_on[i] = row.motors_on
-        c.pos_axis[i] = row.pos_axis
-        c.pos_sp_ned_m[i] = row.pos_sp_ned_m
-        c.vel_sp_ned_m_s[i] = row.vel_sp_ned_m_s
-        c.yaw_mode[i] = row.yaw_mode
-        c.yaw_sp_rad[i] = row.yaw_sp_rad
-        c.yaw_rate_sp_rad_s[i] = row.yaw_rate_sp_rad_s
+        c.motors_on[idx] = [row.motors_on for row in rows]
+        c.pos_axis[idx] = [row.pos_axis for row in rows]
+        c.pos_sp_ned_m[idx] = [row.pos_sp_ned_m for row in rows]
+        c.vel_sp_ned_m_s[idx] = [row.vel_sp_ned_m_s for row in rows]
+        c.yaw_mode[idx] = [row.yaw_mode for row in rows]
+        c.yaw_sp_rad[idx] = [row.yaw_sp_rad for row in rows]
+        c.yaw_rate_sp_rad_s[idx] = [row.yaw_rate_sp_rad_s for row in rows]
 
     def _build_rows(self) -> list[Row]:
         s = self.state

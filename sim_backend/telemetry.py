@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -45,9 +45,9 @@ PARAM_ENCODING = {PX4: 16, "ardupilot": 131072}
 SW_VERSION = {PX4: (1 << 24) | (14 << 16) | 255, "ardupilot": (4 << 24) | (5 << 16) | 255}
 
 
-@dataclass(frozen=True)
-class Row:
-    """One vehicle at one tick (NED, SI units)."""
+class Row(NamedTuple):
+    """One vehicle at one tick (NED, SI units); immutable, and built for every vehicle every
+    tick: a named tuple is made several times faster than a frozen dataclass."""
 
     time_boot_ms: int
     pos: tuple[float, float, float]
