@@ -5,6 +5,7 @@ Measured with process_time (CPU of this process only, less disturbed by other lo
   `decode_datagram` and through pymavlink's own parser (the path before issue 15);
 - receive: the same plus the signature check (`signature_ok`), as the adapter does it;
 - setpoint send: `MavlinkAdapter.send_velocity_enu` (signed, sent over loopback UDP);
+- follower tick: `poll()` (what one simulated vehicle sent in a tick) + one setpoint;
 - telemetry: one vehicle's `VehicleEndpoint.telemetry` per tick (signed, the streams a
   follower leaves at their defaults and with ATTITUDE/GLOBAL_POSITION_INT at 4 Hz);
 - simulator: `Simulator.step_once` with N signed vehicles flying offboard, each sent one
@@ -213,6 +214,31 @@ def bench_simulator(n: int, ticks: int, slow: bool) -> None:
           f"vehicle at 50 Hz ({flying}/{n} still in offboard)")
 
 
+def bench_follower_tick(ticks: int) -> None:
+    """An adapter flying one simulated vehicle: poll() + send_velocity_enu() per tick."""
+    for label, slow in (("default streams", False), ("ATT+GPI at 4 Hz", True)):
+        sim = new_sim(1)
+        cfg = AdapterConfig(local_port=0, remote_port=sim.listen_ports()[0], target_sysid=1,
+                            signing_key=KEY)
+        with MavlinkAdapter(cfg) as ad:
+            assert ad.sock is not None
+            ep = sim.endpoints[0]
+            ep.default_dest = ad.sock.getsockname()
+            if slow:
+                ep.intervals[30] = ep.intervals[33] = 0.25
+            cpu: list[float] = []
+            for _ in range(ticks):
+                sim.step_once()
+                start = time.process_time()
+                ad.poll()
+                ad.send_velocity_enu((0.5, -0.25, 0.0))
+                cpu.append(time.process_time() - start)
+            ok = ad.state.link_ok and ad.counters["bad_packets"] == 0
+        sim.close()
+        print(f"follower MAVLink work per tick ({label:<16}, signed): poll + setpoint "
+              f"{statistics.median(cpu) * 1e6:6.1f} us median (link ok: {ok})")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -225,6 +251,7 @@ def main() -> int:
     bench_parse(args.calls)
     bench_send(args.calls // 4)
     bench_telemetry(args.calls // 4)
+    bench_follower_tick(args.ticks)
     bench_simulator(args.vehicles, args.ticks, False)
     bench_simulator(args.vehicles, args.ticks, True)
     return 0
