@@ -164,10 +164,10 @@ def test_signing_verdicts_equal_on_forged_replayed_and_unsigned(
         KEY, clock=lambda: 1.8e9)
     ours_counts: Counter[str] = Counter()
     their_counts: Counter[str] = Counter()
-    for data in datagrams:
-        a = [signature_ok(ours, m, ours_counts) for m in decode_datagram(new_codec(2, 1), data)
-             .messages]
-        b = [signature_ok(theirs, m, their_counts) for m in reference(data)[0]]
+    for datagram in datagrams:
+        a = [signature_ok(ours, m, ours_counts)
+             for m in decode_datagram(new_codec(2, 1), datagram).messages]
+        b = [signature_ok(theirs, m, their_counts) for m in reference(datagram)[0]]
         assert a == b
     assert ours_counts == their_counts and ours.counters == theirs.counters
 
