@@ -117,6 +117,8 @@ def decode_datagram(mav: mavlink2.MAVLink, data: bytes) -> Decoded:
     Framing follows pymavlink's robust parser: a run of bytes that starts no frame is one
     bad fragment, and so is an incomplete frame at the end.  `mav` decodes the types not
     in FAST_IDS (all of them, if it checks signatures itself)."""
+    if type(data) is not bytes:  # a bytearray or memoryview: frames are sliced as bytes
+        data = bytes(data)
     keyed = mav.signing.secret_key is not None
     good: list[MAVLinkMessage] = []
     bad, i, n = 0, 0, len(data)

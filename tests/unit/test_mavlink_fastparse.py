@@ -181,3 +181,10 @@ def test_keyed_codec_decodes_through_pymavlink() -> None:
     forged[-1] ^= 1
     assert len(decode_datagram(rx, good[0]).messages) == 1
     assert decode_datagram(rx, bytes(forged)).bad == 1
+
+
+def test_any_bytes_like_datagram_is_read() -> None:
+    frame = signed_stream(1)[0]
+    for data in (frame, bytearray(frame), memoryview(frame)):
+        decoded = decode_datagram(new_codec(2, 1), data)  # type: ignore[arg-type]
+        assert len(decoded.messages) == 1 and decoded.bad == 0
