@@ -201,8 +201,7 @@ class Simulator:
         self.stats.ticks += 1
 
     def _write_control(self, changed: list[tuple[int, ControlRow]]) -> None:
-        """The new control rows of the vehicles whose autopilot changed them: one numpy
-        write per field for all of them (with setpoints streaming, that is every vehicle)."""
+        """Changed control rows (every vehicle, while setpoints stream): one write per field."""
         idx = [i for i, _ in changed]
         rows = [row for _, row in changed]
         c = self.command
@@ -225,15 +224,11 @@ class Simulator:
                                                 s.yaw_rate_rad_s.tolist(), on_ground, strict=True)]
 
     def receive_until(self, deadline: float) -> None:
-        """Handle datagrams until the clock reaches `deadline` (past deadline: what is queued).
-
-        One datagram per ready socket per round: the selector is level-triggered, so a
-        socket with more queued is ready again in the next round.  No read then ends in
-        EAGAIN (a wasted system call per socket), and a chatty peer gets no more turns than
-        the others.  The clock is checked after each datagram, so a burst delays the next
-        tick by at most one datagram's work; the rest waits in the socket buffers.  What is
-        queued (a past deadline) is taken in at most QUEUED_ROUNDS rounds.
-        """
+        """Handle datagrams until the clock reaches `deadline` (past deadline: what is queued,
+        in at most QUEUED_ROUNDS rounds).  One datagram per ready socket per round (the
+        selector is level-triggered): no read ends in EAGAIN, a wasted system call, and a
+        chatty peer gets no more turns than the others.  The clock is checked after each
+        datagram; a burst waits in the socket buffers rather than delay the next tick."""
         rounds = 0
         while True:
             remaining = deadline - self._clock()
@@ -246,29 +241,23 @@ class Simulator:
             if not events or (remaining <= 0.0 and rounds >= QUEUED_ROUNDS):
                 return
 
-    def _take(self, i: int) -> None:
-        """One datagram of vehicle i's socket, which the selector reported readable."""
+    def _take(self, i: int) -> bool:
+        """Handle one datagram of vehicle i's socket; False when none was queued."""
         ep = self.endpoints[i]
         try:
             data, addr = ep.sock.recvfrom(65535)
         except (BlockingIOError, InterruptedError):
-            return
+            return False
         except OSError:
             self.counters["rx_errors"] += 1
-            return
+            return False
         ep.on_datagram(data, addr, self.boot_time_s(), self._rows[i])
+        return True
 
-    def _drain(self, i: int, most: int = 16) -> None:
-        ep = self.endpoints[i]
+    def _drain(self, i: int, most: int) -> None:
         for _ in range(most):  # bounded so one chatty peer cannot starve the others
-            try:
-                data, addr = ep.sock.recvfrom(65535)
-            except (BlockingIOError, InterruptedError):
+            if not self._take(i):
                 return
-            except OSError:
-                self.counters["rx_errors"] += 1
-                return
-            ep.on_datagram(data, addr, self.boot_time_s(), self._rows[i])
 
     # ---- real time ----------------------------------------------------------------------
     def boot_time_s(self) -> float:
