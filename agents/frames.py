@@ -25,6 +25,17 @@ def ned_to_enu(vec_ned: FloatArray) -> FloatArray:
     return np.stack([vec[..., 1], vec[..., 0], -vec[..., 2]], axis=-1)
 
 
+def enu_to_ned_xyz(x: float, y: float, z: float) -> tuple[float, float, float]:
+    """One ENU vector as three floats to NED, without numpy: `enu_to_ned` for the
+    per-message MAVLink path, where an array costs more than the whole conversion."""
+    return (y, x, -z)
+
+
+def ned_to_enu_xyz(x: float, y: float, z: float) -> tuple[float, float, float]:
+    """One NED vector as three floats to ENU (`ned_to_enu` without numpy)."""
+    return (y, x, -z)
+
+
 def yaw_enu_to_ned(yaw_enu_rad: float) -> float:
     """ENU yaw (counter-clockwise from east) to NED yaw (clockwise from north), in (-pi, pi]."""
     return wrap_pi(0.5 * np.pi - yaw_enu_rad)

@@ -170,10 +170,12 @@ class VehicleEndpoint:
             return lambda: tm.fast_bytes(self.mav, msg_id, row, self.home)
         if msg_id == tm.MSG_PROTOCOL_VERSION:
             return lambda: tm.protocol_version(self.mav)
+        if msg_id not in tm.STATUS_IDS:
+            return None
         ap = self.autopilot
-        msg = tm.status_message(self.mav, msg_id, row, self.home, ap.flavour, ap.mode, ap.armed,
-                                self.sysid, ap.home_ned_m)
-        return None if msg is None else (lambda: encode(self.mav, msg))
+        flavour, mode, armed, home_ned_m = ap.flavour, ap.mode, ap.armed, ap.home_ned_m
+        return lambda: tm.status_bytes(self.mav, msg_id, row, self.home, flavour, mode, armed,
+                                       self.sysid, home_ned_m) or b""
 
     def statustext(self, severity: int, text: str) -> bytes:
         msg = self.mav.statustext_encode(severity, text.encode()[:50])
@@ -196,7 +198,8 @@ class VehicleEndpoint:
                 continue
             due = self.next_due[msg_id] + interval
             self.next_due[msg_id] = due if due > now_s else now_s + interval
-            data = self.build(msg_id, row)
+            data = (tm.fast_bytes(self.mav, msg_id, row, self.home) if msg_id in tm.FAST_IDS
+                    else self.build(msg_id, row))
             if data is not None:
                 out += data
         if out:

@@ -30,7 +30,7 @@ from agents.frames import enu_to_ned
 from agents.mavlink.modes import FLAVOURS
 from agents.scenario import HomeConfig, Scenario, VehicleConfig
 from sim_backend import model
-from sim_backend.autopilot import Autopilot
+from sim_backend.autopilot import Autopilot, ControlRow
 from sim_backend.endpoint import VehicleEndpoint
 from sim_backend.params import ParamStore, default_params
 from sim_backend.telemetry import Row
@@ -41,6 +41,7 @@ TickHook = Callable[[float, model.FleetState], None]
 MAX_CATCHUP_S = 30.0  # a longer stall (a debugger, a laptop lid) is dropped, counted, logged
 MAX_VEHICLES = 255
 CATCH_UP_DRAIN = 1024  # datagrams per vehicle taken before a catch-up (a socket buffer's worth)
+QUEUED_ROUNDS = 16  # rounds over the ready sockets when taking what is queued
 
 
 @dataclass(frozen=True)
@@ -172,6 +173,7 @@ class Simulator:
 
     def _advance(self) -> None:
         now = self.sim_time_s
+        changed: list[tuple[int, ControlRow]] = []
         for i, ep in enumerate(self.endpoints):
             ap = ep.autopilot
             if ap.armed:
@@ -180,7 +182,9 @@ class Simulator:
                 ap.update(now, row.pos, row.landed)
                 self.counters["failsafes"] += ap.failsafes - failsafes
             if ap.dirty:
-                self._write_control(i, ap)
+                changed.append((i, ap.control()))
+        if changed:
+            self._write_control(changed)
         self.state = model.step(self.state, self.command, self.params, self.dt_s)
         self.sim_time_s = round(self.sim_time_s + self.dt_s, 9)
         self._rows = self._build_rows()
@@ -196,16 +200,18 @@ class Simulator:
             hook(self.sim_time_s, self.state)
         self.stats.ticks += 1
 
-    def _write_control(self, i: int, ap: Autopilot) -> None:
-        row = ap.control()
+    def _write_control(self, changed: list[tuple[int, ControlRow]]) -> None:
+        """Changed control rows (every vehicle, while setpoints stream): one write per field."""
+        idx = [i for i, _ in changed]
+        rows = [row for _, row in changed]
         c = self.command
-        c.motors_on[i] = row.motors_on
-        c.pos_axis[i] = row.pos_axis
-        c.pos_sp_ned_m[i] = row.pos_sp_ned_m
-        c.vel_sp_ned_m_s[i] = row.vel_sp_ned_m_s
-        c.yaw_mode[i] = row.yaw_mode
-        c.yaw_sp_rad[i] = row.yaw_sp_rad
-        c.yaw_rate_sp_rad_s[i] = row.yaw_rate_sp_rad_s
+        c.motors_on[idx] = [row.motors_on for row in rows]
+        c.pos_axis[idx] = [row.pos_axis for row in rows]
+        c.pos_sp_ned_m[idx] = [row.pos_sp_ned_m for row in rows]
+        c.vel_sp_ned_m_s[idx] = [row.vel_sp_ned_m_s for row in rows]
+        c.yaw_mode[idx] = [row.yaw_mode for row in rows]
+        c.yaw_sp_rad[idx] = [row.yaw_sp_rad for row in rows]
+        c.yaw_rate_sp_rad_s[idx] = [row.yaw_rate_sp_rad_s for row in rows]
 
     def _build_rows(self) -> list[Row]:
         s = self.state
@@ -218,32 +224,40 @@ class Simulator:
                                                 s.yaw_rate_rad_s.tolist(), on_ground, strict=True)]
 
     def receive_until(self, deadline: float) -> None:
-        """Handle datagrams until the clock reaches `deadline` (past deadline: what is queued).
-
-        The clock is checked after each socket, so a burst of datagrams delays the next
-        tick by at most one socket's worth of work; the rest waits in the socket buffers.
-        """
+        """Handle datagrams until the clock reaches `deadline` (past deadline: what is queued,
+        in at most QUEUED_ROUNDS rounds).  One datagram per ready socket per round (the
+        selector is level-triggered): no read ends in EAGAIN, a wasted system call, and a
+        chatty peer gets no more turns than the others.  The clock is checked after each
+        datagram; a burst waits in the socket buffers rather than delay the next tick."""
+        rounds = 0
         while True:
             remaining = deadline - self._clock()
             events = self._selector.select(max(0.0, remaining))
             for key, _ in events:
-                self._drain(key.data)
+                self._take(key.data)
                 if deadline >= 0.0 and self._clock() >= deadline:
                     return
-            if not events or remaining <= 0.0:
+            rounds += 1
+            if not events or (remaining <= 0.0 and rounds >= QUEUED_ROUNDS):
                 return
 
-    def _drain(self, i: int, most: int = 16) -> None:
+    def _take(self, i: int) -> bool:
+        """Handle one datagram of vehicle i's socket; False when none was queued."""
         ep = self.endpoints[i]
+        try:
+            data, addr = ep.sock.recvfrom(65535)
+        except (BlockingIOError, InterruptedError):
+            return False
+        except OSError:
+            self.counters["rx_errors"] += 1
+            return False
+        ep.on_datagram(data, addr, self.boot_time_s(), self._rows[i])
+        return True
+
+    def _drain(self, i: int, most: int) -> None:
         for _ in range(most):  # bounded so one chatty peer cannot starve the others
-            try:
-                data, addr = ep.sock.recvfrom(65535)
-            except (BlockingIOError, InterruptedError):
+            if not self._take(i):
                 return
-            except OSError:
-                self.counters["rx_errors"] += 1
-                return
-            ep.on_datagram(data, addr, self.boot_time_s(), self._rows[i])
 
     # ---- real time ----------------------------------------------------------------------
     def boot_time_s(self) -> float:

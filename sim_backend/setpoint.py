@@ -8,6 +8,7 @@ position-controlled, else velocity-controlled (velocity 0 when that bit is set t
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -18,8 +19,6 @@ MAV_FRAME_BODY_OFFSET_NED = 9
 SUPPORTED_FRAMES = (MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_OFFSET_NED, MAV_FRAME_BODY_NED,
                     MAV_FRAME_BODY_OFFSET_NED)
 
-POS_BITS = (0, 1, 2)
-VEL_BITS = (3, 4, 5)
 YAW_BIT = 10
 YAW_RATE_BIT = 11
 
@@ -43,6 +42,16 @@ def _bit(mask: int, bit: int) -> bool:
     return bool(mask >> bit & 1)
 
 
+@functools.lru_cache(maxsize=1024)
+def _mask_fields(type_mask: int) -> tuple[tuple[bool, bool, bool], tuple[bool, bool, bool],
+                                         bool, bool]:
+    """(position axes, velocity axes, yaw, yaw rate) a type_mask uses; senders stream one
+    mask over and over, so each is read bit by bit once."""
+    pos_axis = (not _bit(type_mask, 0), not _bit(type_mask, 1), not _bit(type_mask, 2))
+    vel_axis = (not _bit(type_mask, 3), not _bit(type_mask, 4), not _bit(type_mask, 5))
+    return pos_axis, vel_axis, not _bit(type_mask, YAW_BIT), not _bit(type_mask, YAW_RATE_BIT)
+
+
 def _rotate_yaw(vec: tuple[float, float, float], yaw_rad: float) -> tuple[float, float, float]:
     """Body (forward, right, down) to NED by heading only, as PX4 and ArduPilot do."""
     c, s = math.cos(yaw_rad), math.sin(yaw_rad)
@@ -50,12 +59,11 @@ def _rotate_yaw(vec: tuple[float, float, float], yaw_rad: float) -> tuple[float,
 
 
 def _pick(vec: tuple[float, float, float], used: tuple[bool, ...]) -> tuple[float, float, float]:
-    return (vec[0] if used[0] else 0.0, vec[1] if used[1] else 0.0, vec[2] if used[2] else 0.0)
-
-
-def _finite(*values: float) -> None:
-    if not all(math.isfinite(v) for v in values):
+    """The used components (the others 0); raises SetpointRejected if one is not finite."""
+    out = (vec[0] if used[0] else 0.0, vec[1] if used[1] else 0.0, vec[2] if used[2] else 0.0)
+    if not (math.isfinite(out[0]) and math.isfinite(out[1]) and math.isfinite(out[2])):
         raise SetpointRejected("non-finite field")
+    return out
 
 
 def decode_setpoint(type_mask: int, frame: int, pos: tuple[float, float, float],
@@ -65,30 +73,24 @@ def decode_setpoint(type_mask: int, frame: int, pos: tuple[float, float, float],
     """The setpoint a message asks for; raises SetpointRejected for one to drop and count."""
     if frame not in SUPPORTED_FRAMES:
         raise SetpointRejected(f"frame {frame}")
-    pos_axis = tuple(not _bit(type_mask, b) for b in POS_BITS)
-    vel_axis = tuple(not _bit(type_mask, b) for b in VEL_BITS)
-    use_yaw, use_rate = not _bit(type_mask, YAW_BIT), not _bit(type_mask, YAW_RATE_BIT)
-    if not (any(pos_axis) or any(vel_axis) or use_yaw or use_rate):
+    pos_axis, vel_axis, use_yaw, use_rate = _mask_fields(type_mask)
+    if not (True in pos_axis or True in vel_axis or use_yaw or use_rate):
         raise SetpointRejected("type_mask ignores every field this model flies")
-    _finite(*(p for p, used in zip(pos, pos_axis, strict=True) if used))
-    _finite(*(v for v, used in zip(vel, vel_axis, strict=True) if used))
-    if use_yaw:
-        _finite(yaw_rad)
-    if use_rate:
-        _finite(yaw_rate_rad_s)
-    vel_used = _pick(vel, vel_axis)
     pos_used = _pick(pos, pos_axis)
-    body = frame in (MAV_FRAME_BODY_NED, MAV_FRAME_BODY_OFFSET_NED)
-    if body:
-        vel_used = _rotate_yaw(vel_used, vehicle_yaw_rad)
-        pos_used = _rotate_yaw(pos_used, vehicle_yaw_rad)
+    vel_used = _pick(vel, vel_axis)
+    if (use_yaw and not math.isfinite(yaw_rad)) or \
+            (use_rate and not math.isfinite(yaw_rate_rad_s)):
+        raise SetpointRejected("non-finite field")
     if frame != MAV_FRAME_LOCAL_NED:
+        if frame in (MAV_FRAME_BODY_NED, MAV_FRAME_BODY_OFFSET_NED):
+            vel_used = _rotate_yaw(vel_used, vehicle_yaw_rad)
+            pos_used = _rotate_yaw(pos_used, vehicle_yaw_rad)
         pos_used = (pos_used[0] + vehicle_pos_ned_m[0], pos_used[1] + vehicle_pos_ned_m[1],
                     pos_used[2] + vehicle_pos_ned_m[2])
     return Setpoint(
-        pos_axis=(pos_axis[0], pos_axis[1], pos_axis[2]),
-        pos_ned_m=(pos_used[0], pos_used[1], pos_used[2]),
-        vel_ned_m_s=(vel_used[0], vel_used[1], vel_used[2]),
+        pos_axis=pos_axis,
+        pos_ned_m=pos_used,
+        vel_ned_m_s=vel_used,
         yaw_rad=yaw_rad if use_yaw else None,
         yaw_rate_rad_s=yaw_rate_rad_s if use_rate and not use_yaw else None,
     )

@@ -19,9 +19,10 @@ from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
+from pymavlink.dialects.v20.common import MAVLink_set_position_target_local_ned_message
 
 from agents.errors import LinkLostError, MavlinkError
-from agents.frames import enu_to_ned, ned_to_enu, yaw_enu_to_ned
+from agents.frames import enu_to_ned_xyz, ned_to_enu_xyz, yaw_enu_to_ned
 from agents.mavlink.modes import (
     MAV_MODE_FLAG_SAFETY_ARMED,
     decode_custom_mode,
@@ -34,6 +35,7 @@ from agents.mavlink.wire import (
     MAVLinkMessage,
     decode_datagram,
     encode,
+    encode_fields,
     new_codec,
     sign_outgoing,
     signature_ok,
@@ -49,6 +51,7 @@ HEARTBEAT_PERIOD_S = 1.0
 MAV_SEVERITY_WARNING = 4
 STATUSTEXT_KEPT = 20
 TIMESYNC_PERIOD_S = 0.25
+SETPOINT = MAVLink_set_position_target_local_ned_message
 
 
 class MavlinkAdapter:
@@ -246,16 +249,15 @@ class MavlinkAdapter:
         self._state = replace(self._state, armed=self._armed, mode=self._mode)
 
     def _local_position(self, msg: MAVLinkMessage, now: float) -> None:
-        ned = np.array([[msg.x, msg.y, msg.z], [msg.vx, msg.vy, msg.vz]])
-        if not np.all(np.isfinite(ned)):
+        x, y, z, vx, vy, vz = msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz
+        if not math.isfinite(x + y + z + vx + vy + vz):  # any NaN or inf makes the sum so
             self.counters["ignored_nonfinite"] += 1
             return
-        enu = ned_to_enu(ned).tolist()
         # The link is judged by when we read telemetry (as before arrival stamps): only
         # the sample's own stamp needs its true arrival time.
         self._last_rx_s = max(now, self._poll_s)
         stamp = self.vclock.map.stamp(msg.time_boot_ms * 1e-3, now)
-        self._state = VehicleState(tuple(enu[0]), tuple(enu[1]), stamp,
+        self._state = VehicleState(ned_to_enu_xyz(x, y, z), ned_to_enu_xyz(vx, vy, vz), stamp,
                                    self._armed, self._mode, True)
 
     # ---- clock --------------------------------------------------------------------------
@@ -275,21 +277,20 @@ class MavlinkAdapter:
     def send_velocity_enu(self, vel_m_s: tuple[float, float, float] | np.ndarray,
                           yaw_enu_rad: float | None = None) -> bool:
         """Stream one velocity setpoint; False (and counted) when refused."""
-        vel = np.asarray(vel_m_s, dtype=np.float64)
-        if vel.shape != (3,) or not np.all(np.isfinite(vel)) or \
+        vel = _three_floats(vel_m_s)
+        if vel is None or not math.isfinite(vel[0] + vel[1] + vel[2]) or \
                 (yaw_enu_rad is not None and not math.isfinite(yaw_enu_rad)):
             self.counters["refused_nonfinite"] += 1
             return False
         if self.sysid is None or self.remote is None:
             self.counters["refused_not_connected"] += 1
             return False
-        vn, ve, vd = enu_to_ned(vel).tolist()
+        vn, ve, vd = enu_to_ned_xyz(*vel)
         mask = MASK_VELOCITY if yaw_enu_rad is None else MASK_VELOCITY_YAW
         yaw = 0.0 if yaw_enu_rad is None else yaw_enu_to_ned(yaw_enu_rad)
-        msg = self.mav.set_position_target_local_ned_encode(
-            self._boot_ms(), self.sysid, 1, MAV_FRAME_LOCAL_NED, mask, 0.0, 0.0, 0.0,
-            vn, ve, vd, 0.0, 0.0, 0.0, yaw, 0.0)
-        self._send(msg)
+        self._send_bytes(encode_fields(  # fields in wire order
+            self.tx, SETPOINT, self._boot_ms(), 0.0, 0.0, 0.0, vn, ve, vd, 0.0, 0.0, 0.0, yaw,
+            0.0, mask, self.sysid, 1, MAV_FRAME_LOCAL_NED))
         self.counters["setpoints_sent"] += 1
         return True
 
@@ -308,7 +309,23 @@ class MavlinkAdapter:
         if self.sock is None or self.remote is None:
             self.counters["tx_dropped"] += 1
             return
+        self._send_bytes(encode(self.tx, msg))
+
+    def _send_bytes(self, data: bytes) -> None:
+        if self.sock is None or self.remote is None:
+            self.counters["tx_dropped"] += 1
+            return
         try:
-            self.sock.sendto(encode(self.tx, msg), self.remote)
+            self.sock.sendto(data, self.remote)
         except OSError:
             self.counters["tx_errors"] += 1
+
+
+def _three_floats(vec: tuple[float, float, float] | np.ndarray,
+                  ) -> tuple[float, float, float] | None:
+    """A 3-vector as floats, or None when it is not one."""
+    try:
+        x, y, z = vec
+        return float(x), float(y), float(z)
+    except (TypeError, ValueError):
+        return None

@@ -24,7 +24,9 @@ MAV_CMD_COMPONENT_ARM_DISARM = 400
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_CMD_REQUEST_MESSAGE = 512
 MSG_HEARTBEAT = 0
+MSG_ATTITUDE = 30
 MSG_LOCAL_POSITION_NED = 32
+MSG_GLOBAL_POSITION_INT = 33
 MSG_HOME_POSITION = 242
 ACCEPTED, TEMPORARILY_REJECTED, IN_PROGRESS = 0, 1, 5
 ZERO = (0.0, 0.0, 0.0)
@@ -43,6 +45,9 @@ class StartupTimeouts:
     setpoint_hz: float = 20.0
     altitude_tolerance_m: float = 0.3
     telemetry_hz: float = 50.0
+    # Streams the agent reads only at start-up (or not at all), asked down as a companion
+    # computer does on PX4/ArduPilot; not off: a ground station on the vehicle still sees them.
+    slow_telemetry_hz: float = 4.0
 
 
 def wait_until(ad: MavlinkAdapter, ok: Callable[[VehicleState], bool], timeout_s: float,
@@ -120,11 +125,7 @@ def connect(ad: MavlinkAdapter, t: StartupTimeouts,
     """Wait for the vehicle's heartbeat and its first position; ask for fast position telemetry."""
     wait_heartbeat(ad, t)
     mark("heartbeat")
-    try:
-        command(ad, MAV_CMD_SET_MESSAGE_INTERVAL, (MSG_LOCAL_POSITION_NED, 1e6 / t.telemetry_hz),
-                t)
-    except MavlinkError as exc:  # the default rate still works, just coarser
-        log.warning("vehicle %s kept its LOCAL_POSITION_NED rate: %s", ad.sysid, exc)
+    set_rates(ad, t)
     state = wait_until(ad, lambda s: s.link_ok, t.position_s, "LOCAL_POSITION_NED")
     if ad.home_amsl_m is None:
         command(ad, MAV_CMD_REQUEST_MESSAGE, (MSG_HOME_POSITION,), t)
@@ -132,6 +133,18 @@ def connect(ad: MavlinkAdapter, t: StartupTimeouts,
                            "home altitude")
     mark("position")
     return state
+
+
+def set_rates(ad: MavlinkAdapter, t: StartupTimeouts) -> None:
+    """LOCAL_POSITION_NED at the control's rate; ATTITUDE and GLOBAL_POSITION_INT (home
+    altitude only) at `slow_telemetry_hz`.  A refusal keeps the vehicle's default rate."""
+    rates = ((MSG_LOCAL_POSITION_NED, t.telemetry_hz), (MSG_ATTITUDE, t.slow_telemetry_hz),
+             (MSG_GLOBAL_POSITION_INT, t.slow_telemetry_hz))
+    for msg_id, hz in rates:
+        try:
+            command(ad, MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, 1e6 / hz), t)
+        except MavlinkError as exc:  # the default rate still works, just coarser or dearer
+            log.warning("vehicle %s kept its rate of message %d: %s", ad.sysid, msg_id, exc)
 
 
 def wait_heartbeat(ad: MavlinkAdapter, t: StartupTimeouts) -> None:

@@ -7,7 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from agents.frames import enu_to_ned, ned_to_enu, yaw_enu_to_ned, yaw_ned_to_enu
+from agents.frames import (
+    enu_to_ned,
+    enu_to_ned_xyz,
+    ned_to_enu,
+    ned_to_enu_xyz,
+    yaw_enu_to_ned,
+    yaw_ned_to_enu,
+)
 from agents.mavlink import modes
 
 
@@ -42,6 +49,12 @@ def test_enu_ned_vectors() -> None:
     enu = np.array([1.0, 2.0, 3.0])
     assert enu_to_ned(enu).tolist() == [2.0, 1.0, -3.0]
     assert ned_to_enu(enu_to_ned(enu)).tolist() == enu.tolist()
+
+
+def test_scalar_twins_equal_the_array_conversions() -> None:
+    for vec in ([1.0, 2.0, 3.0], [-0.5, 7.25, -1e-3], [0.0, -0.0, 1e9]):
+        assert list(enu_to_ned_xyz(*vec)) == enu_to_ned(np.array(vec)).tolist()
+        assert list(ned_to_enu_xyz(*vec)) == ned_to_enu(np.array(vec)).tolist()
 
 
 def test_yaw_conversion() -> None:

@@ -38,3 +38,20 @@ def test_garbage_truncation_and_bad_crc_counted() -> None:
     assert decode_datagram(rx, good[:-1] + bytes([good[-1] ^ 0xFF])).bad == 1
     both = decode_datagram(rx, good + good)
     assert len(both.messages) == 2 and both.bad == 0
+
+
+def test_struct_packed_status_messages_equal_pymavlink_objects() -> None:
+    """The simulator's 1-5 Hz streams packed by struct are the bytes pymavlink packs."""
+    from agents.scenario import HomeConfig
+    from sim_backend import telemetry as tm
+
+    home = HomeConfig()
+    row = tm.Row(123456, (3.5, -7.25, -10.0), (1.5, -0.5, 0.25), 0.1, -0.2, 2.5, 0.3, False)
+    for msg_id in sorted(tm.STATUS_IDS):
+        for flavour, mode, armed in (("px4", "OFFBOARD", True), ("ardupilot", "LAND", False)):
+            a, b = new_codec(7, 1), new_codec(7, 1)
+            a.seq = b.seq = 200
+            obj = tm.status_message(a, msg_id, row, home, flavour, mode, armed, 7, (1.0, 2.0, 0))
+            assert obj is not None
+            packed = tm.status_bytes(b, msg_id, row, home, flavour, mode, armed, 7, (1.0, 2.0, 0))
+            assert packed == encode(a, obj), obj.get_type()

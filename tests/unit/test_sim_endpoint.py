@@ -108,3 +108,43 @@ def test_a_signed_vehicle_answers_a_request_with_frames_a_verifier_accepts(sim: 
         assert [m.get_type() for m in got] == ["COMMAND_ACK", name]
         assert [verifier.check(frame_bytes(m), m.get_msgId(), m.get_srcSystem(),
                                m.get_srcComponent()) for m in got] == [None, None]
+
+
+def test_message_intervals_are_per_vehicle_and_slow_streams_keep_flowing(sim: Simulator) -> None:
+    """A companion asks ATTITUDE and GLOBAL_POSITION_INT down to 4 Hz on its own vehicle
+    (agents.mavlink.startup.set_rates): that vehicle streams them at 4 Hz to everyone
+    listening, the other vehicle keeps its default, LOCAL_POSITION_NED stays at 50 Hz."""
+    gcs = new_codec(255, 190)
+    clients = []
+    for i in range(2):
+        client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        client.bind(("127.0.0.1", 0))
+        client.setblocking(False)
+        clients.append(client)
+        sim.endpoints[i].on_datagram(gcs.heartbeat_encode(6, 8, 0, 0, 0).pack(gcs),
+                                     client.getsockname(), sim.sim_time_s, sim._rows[i])
+    try:
+        for msg_id in (30, 33):
+            sim.endpoints[0].on_datagram(
+                gcs.command_long_encode(1, 1, 511, 0, msg_id, 250_000, 0, 0, 0, 0, 0).pack(gcs),
+                clients[0].getsockname(), sim.sim_time_s, sim._rows[0])
+        for _ in range(round(2.0 / sim.dt_s)):  # 2 s of ticks
+            sim.step_once()
+        counts = []
+        for client in clients:
+            seen: dict[str, int] = {}
+            while True:
+                try:
+                    data = client.recv(65535)
+                except BlockingIOError:
+                    break
+                for m in decode_datagram(new_codec(250, 0), data).messages:
+                    seen[m.get_type()] = seen.get(m.get_type(), 0) + 1
+            counts.append(seen)
+    finally:
+        for client in clients:
+            client.close()
+    slow, default = counts
+    assert 7 <= slow["ATTITUDE"] <= 9 and 7 <= slow["GLOBAL_POSITION_INT"] <= 9
+    assert slow["LOCAL_POSITION_NED"] >= 99 and default["ATTITUDE"] >= 99
+    assert default["GLOBAL_POSITION_INT"] >= 99
