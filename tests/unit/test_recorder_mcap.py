@@ -6,12 +6,13 @@ import dataclasses
 import io
 import json
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import pytest
 
 from agents.scenario_file import load_scenario
-from deploy.recording.mcap_log import McapLog, dataclass_schema
+from deploy.recording.mcap_log import McapLog, dataclass_schema, message_json
 from tests.recorder_synth import SynthRun
 from transport.keys import SwarmKeys
 from transport.messages import (
@@ -125,3 +126,20 @@ def test_unfinished_file_keeps_every_complete_chunk(tmp_path: Path) -> None:
             messages += isinstance(record, Message)
     per_chunk = 8 * 1024 // 300  # a JSON message is over 300 bytes
     assert len(written) - per_chunk <= messages < len(written)
+
+
+def test_message_json_is_the_standard_encoders_bytes(tmp_path: Path) -> None:
+    """msgspec writes the channels' JSON: byte for byte what json.dumps(asdict) gives, so
+    a reader (Foxglove, `mcap cat`) sees the same messages as before; a value msgspec does
+    not know falls back to the standard encoder."""
+    _, written = write_run(tmp_path / "r.mcap")
+    assert {type(m) for _, m in written} >= {FollowerState, ProcessStatus}
+    for _, msg in written:
+        standard = json.dumps(dataclasses.asdict(msg), separators=(",", ":")).encode()
+        assert message_json(msg) == standard
+    status = next(m for _, m in written if isinstance(m, ProcessStatus))
+    frozen = dataclasses.replace(status, counters=MappingProxyType({"rx": 3, "drop": 1}))
+    assert message_json(frozen) == b'{"header":' + json.dumps(
+        dataclasses.asdict(status)["header"], separators=(",", ":")).encode() + (
+        b',"role":"%s","index":%d,"state":"%s","counters":{"rx":3,"drop":1},"detail":"%s"}'
+        % (status.role.encode(), status.index, status.state.encode(), status.detail.encode()))
