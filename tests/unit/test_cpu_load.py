@@ -81,3 +81,27 @@ def test_load_line_names_followers_and_the_machine() -> None:
     assert "sim 12 %" in line and "targets 4 % each" in line
     assert "machine 71 % busy (2 cores, load 3.2)" in line
     assert load_line({}) is None
+
+
+def test_enclose_profile_dir_leaves_a_cpu_profile_per_process(
+    tmp_path: object, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import argparse
+    import pstats
+    from pathlib import Path
+
+    from agents.process import profiled
+
+    folder = Path(str(tmp_path)) / "prof"
+
+    def work(args: argparse.Namespace) -> int:
+        _burn(0.05)
+        return int(args.code)
+
+    assert profiled(work, argparse.Namespace(code=0), "follower-7") == 0
+    assert not folder.exists()  # off unless asked for
+    monkeypatch.setenv("ENCLOSE_PROFILE_DIR", str(folder))
+    assert profiled(work, argparse.Namespace(code=3), "follower-7") == 3
+    stats = pstats.Stats(str(folder / "follower-7.prof"))
+    assert any(name == "work" for (_, _, name) in stats.stats)  # type: ignore[attr-defined]
+    assert stats.total_tt >= 0.04  # type: ignore[attr-defined]  # CPU of the busy loop
