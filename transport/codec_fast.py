@@ -97,22 +97,9 @@ def enc_follower_state(m: FollowerState) -> Wire | None:
     r, dr, phi, pos, vel, u = m.r_m, m.dr_m_s, m.phi_m, m.pos_m, m.vel_m_s, m.u_m_s
     flows = m.link_flows
     if not (head_ok(sid, seq, st) and type(idx) is int and idx >= 0 and type(vst) is float
-            and type(r) is tuple and type(dr) is tuple and type(phi) is tuple
-            and type(pos) is tuple and type(vel) is tuple and type(u) is tuple
             and type(flows) is tuple and len(flows) <= MAX_ITEMS):
         return None
-    r0, r1 = r
-    dr0, dr1 = dr
-    phi0, phi1 = phi
-    pos0, pos1 = pos
-    vel0, vel1 = vel
-    u0, u1 = u
-    if not (type(r0) is float and type(r1) is float and type(dr0) is float
-            and type(dr1) is float and type(phi0) is float and type(phi1) is float
-            and type(pos0) is float and type(pos1) is float and type(vel0) is float
-            and type(vel1) is float and type(u0) is float and type(u1) is float):
-        return None
-    s = st + vst + r0 + r1 + dr0 + dr1 + phi0 + phi1 + pos0 + pos1 + vel0 + vel1 + u0 + u1
+    s = st + vst + _vec2s_sum((r, dr, phi, pos, vel, u), tuple)
     for f in flows:
         if type(f) is not tuple:
             return None
