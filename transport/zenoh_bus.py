@@ -9,6 +9,7 @@ everything and closes the session; use the bus as a context manager.
 from __future__ import annotations
 
 import logging
+import os
 from collections import deque
 from typing import TypeVar, Union
 
@@ -158,6 +159,13 @@ class ZenohAliveWatch:
         self._sub.undeclare()
 
 
+# One receiving worker thread instead of Zenoh's two: an enclose process receives a few
+# hundred small messages a second, and a second worker woken for each of them is CPU spent
+# on wake-ups (ring16 on 2 cores, paired runs: followers 7.8-8.0 % of a core instead of
+# 8.2-8.3 %, 0.4-0.7 % of ticks late instead of 0.9-1.0 %; BENCHMARKS.md, issue 15).
+RUNTIME_DEFAULT = "(rx: (worker_threads: 1))"
+
+
 class ZenohBus(BusBase):
     """A Zenoh session configured by `ZenohConfig`."""
 
@@ -169,6 +177,8 @@ class ZenohBus(BusBase):
         self._clock = process_clock() if clock is None else clock  # transport.clock
         self.clock_sync: ClockSync | None = None
         self._owned: list[_Owned] = []
+        # Read by Zenoh once per process, when its first session opens; yours wins if set.
+        os.environ.setdefault("ZENOH_RUNTIME", RUNTIME_DEFAULT)
         try:
             self.session = zenoh.open(build_zenoh_config(cfg))
         except zenoh.ZError as exc:

@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import json
+import os
+import socket
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from agents.errors import ConfigError
+from transport.zenoh_bus import RUNTIME_DEFAULT
 from transport.zenoh_config import ZenohConfig, build_zenoh_config, loopback_endpoint
 
 
@@ -76,3 +81,37 @@ def test_unparsable_user_file_rejected(tmp_path: Path) -> None:
     path.write_text("{ mode: ")
     with pytest.raises(ConfigError):
         build_zenoh_config(ZenohConfig(user_config_path=str(path)))
+
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("preset", [None, "(rx: (worker_threads: 2))"])
+def test_one_receiving_thread_unless_the_user_says_otherwise(preset: str | None) -> None:
+    """ZenohBus asks Zenoh for one rx worker (a second one only costs wake-ups), unless
+    ZENOH_RUNTIME is already set: then the user's choice stands."""
+    env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
+    if preset is not None:
+        env["ZENOH_RUNTIME"] = preset
+    with socket.socket() as s:  # a free port for the listening session
+        s.bind(("127.0.0.1", 0))
+        endpoint = loopback_endpoint(s.getsockname()[1])
+    code = (
+        "import os, time\n"
+        "from transport.zenoh_bus import ZenohBus\n"
+        "from transport.zenoh_config import ZenohConfig\n"
+        f"a = ZenohBus(ZenohConfig(listen=({endpoint!r},)))\n"
+        "sub = a.subscribe('t/x')\n"
+        f"b = ZenohBus(ZenohConfig(connect=({endpoint!r},)))\n"
+        "pub = b.declare_publisher('t/x')\n"
+        "end = time.monotonic() + 20\n"
+        "while not sub.drain() and time.monotonic() < end:\n"
+        "    pub.put(b'x'); time.sleep(0.05)\n"
+        "names = [open(f'/proc/self/task/{t}/comm').read().strip()\n"
+        "         for t in os.listdir('/proc/self/task')]\n"
+        "print(os.environ['ZENOH_RUNTIME'], sum(n.startswith('rx-') for n in names))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, timeout=50, check=True).stdout.split()
+    expected = preset or RUNTIME_DEFAULT
+    assert " ".join(out[:-1]) == expected
+    assert int(out[-1]) == (2 if preset else 1)
