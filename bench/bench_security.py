@@ -27,6 +27,7 @@ from pathlib import Path
 from agents.mavlink.signing import signing_timestamp
 from agents.mavlink.wire import decode_datagram, new_codec, sign_outgoing
 from agents.scenario import HomeConfig, VehicleConfig
+from deploy.cpu_load import process_cpu_s
 from deploy.ports import free_tcp_port
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 from transport.codec import encode
@@ -44,8 +45,10 @@ def cpu_s(pid: int | None = None) -> float:
     if pid is None:
         t = os.times()
         return t.user + t.system
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    used = process_cpu_s(pid)
+    if used is None:
+        raise RuntimeError(f"process {pid} is gone")
+    return used
 
 
 def zenoh_cfg(creds: str | None, name: str, **kw: object) -> ZenohConfig:

@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Any
+
+from deploy.cpu_load import process_cpu_s
 
 
 def rss_mb(pid: int) -> float | None:
@@ -30,15 +31,6 @@ def rss_mb(pid: int) -> float | None:
     except OSError:
         return None
     return None
-
-
-def cpu_s(pid: int) -> float | None:
-    """User + system CPU seconds of a live process (/proc/<pid>/stat)."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except (OSError, IndexError):
-        return None
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def run_case(scenario: str, duration_s: float, out: Path, estimator: str) -> dict[str, Any]:
@@ -68,7 +60,7 @@ def run_case(scenario: str, duration_s: float, out: Path, estimator: str) -> dic
                         rss = rss_mb(pid)
                         if rss is not None:
                             peak[name] = max(peak.get(name, 0.0), rss)
-                    used = cpu_s(pid)
+                    used = process_cpu_s(pid)
                     if used is not None:  # the last reading before the process ends
                         cpu[name] = used
             time.sleep(1.0)

@@ -86,7 +86,6 @@ def dataclass_schema(cls: type) -> dict[str, Any]:
 _FIELD_NAMES: dict[type, tuple[str, ...]] = {}
 
 
-
 def _mapping_as_dict(obj: object) -> dict[str, Any]:
     """Counters arrive as mappings that are not dicts (e.g. a Counter subclass)."""
     if isinstance(obj, Mapping):
