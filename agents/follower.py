@@ -91,7 +91,7 @@ class FollowerNode:
         self.stamper = Stamper(f"follower-{index}", bus.now_s)
         self.est_out = bus.declare_publisher(self.keys.follower_estimate(index))
         self.est_stamper = Stamper(f"follower-{index}", bus.now_s)
-        self.est_phase_s = 0.5 * self.setup.est_period_s * scenario.tick_group(index)
+        self.est_phase_s = self.setup.est_period_s * scenario.tick_phase(index)
         self.last_state: VehicleState | None = None
         self.last_u = 0j
         # Checked, not trusted (transport.checks); + per-link rx and age (transport.link_stats)

@@ -36,6 +36,14 @@ class Gains:
     k_d: float = 2.0
     alpha3: float = 3.0
     step_fraction: float = 0.5  # share of an error one sampled step may remove; 0 = plain Euler
+    # The estimator's own share (None: step_fraction).  Its links' lag is ~ 1 / (share x
+    # rate), while the controller's share sets how hard the commands move.
+    estimator_step_fraction: float | None = None
+
+    @property
+    def est_step_fraction(self) -> float:
+        share = self.estimator_step_fraction
+        return self.step_fraction if share is None else share
 
 
 @dataclass(frozen=True)
@@ -206,6 +214,22 @@ class Scenario:
                     colour[b] = 1 - colour[a]
                     frontier.append(b)
         return colour.get(i, 0)
+
+    def tick_phase(self, i: int) -> float:
+        """Follower i's tick as a fraction of the period, in [0, 1).
+
+        Group 1 (`tick_group`) ticks half a period after group 0, and within a group the
+        members spread over that half period instead of all waking at once: a swarm whose
+        followers all tick together queues on the cores (ring8 on 2 cores: 1.3 ms one-way
+        latency, issue 15).  The members take slots in zig-zag order (0, 2, 4, .., 5, 3, 1),
+        so that members next to each other in index order are at most two slots apart and
+        every ring link still carries data about half a period old both ways.
+        """
+        group = self.tick_group(i)
+        members = [j for j in range(self.n) if self.tick_group(j) == group]
+        m, k = len(members), members.index(i)
+        slot = 2 * k if k < (m + 1) // 2 else 2 * (m - 1 - k) + 1
+        return 0.5 * group + 0.5 * slot / m
 
     def steady_from_s(self) -> float:
         start = self.run.steady_from_s

@@ -247,14 +247,22 @@ def _successor(t: Table, f_pos: np.ndarray, center: np.ndarray, n: int) -> tuple
     return successor_from_order(order)
 
 
+def _share(t: Table, key: str, default: float) -> float:
+    fraction = number(t, key, "gains", default)
+    if not 0.0 <= fraction <= 1.0:
+        raise ScenarioError(f"gains.{key}", f"must be within [0, 1], got {fraction}")
+    return fraction
+
+
 def _gains(t: Table) -> Gains:
     d = Gains()
     known_keys(t, d.__dataclass_fields__, "gains")
-    names = [k for k in d.__dataclass_fields__ if k != "step_fraction"]
-    fraction = number(t, "step_fraction", "gains", d.step_fraction)
-    if not 0.0 <= fraction <= 1.0:
-        raise ScenarioError("gains.step_fraction", f"must be within [0, 1], got {fraction}")
-    g = Gains(step_fraction=fraction, **{k: positive(t, k, "gains", getattr(d, k)) for k in names})
+    shares = ("step_fraction", "estimator_step_fraction")
+    names = [k for k in d.__dataclass_fields__ if k not in shares]
+    fraction = _share(t, "step_fraction", d.step_fraction)
+    est = None if "estimator_step_fraction" not in t else _share(t, "estimator_step_fraction", 0)
+    g = Gains(step_fraction=fraction, estimator_step_fraction=est,
+              **{k: positive(t, k, "gains", getattr(d, k)) for k in names})
     for key in ("alpha1", "alpha2", "alpha3"):
         if getattr(g, key) < 1.0:
             raise InadmissibleError(f"gains.{key}", "must be >= 1 (the paper's p > q)")

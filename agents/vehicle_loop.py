@@ -121,9 +121,8 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         mark("linked")
         log_phases(f"{role} {index}")
         period = 1.0 / scenario.run.rate_hz
-        # Neighbouring followers tick half a period apart (Scenario.tick_group).
-        group = scenario.tick_group(index) if role == "follower" else 0
-        phase = 0.5 * period * group
+        # Neighbouring followers tick half a period apart, the rest spread (Scenario.tick_phase).
+        phase = period * scenario.tick_phase(index) if role == "follower" else 0.0
         # A node with work between ticks (the follower's estimator) does it in the wait.
         idle = getattr(node, "idle", None)
         ticker = Ticker(period, bus.now_s, phase_s=phase, sleep=idle or time.sleep)

@@ -50,20 +50,24 @@ def main() -> None:
     parser.add_argument("--rates", type=float, nargs="+", default=[50.0, 100.0])
     parser.add_argument("--delays", type=int, nargs="+", default=[1, 3])
     parser.add_argument("--duration", type=float, default=120.0)
+    parser.add_argument("--estimator-only", action="store_true",
+                        help="vary [gains] estimator_step_fraction, the controller's share "
+                             "staying at the scenario's step_fraction")
     args = parser.parse_args()
+    field = "estimator_step_fraction" if args.estimator_only else "step_fraction"
     base = with_estimator(load_scenario(args.case), "robust")
     print("| run | estimator_error_m | radius_error_m | angle_error | command_jump_m_s |")
     print("|---|---|---|---|---|")
     for fraction in args.fractions:
         s = dataclasses.replace(base, gains=dataclasses.replace(base.gains,
-                                                                step_fraction=fraction))
+                                                                **{field: fraction}))
         for rate in args.rates:
             series = simulate_lockstep(s, 0.02, args.duration, estimator_dt_s=1.0 / rate)
-            print(row(f"step_fraction {fraction:g}, lock-step, estimator {rate:g} Hz",
+            print(row(f"{field} {fraction:g}, lock-step, estimator {rate:g} Hz",
                       metrics(s, series, args.duration)), flush=True)
         for delay in args.delays:
             series = run_swarm(s, args.duration, delay_ticks=delay)
-            print(row(f"step_fraction {fraction:g}, data {delay} tick(s) late, 50 Hz",
+            print(row(f"{field} {fraction:g}, data {delay} tick(s) late, 50 Hz",
                       metrics(s, series, args.duration)), flush=True)
 
 

@@ -54,13 +54,14 @@ def _steps(
 ) -> None:
     """Advance steps k0..k1-1 in place.
 
-    gains = (k_e, alpha1, k_z, alpha2, k_d, alpha3, rho_d, w_d).
+    gains = (k_e, alpha1, k_z, alpha2, k_d, alpha3, rho_d, w_d, the controller's cap);
+    cap is the estimator step's.
     """
     n = phi.shape[0]
     k_e, inv_a1, k_z, inv_a2 = gains[0], 1.0 / gains[1], gains[2], 1.0 / gains[3]
     k_d, inv_a3, rho_d, w_d = gains[4], 1.0 / gains[5], gains[6], gains[7]
     rate = np.zeros((n, 2))
-    dt_e, cap_u = dt / substeps, cap / substeps  # cap is the estimator step's
+    dt_e, cap_u = dt / substeps, gains[8]
     for k in range(k0, k1):
         r = phi + p_tilde[k]
         _consensus(r, tails, heads, fractions, inv_a1, k_e, cap, rate)

@@ -81,14 +81,15 @@ class _Loop:
         adjacency = s.adjacency()
         tails, heads = np.nonzero(adjacency)
         gains = np.array(
-            [g.k_e, g.alpha1, g.k_z, g.alpha2, g.k_d, g.alpha3, pat.rho_d_m, pat.w_d_rad_s]
+            [g.k_e, g.alpha1, g.k_z, g.alpha2, g.k_d, g.alpha3, pat.rho_d_m, pat.w_d_rad_s,
+             rate_cap(g.step_fraction, self.dt_s)]
         )
         fastloop.run_steps(
             k0,
             k1,
             self.dt_s,
             self.substeps,
-            rate_cap(g.step_fraction, self.dt_s / self.substeps),
+            rate_cap(g.est_step_fraction, self.dt_s / self.substeps),
             gains,
             tails,
             heads,

@@ -16,12 +16,15 @@ pytestmark = pytest.mark.skipif(not fastloop.HAVE_NUMBA, reason="numba not insta
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize(("dt_s", "fraction"), [(0.001, 0.5), (0.02, 0.5), (0.02, 0.0)])
-def test_numba_engine_matches_numpy_engine_on_the_paper_case(dt_s: float, fraction: float) -> None:
+@pytest.mark.parametrize(("dt_s", "fraction", "est_fraction"),
+                         [(0.001, 0.5, None), (0.02, 0.5, None), (0.02, 0.0, None),
+                          (0.02, 0.3, 0.9)])
+def test_numba_engine_matches_numpy_engine_on_the_paper_case(
+        dt_s: float, fraction: float, est_fraction: float | None) -> None:
     paper = load_scenario()
-    scenario = dataclasses.replace(
-        paper, gains=dataclasses.replace(paper.gains, step_fraction=fraction)
-    )
+    gains = dataclasses.replace(paper.gains, step_fraction=fraction,
+                                estimator_step_fraction=est_fraction)
+    scenario = dataclasses.replace(paper, gains=gains)
     ref = simulate_lockstep(scenario, dt_s, 10.0, engine="numpy")
     fast = simulate_lockstep(scenario, dt_s, 10.0, engine="numba")
     np.testing.assert_allclose(fast.follower_pos_m, ref.follower_pos_m, atol=1e-9)

@@ -11,6 +11,7 @@ import pytest
 from agents.core.profiles import TargetMotion
 from agents.errors import ConfigError, InadmissibleError, ScenarioError
 from agents.scenario_file import load_scenario, parse_scenario
+from tests.unit.test_closed_loop import load_scenario_text
 
 PAPER = (Path(__file__).parents[2] / "agents" / "scenarios" / "paper.toml").read_text()
 
@@ -144,3 +145,30 @@ def test_tick_groups_two_colour_the_ring() -> None:
         assert s.tick_group(a) != s.tick_group(b)
     ring16 = load_scenario("ring16")
     assert all(ring16.tick_group(a) != ring16.tick_group(b) for a, b in ring16.edges)
+
+
+@pytest.mark.parametrize("name", ["paper", "ring16", "ring32"])
+def test_tick_phases_spread_and_keep_links_half_a_period_apart(name: str) -> None:
+    s = load_scenario(name)
+    phases = [s.tick_phase(i) for i in range(s.n)]
+    assert all(0.0 <= p < 1.0 for p in phases)
+    assert len(set(phases)) == s.n  # nobody wakes with anybody else
+    for i in range(s.n):  # group 0 in the first half of the period, group 1 in the second
+        assert (phases[i] >= 0.5) == (s.tick_group(i) == 1)
+    for a, b in s.edges:  # each link's data is about half a period old both ways
+        gap = (phases[b] - phases[a]) % 1.0
+        assert 0.5 - 2.0 / s.n - 1e-9 <= gap <= 0.5 + 2.0 / s.n + 1e-9, (a, b, gap)
+
+
+def test_estimator_step_fraction_is_its_own_share_and_checked() -> None:
+    base = load_scenario_text()
+
+    def with_share(value: str) -> str:
+        return base.replace("alpha3 = 3.0", f"alpha3 = 3.0\nestimator_step_fraction = {value}")
+
+    plain = parse_scenario(base)
+    assert plain.gains.est_step_fraction == plain.gains.step_fraction == 0.5
+    own = parse_scenario(with_share("0.9"))
+    assert (own.gains.est_step_fraction, own.gains.step_fraction) == (0.9, 0.5)
+    with pytest.raises(ScenarioError, match=r"gains\.estimator_step_fraction"):
+        parse_scenario(with_share("1.5"))
