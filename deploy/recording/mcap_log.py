@@ -22,6 +22,7 @@ from typing import IO, Any
 import msgspec
 from mcap.writer import CompressionType, Writer
 
+from deploy.recording.mcap_fast import MessageAppender
 from transport.messages import Message
 
 MESSAGE_ENCODING = "json"
@@ -152,6 +153,7 @@ class McapLog:
         self._stream: IO[bytes] = open(path, "wb")  # noqa: SIM115  # closed in close()
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=_compression())
         self._writer.start(profile="", library="enclose-recorder")
+        self._fast = MessageAppender.attach(self._writer)  # None: the library's own path
         self._schemas: dict[type, int] = {}
         self._channels: dict[str, int] = {}
         self._raw_schemas: dict[RawSchema, int] = {}
@@ -173,13 +175,10 @@ class McapLog:
 
     def write(self, key: str, msg: Message, recv_stamp_s: float) -> None:
         channel = self._channel(key, type(msg))
-        self._writer.add_message(
-            channel_id=channel,
-            log_time=int(recv_stamp_s * _NS),
-            data=message_json(msg),
+        add = self._writer.add_message if self._fast is None else self._fast.add
+        add(channel_id=channel, log_time=int(recv_stamp_s * _NS), data=message_json(msg),
             publish_time=max(0, int(msg.header.stamp_s * _NS)),
-            sequence=msg.header.seq & 0xFFFFFFFF,
-        )
+            sequence=msg.header.seq & 0xFFFFFFFF)
         self.messages[key] += 1
 
     def write_raw(self, frame: RawFrame) -> None:
