@@ -177,6 +177,7 @@ class Launch:
         mark("credentials")
         try:
             self.start_all()
+            self.sup.end_forks()
             mark("spawned")
             with self.open_bus() as bus:
                 mark("bus_open")

@@ -15,11 +15,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from agents.errors import DeployError
 from deploy.forked import ForkedProcess, fork_is_safe, fork_main
+from deploy.zygote import Zygote
 
 log = logging.getLogger(__name__)
 Clock = Callable[[], float]
-FORKED_MODULES = ("deploy.swarm_sim", "agents.follower", "agents.target")
+FORKED_MODULES = ("deploy.swarm_sim", "agents.target")
+# Forked by a fork server that imported only these (deploy.zygote): a follower must not
+# inherit the launcher's numpy and simulator pages (issue 15: <= 50 MB per follower).
+LEAN_MODULES = ("agents.follower",)
 
 
 @dataclass
@@ -56,11 +61,25 @@ class Supervisor:
     log_dir: Path
     children: list[Child] = field(default_factory=list)
     clock: Clock = time.monotonic
+    zygote: Zygote | None = None
 
     def preload(self) -> None:
-        """Import the modules of the processes the launcher forks, before it forks them."""
+        """Import the modules of the processes the launcher forks, before it forks them,
+        and start the fork server of the lean ones (it imports them meanwhile)."""
+        if self.zygote is None:
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+            try:
+                self.zygote = Zygote(LEAN_MODULES, self.log_dir / "zygote.log")
+            except DeployError as exc:  # not Linux: they are forked from here instead
+                log.warning("%s", exc)
         for module in FORKED_MODULES:
             importlib.import_module(module)
+
+    def end_forks(self) -> None:
+        """Every child is started: stop the fork server (restarts start interpreters)."""
+        if self.zygote is not None:
+            self.zygote.close()
+            self.zygote = None
 
     def start(self, name: str, module: str, args: Sequence[str], fork: bool = False,
               prefix: Sequence[str] = ()) -> Child:
@@ -72,7 +91,10 @@ class Supervisor:
         self.log_dir.mkdir(parents=True, exist_ok=True)
         argv = [*prefix, sys.executable, "-m", module, *args]
         child = Child(name, argv, self.log_dir / f"{name}.log")
-        if fork and not prefix and fork_is_safe():
+        if fork and not prefix and self.zygote is not None and module in self.zygote.modules:
+            child.spawned_s = time.monotonic()
+            child.proc = self.zygote.fork(module, args, child.log_path)
+        elif fork and not prefix and fork_is_safe():
             child.spawned_s = time.monotonic()
             child.proc = fork_main(module, list(args), child.log_path,
                                    import_in_child=module not in FORKED_MODULES)
@@ -143,6 +165,7 @@ class Supervisor:
             self.wait(alive, 2.0)
 
     def stop_all(self, grace_s: float = 5.0) -> None:
+        self.end_forks()
         self.terminate(self.children, grace_s)
 
 

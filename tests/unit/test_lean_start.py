@@ -147,3 +147,23 @@ def test_no_fork_while_a_thread_runs(tmp_path: Path) -> None:
     finally:
         stop.set()
         helper.join()
+
+
+@pytest.mark.timeout(60)
+def test_the_fork_server_forks_lean_children_that_this_process_waits_for(
+        tmp_path: Path) -> None:
+    import numpy  # noqa: F401  # this process has it; the server's children must not
+
+    from deploy.supervisor import Supervisor
+    from deploy.zygote import Zygote
+
+    sup = Supervisor(tmp_path)
+    sup.zygote = Zygote(["tests.child_proc"], tmp_path / "zygote.log")
+    try:
+        child = sup.start("c", "tests.child_proc", ["parent", "numpy"], fork=True)
+        failing = sup.start("f", "tests.child_proc", ["exit", "3"], fork=True)
+    finally:
+        sup.end_forks()
+    assert sup.wait([child, failing], 20.0)  # reparented to us: waited for by PID
+    assert child.poll() == 0 and failing.poll() == 3
+    assert child.log_path.read_text().split() == [str(os.getpid()), "False"]

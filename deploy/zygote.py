@@ -1,0 +1,128 @@
+"""A fork server for the lean processes (issue 15: <= 50 MB per follower).
+
+A forked child's RSS counts every page of its parent it inherited: a follower forked from
+the launcher carries the launcher's numpy, pymavlink dialect and simulator modules even
+though it never uses them.  So the launcher starts this small server early, in a fresh
+interpreter that imports only the lean processes' modules, and asks it to fork them; the
+children keep the fast start of a fork (no interpreter start, no imports) without the
+launcher's pages.
+
+The server double-forks, so that each child is orphaned at once and reparented to the
+launcher, which marks itself a child subreaper (Linux prctl) while it starts children:
+the launcher then waits for its followers by PID exactly as for the ones it forked itself
+(deploy.forked.ForkedProcess).  Protocol on the server's stdin/stdout: one JSON request
+per line, `{"module", "argv", "log"}`, answered by the child's PID (or `error: ...`).
+
+python -m deploy.zygote MODULE... (started by deploy.supervisor, never by hand)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import importlib
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from agents.errors import DeployError
+from deploy.forked import ForkedProcess, fork_pid
+
+PR_SET_CHILD_SUBREAPER = 36  # linux/prctl.h
+
+
+def set_subreaper(on: bool) -> bool:
+    """Adopt (or stop adopting) this process's orphaned descendants; False where unsupported."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return int(libc.prctl(PR_SET_CHILD_SUBREAPER, int(on), 0, 0, 0)) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+class Zygote:
+    """The launcher's side: start the server, fork children through it, close it."""
+
+    def __init__(self, modules: Sequence[str], log_path: Path) -> None:
+        if not set_subreaper(True):
+            raise DeployError("cannot become a child subreaper: no fork server")
+        self.modules = frozenset(modules)
+        with open(log_path, "ab") as log:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "deploy.zygote", *modules],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log,
+                start_new_session=True, text=True, bufsize=1,
+                env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            )
+        self._ready = False
+
+    def _answer(self) -> str:
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline().strip()
+        if not line or line.startswith("error"):
+            raise DeployError(f"fork server: {line or 'exited'} (see its log)")
+        return line
+
+    def fork(self, module: str, argv: Sequence[str], log_path: Path) -> ForkedProcess:
+        assert self.proc.stdin is not None
+        if not self._ready:  # its imports ran while the launcher made credentials
+            self._answer()
+            self._ready = True
+        request = {"module": module, "argv": list(argv), "log": str(log_path)}
+        self.proc.stdin.write(json.dumps(request) + "\n")
+        return ForkedProcess(int(self._answer()))
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """End the server (EOF on its stdin) and stop adopting orphans."""
+        with contextlib.suppress(OSError):
+            if self.proc.stdin is not None:
+                self.proc.stdin.close()
+        try:
+            self.proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+        set_subreaper(False)
+
+
+def _double_fork(module: str, argv: list[str], log_path: Path) -> int:
+    """Fork a middle process that forks the child and exits: the child's parent becomes
+    the subreaper (the launcher) before we reap the middle one and answer."""
+    read_end, write_end = os.pipe()
+    middle = os.fork()
+    if middle == 0:
+        os.close(read_end)
+        try:
+            pid = fork_pid(module, argv, log_path, close_fds=(write_end,))
+            os.write(write_end, f"{pid}\n".encode())
+        finally:
+            os._exit(0)
+    os.close(write_end)
+    with os.fdopen(read_end, "rb") as answer:
+        text = answer.readline()
+    os.waitpid(middle, 0)
+    return int(text)
+
+
+def main(argv: Sequence[str]) -> int:
+    for module in argv:
+        importlib.import_module(module)
+    print("ready", flush=True)
+    for line in sys.stdin:
+        try:
+            req = json.loads(line)
+            pid = _double_fork(str(req["module"]), [str(a) for a in req["argv"]], Path(req["log"]))
+        except (ValueError, KeyError, OSError) as exc:
+            print(f"error: {type(exc).__name__}: {exc}", flush=True)
+            continue
+        print(pid, flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
