@@ -118,7 +118,7 @@ def fork_pid(module: str, argv: Sequence[str], log_path: Path,
 
 
 def fork_main(module: str, argv: Sequence[str], log_path: Path,
-              import_in_child: bool = False) -> ForkedProcess:
+              import_in_child: bool = False, close_fds: Sequence[int] = ()) -> ForkedProcess:
     """Fork a child that runs `module.main(argv)` with its output in `log_path` (new file).
 
     The module is imported here, once, before the fork, unless `import_in_child`: then
@@ -126,7 +126,7 @@ def fork_main(module: str, argv: Sequence[str], log_path: Path,
     children forked after it)."""
     if not import_in_child:
         importlib.import_module(module)
-    return ForkedProcess(fork_pid(module, argv, log_path))
+    return ForkedProcess(fork_pid(module, argv, log_path, close_fds))
 
 
 def call_forked(fn: Callable[[], None], what: str,

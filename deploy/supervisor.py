@@ -97,7 +97,8 @@ class Supervisor:
         elif fork and not prefix and fork_is_safe():
             child.spawned_s = time.monotonic()
             child.proc = fork_main(module, list(args), child.log_path,
-                                   import_in_child=module not in FORKED_MODULES)
+                                   import_in_child=module not in FORKED_MODULES,
+                                   close_fds=() if self.zygote is None else self.zygote.fds())
         else:
             self._spawn(child, "wb")
         self.children.append(child)

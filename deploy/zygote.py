@@ -11,7 +11,10 @@ The server double-forks, so that each child is orphaned at once and reparented t
 launcher, which marks itself a child subreaper (Linux prctl) while it starts children:
 the launcher then waits for its followers by PID exactly as for the ones it forked itself
 (deploy.forked.ForkedProcess).  Protocol on the server's stdin/stdout: one JSON request
-per line, `{"module", "argv", "log"}`, answered by the child's PID (or `error: ...`).
+per line, `{"module", "argv", "log"}`, answered by the child's PID (or `error: ...`);
+`exit` (or end of input) ends it.  The launcher's own forked children inherit its ends
+of these pipes, so they close them (`fds`) and the launcher ends the server by `exit`,
+not by closing its end alone.
 
 python -m deploy.zygote MODULE... (started by deploy.supervisor, never by hand)
 """
@@ -75,10 +78,15 @@ class Zygote:
         self.proc.stdin.write(json.dumps(request) + "\n")
         return ForkedProcess(int(self._answer()))
 
+    def fds(self) -> tuple[int, ...]:
+        """This process's ends of the server's pipes, which a child forked here must close."""
+        return tuple(f.fileno() for f in (self.proc.stdin, self.proc.stdout) if f is not None)
+
     def close(self, timeout_s: float = 5.0) -> None:
-        """End the server (EOF on its stdin) and stop adopting orphans."""
-        with contextlib.suppress(OSError):
+        """End the server and stop adopting orphans."""
+        with contextlib.suppress(OSError, ValueError):
             if self.proc.stdin is not None:
+                self.proc.stdin.write("exit\n")
                 self.proc.stdin.close()
         try:
             self.proc.wait(timeout_s)
@@ -114,6 +122,8 @@ def main(argv: Sequence[str]) -> int:
         importlib.import_module(module)
     print("ready", flush=True)
     for line in sys.stdin:
+        if line.strip() == "exit":
+            break
         try:
             req = json.loads(line)
             pid = _double_fork(str(req["module"]), [str(a) for a in req["argv"]], Path(req["log"]))

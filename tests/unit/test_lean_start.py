@@ -4,6 +4,7 @@ start-up phase stamps, and one-way latency from stamped arrivals."""
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -182,12 +183,20 @@ def test_the_fork_server_forks_lean_children_that_this_process_waits_for(
     from deploy.zygote import Zygote
 
     sup = Supervisor(tmp_path)
-    sup.zygote = Zygote(["tests.child_proc"], tmp_path / "zygote.log")
+    zygote = sup.zygote = Zygote(["tests.child_proc"], tmp_path / "zygote.log")
     try:
         child = sup.start("c", "tests.child_proc", ["parent", "numpy"], fork=True)
         failing = sup.start("f", "tests.child_proc", ["exit", "3"], fork=True)
+        # A child forked here meanwhile must not hold the server's pipes open.
+        sleeper = fork_main("tests.child_proc", ["sleep", "30"], tmp_path / "s.log",
+                            close_fds=zygote.fds())
     finally:
         sup.end_forks()
-    assert sup.wait([child, failing], 20.0)  # reparented to us: waited for by PID
-    assert child.poll() == 0 and failing.poll() == 3
-    assert child.log_path.read_text().split() == [str(os.getpid()), "False"]
+    try:
+        assert zygote.proc.returncode == 0  # it ended when asked, not killed at the timeout
+        assert sup.wait([child, failing], 20.0)  # reparented to us: waited for by PID
+        assert child.poll() == 0 and failing.poll() == 3
+        assert child.log_path.read_text().split() == [str(os.getpid()), "False"]
+    finally:
+        sleeper.send_signal(signal.SIGKILL)
+        assert wait_exit(sleeper) is not None
