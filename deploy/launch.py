@@ -116,12 +116,14 @@ class Launch:
             [*joins, "--out", str(self.out), *sec("recorder"), *recorder_live_argv(self.args)],
             fork=True,
         )
-        for i in range(s.n):
-            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
-            self.sup.start(f"follower-{i}", "agents.follower", argv, fork=True)
+        # Targets first: the followers come from the fork server, which may still be
+        # importing (deploy.zygote).
         for j in range(s.m):
             argv = [*joins, *mav, "--index", str(j), *sec(f"target-{j}")]
             self.sup.start(f"target-{j}", "agents.target", argv, fork=True)
+        for i in range(s.n):
+            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
+            self.sup.start(f"follower-{i}", "agents.follower", argv, fork=True)
 
     def expected_tokens(self) -> set[str]:
         k, s = self.keys, self.scenario
@@ -172,8 +174,13 @@ class Launch:
             self.adapter_base,
         )
         t0 = time.monotonic()
+        self.sup.start_fork_server()
         interrupted = False
-        self.secrets = self.make_secrets()
+        try:
+            self.secrets = self.make_secrets()
+        except BaseException:
+            self.sup.end_forks()
+            raise
         mark("credentials")
         try:
             self.start_all()

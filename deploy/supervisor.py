@@ -63,15 +63,18 @@ class Supervisor:
     clock: Clock = time.monotonic
     zygote: Zygote | None = None
 
-    def preload(self) -> None:
-        """Import the modules of the processes the launcher forks, before it forks them,
-        and start the fork server of the lean ones (it imports them meanwhile)."""
+    def start_fork_server(self) -> None:
+        """Start the fork server of the lean processes as early as possible: its own
+        interpreter start and imports then overlap with the launcher's work."""
         if self.zygote is None:
             self.log_dir.mkdir(parents=True, exist_ok=True)
             try:
                 self.zygote = Zygote(LEAN_MODULES, self.log_dir / "zygote.log")
             except DeployError as exc:  # not Linux: they are forked from here instead
                 log.warning("%s", exc)
+
+    def preload(self) -> None:
+        """Import the modules of the processes the launcher forks, before it forks them."""
         for module in FORKED_MODULES:
             importlib.import_module(module)
 
