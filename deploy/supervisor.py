@@ -89,8 +89,9 @@ class Supervisor:
         """Start `python -m module args`, after `prefix` (e.g. `ip netns exec NS env K=V`);
         with `fork` (and no prefix), as a fork of this process that runs `module.main(args)`
         (deploy.forked: no interpreter start-up, no imports; a module not in FORKED_MODULES
-        is imported by its child alone), when that is safe (no other thread, no Zenoh
-        session here yet); else, and on a restart, a fresh interpreter."""
+        or LEAN_MODULES is imported by its child alone), when that is safe (no other
+        thread, no Zenoh session here yet); a LEAN_MODULES one by the fork server when it
+        runs (deploy.zygote); else, and on a restart, a fresh interpreter."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         argv = [*prefix, sys.executable, "-m", module, *args]
         child = Child(name, argv, self.log_dir / f"{name}.log")
@@ -99,8 +100,9 @@ class Supervisor:
             child.proc = self.zygote.fork(module, args, child.log_path)
         elif fork and not prefix and fork_is_safe():
             child.spawned_s = time.monotonic()
+            here = (*FORKED_MODULES, *LEAN_MODULES)  # no fork server: fast, if not lean
             child.proc = fork_main(module, list(args), child.log_path,
-                                   import_in_child=module not in FORKED_MODULES,
+                                   import_in_child=module not in here,
                                    close_fds=() if self.zygote is None else self.zygote.fds())
         else:
             self._spawn(child, "wb")
