@@ -72,6 +72,7 @@ class Supervisor:
                 self.zygote = Zygote(LEAN_MODULES, self.log_dir / "zygote.log")
             except DeployError as exc:  # not Linux: they are forked from here instead
                 log.warning("%s", exc)
+            self._write_pids()
 
     def preload(self) -> None:
         """Import the modules of the processes the launcher forks, before it forks them."""
@@ -83,6 +84,7 @@ class Supervisor:
         if self.zygote is not None:
             self.zygote.close()
             self.zygote = None
+            self._write_pids()
 
     def start(self, name: str, module: str, args: Sequence[str], fork: bool = False,
               prefix: Sequence[str] = ()) -> Child:
@@ -137,6 +139,8 @@ class Supervisor:
         """PIDs on disk as soon as they exist, so that an outside cleanup can find them
         even if the launcher itself is killed."""
         pids = {c.name: c.pid for c in self.children}
+        if self.zygote is not None:
+            pids["zygote"] = self.zygote.proc.pid
         tmp = self.log_dir / "pids.json.tmp"
         tmp.write_text(json.dumps(pids, indent=2) + "\n")
         tmp.replace(self.log_dir / "pids.json")

@@ -16,7 +16,7 @@ per line, `{"module", "argv", "log"}`, answered by the child's PID (or `error: .
 of these pipes, so they close them (`fds`) and the launcher ends the server by `exit`,
 not by closing its end alone.
 
-python -m deploy.zygote MODULE... (started by deploy.supervisor, never by hand)
+python -m deploy.zygote LAUNCHER_PID MODULE... (started by deploy.supervisor, not by hand)
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import ctypes
 import importlib
 import json
 import os
+import signal
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -34,16 +35,19 @@ from pathlib import Path
 from agents.errors import DeployError
 from deploy.forked import ForkedProcess, fork_pid
 
-PR_SET_CHILD_SUBREAPER = 36  # linux/prctl.h
+PR_SET_PDEATHSIG, PR_SET_CHILD_SUBREAPER = 1, 36  # linux/prctl.h
+
+
+def _prctl(option: int, value: int) -> bool:
+    try:
+        return int(ctypes.CDLL(None, use_errno=True).prctl(option, value, 0, 0, 0)) == 0
+    except (OSError, AttributeError):
+        return False
 
 
 def set_subreaper(on: bool) -> bool:
     """Adopt (or stop adopting) this process's orphaned descendants; False where unsupported."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        return int(libc.prctl(PR_SET_CHILD_SUBREAPER, int(on), 0, 0, 0)) == 0
-    except (OSError, AttributeError):
-        return False
+    return _prctl(PR_SET_CHILD_SUBREAPER, int(on))
 
 
 class Zygote:
@@ -55,7 +59,7 @@ class Zygote:
         self.modules = frozenset(modules)
         with open(log_path, "ab") as log:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "deploy.zygote", *modules],
+                [sys.executable, "-m", "deploy.zygote", str(os.getpid()), *modules],
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log,
                 start_new_session=True, text=True, bufsize=1,
                 env={**os.environ, "PYTHONUNBUFFERED": "1"},
@@ -118,7 +122,12 @@ def _double_fork(module: str, argv: list[str], log_path: Path) -> int:
 
 
 def main(argv: Sequence[str]) -> int:
-    for module in argv:
+    # Killed with the launcher, whatever kills it: requests it had queued must not fork
+    # followers that nobody will stop (an outside cleanup finds us in pids.json too).
+    _prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != int(argv[0]):
+        return 1  # the launcher died before we asked
+    for module in argv[1:]:
         importlib.import_module(module)
     print("ready", flush=True)
     for line in sys.stdin:

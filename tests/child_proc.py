@@ -1,9 +1,8 @@
 """A stand-in child for supervisor tests: `sleep S`, `exit CODE`, `print TEXT`, or
-`parent MODULE` (prints its parent's PID and whether MODULE is imported).
+`has MODULE` (prints whether MODULE is imported).
 
 Runs as `python -m tests.child_proc ...` or forked (deploy.forked calls `main(argv)`)."""
 
-import os
 import sys
 import time
 from collections.abc import Sequence
@@ -14,8 +13,8 @@ def main(argv: Sequence[str]) -> int:
         time.sleep(float(argv[1]))
     if argv[0] == "print":
         print(argv[1])
-    if argv[0] == "parent":
-        print(os.getppid(), argv[1] in sys.modules)
+    if argv[0] == "has":
+        print(argv[1] in sys.modules)
     return int(argv[1]) if argv[0] == "exit" else 0
 
 

@@ -3,6 +3,7 @@ start-up phase stamps, and one-way latency from stamped arrivals."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -185,8 +186,9 @@ def test_the_fork_server_forks_lean_children_that_this_process_waits_for(
     sup = Supervisor(tmp_path)
     zygote = sup.zygote = Zygote(["tests.child_proc"], tmp_path / "zygote.log")
     try:
-        child = sup.start("c", "tests.child_proc", ["parent", "numpy"], fork=True)
+        child = sup.start("c", "tests.child_proc", ["has", "numpy"], fork=True)
         failing = sup.start("f", "tests.child_proc", ["exit", "3"], fork=True)
+        waiting = sup.start("w", "tests.child_proc", ["sleep", "30"], fork=True)
         # A child forked here meanwhile must not hold the server's pipes open.
         sleeper = fork_main("tests.child_proc", ["sleep", "30"], tmp_path / "s.log",
                             close_fds=zygote.fds())
@@ -194,9 +196,55 @@ def test_the_fork_server_forks_lean_children_that_this_process_waits_for(
         sup.end_forks()
     try:
         assert zygote.proc.returncode == 0  # it ended when asked, not killed at the timeout
-        assert sup.wait([child, failing], 20.0)  # reparented to us: waited for by PID
+        stat = Path(f"/proc/{waiting.pid}/stat").read_text()
+        assert int(stat.rsplit(")", 1)[1].split()[1]) == os.getpid()  # reparented to us
+        assert sup.wait([child, failing], 20.0)  # and so waited for by PID
         assert child.poll() == 0 and failing.poll() == 3
-        assert child.log_path.read_text().split() == [str(os.getpid()), "False"]
+        assert child.log_path.read_text().split() == ["False"]
     finally:
+        sup.stop_all(grace_s=5.0)
         sleeper.send_signal(signal.SIGKILL)
         assert wait_exit(sleeper) is not None
+
+
+# A launcher that starts a fork server, forks a helper that keeps the server's pipes open
+# (as the launcher's own children could), and is killed.
+KILLED_LAUNCHER = """
+import os, sys, time
+from pathlib import Path
+from deploy.zygote import Zygote
+z = Zygote(["tests.child_proc"], Path(sys.argv[1]))
+z.fork("tests.child_proc", ["exit", "0"], Path(sys.argv[1] + ".child"))  # it is serving
+helper = os.fork()
+if helper == 0:  # not the test's output pipe: only the server's
+    os.close(1)
+    os.close(2)
+    time.sleep(30)
+    os._exit(0)
+print(z.proc.pid, helper, flush=True)
+os.kill(os.getpid(), 9)
+"""
+
+
+def zygote_alive(pid: int) -> bool:
+    try:
+        return "zygote" in Path(f"/proc/{pid}/cmdline").read_text(errors="replace")
+    except OSError:
+        return False
+
+
+@pytest.mark.timeout(60)
+def test_the_fork_server_dies_with_a_killed_launcher(tmp_path: Path) -> None:
+    launcher = subprocess.run([sys.executable, "-c", KILLED_LAUNCHER, str(tmp_path / "z.log")],
+                              capture_output=True, text=True, timeout=30, check=False)
+    assert launcher.returncode == -signal.SIGKILL
+    pid, helper = map(int, launcher.stdout.split())
+    try:
+        deadline = time.monotonic() + 20.0
+        while zygote_alive(pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not zygote_alive(pid)  # not left waiting for the end of its input
+    finally:
+        for stray in (pid, helper):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(stray, signal.SIGKILL)
