@@ -43,6 +43,9 @@ START_REPEAT_S = 1.0  # the start word again, for processes (re)started after it
 class Launch:
     """One run: wiring of all processes, the start word, progress, and an orderly stop."""
 
+    # The followers are forked by a fork server (deploy.zygote), started first thing.
+    forks_followers = True
+
     def __init__(
         self, scenario: Scenario, args: argparse.Namespace, out: Path, swarm: str, duration_s: float
     ) -> None:
@@ -174,7 +177,8 @@ class Launch:
             self.adapter_base,
         )
         t0 = time.monotonic()
-        self.sup.start_fork_server()
+        if self.forks_followers:
+            self.sup.start_fork_server()
         interrupted = False
         try:
             self.secrets = self.make_secrets()
