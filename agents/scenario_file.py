@@ -6,7 +6,6 @@ import math
 import tomllib
 from collections.abc import Iterable
 from fractions import Fraction
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -38,16 +37,28 @@ def load_scenario(source: str | Path | None = None, whole_run: bool = True) -> S
     `whole_run`: see `agents.scenario_checks.check_admissible`."""
     if source is None or (isinstance(source, str) and not source.endswith(".toml")):
         name = source or DEFAULT_SCENARIO
-        ref = resources.files("agents") / "scenarios" / f"{name}.toml"
-        if not ref.is_file():
-            raise ScenarioError("scenario", f"no shipped scenario named {name!r}")
-        return parse_scenario(ref.read_text(encoding="utf-8"), origin=name, whole_run=whole_run)
+        return parse_scenario(_shipped(name), origin=name, whole_run=whole_run)
     path = Path(source)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ScenarioError("scenario", f"cannot read {path}: {exc.strerror}") from exc
     return parse_scenario(text, origin=str(path), whole_run=whole_run)
+
+
+def _shipped(name: str) -> str:
+    """The text of a shipped scenario.  From the package's folder when it is one (as pip
+    installs it): importlib.resources costs a follower 1.4 MB of imports (tempfile,
+    shutil, compressors; issue 15: <= 50 MB per follower); it serves zipped installs."""
+    path = Path(__file__).with_name("scenarios") / f"{name}.toml"
+    if path.is_file():
+        return path.read_text(encoding="utf-8")
+    from importlib import resources
+
+    ref = resources.files("agents") / "scenarios" / f"{name}.toml"
+    if not ref.is_file():
+        raise ScenarioError("scenario", f"no shipped scenario named {name!r}")
+    return ref.read_text(encoding="utf-8")
 
 
 def parse_scenario(text: str, origin: str = "<string>", whole_run: bool = True) -> Scenario:
