@@ -17,11 +17,16 @@ start (the old r_i agreed on the LAP, and so does the new mean of p~ + Phi).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-import numpy as np
-from numpy.typing import NDArray
+# numpy only for the reference's arrays: the follower process runs next_carry_c and
+# must not import numpy (issue 15: <= 50 MB per follower).
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+    FloatArray = NDArray[np.float64]
+
 REBASE_TAU_S = 3.0
 
 
@@ -40,6 +45,8 @@ def next_carry(
     part towards the neighbours' carried r_j and undo the continuity.
     """
     if continue_from_m is not None:
+        import numpy as np
+
         return np.asarray(continue_from_m, float) - raw_r_m
     return carry_m * math.exp(-dt_s / tau_s)
 

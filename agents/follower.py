@@ -317,6 +317,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="the swarm is already running (a restart): start from the "
                              "neighbours' estimate, not from p~")
     add_vehicle_arguments(parser)
+    # The launcher (or the user's `enclose` command) checked the targets' spread over the
+    # whole run; that check needs numpy, which this process never imports (issue 15).
+    parser.set_defaults(whole_run_checks=False)
     return process_main(parser, argv, run, lambda a: f"follower-{a.index}")
 
 

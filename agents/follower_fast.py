@@ -19,14 +19,14 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING, NamedTuple
 
-from agents.core.controller import enclosing_control_one
-from agents.core.estimator import (
+from agents.core.controller_one import enclosing_control_one
+from agents.core.estimator_one import (
     consensus_flows_c,
     finite_difference_velocity,
     link_balance_c,
 )
 from agents.estimate_carry import REBASE_TAU_S, next_carry_c
-from agents.follower_logic import FollowerSetup
+from agents.follower_setup import FollowerSetup
 from agents.scenario import Scenario
 
 if TYPE_CHECKING:

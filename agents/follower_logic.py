@@ -22,85 +22,25 @@ of chasing a stale bearing.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.core.controller import ControlGains, enclosing_control
-from agents.core.estimator import (
-    EstimatorParams,
-    consensus_flows,
-    edge_fractions,
-    finite_difference_velocity,
-    link_balance,
-)
-from agents.core.params import control_gains, estimator_params
+from agents.core.controller import enclosing_control
+from agents.core.estimator import consensus_flows, finite_difference_velocity, link_balance
 from agents.estimate_carry import REBASE_TAU_S, next_carry
-from agents.membership import membership
-from agents.scenario import Scenario
+
+# Its weights and edge fractions are tuples: the follower process builds one too, without
+# numpy (agents.follower_fast); this module makes arrays of them where it computes.
+from agents.follower_setup import FollowerSetup as FollowerSetup
 
 if TYPE_CHECKING:
     from transport.messages import FollowerState
 
 FloatArray = NDArray[np.float64]
 ZERO2 = np.zeros(2)
-
-
-@dataclass(frozen=True)
-class FollowerSetup:
-    """What follower `index` knows of the scenario, fixed for a run."""
-
-    index: int
-    weights: FloatArray  # (m,) its row of W: p~_i = weights @ target positions
-    observed: tuple[int, ...]  # targets with a non-zero weight
-    neighbours: tuple[int, ...]
-    nbr_fractions: FloatArray  # (d,) edge fractions, aligned with neighbours
-    successor: int
-    angle_rad: float
-    estimator: EstimatorParams
-    control: ControlGains
-    period_s: float
-    robust: bool = False  # the link-sum estimator (agents.core.estimator.link_balance)
-    stale_after_s: float = 0.5  # a peer older than this is missing (no flow, no spacing)
-    hold_after_s: float = 1.0  # longest extrapolation of any input; held afterwards
-    target_vel_tau_s: float = 0.1
-    max_gap_s: float = 0.25  # longest dt the estimator integrates over one tick
-    age_tau_s: float = 0.5  # time constant of the low-passed data ages
-    # The estimator's own step (issue 15): it advances between control ticks too, on
-    # what its neighbours published at that rate; None: one step per control tick.
-    estimator_period_s: float | None = None
-
-    @property
-    def est_period_s(self) -> float:
-        return self.period_s if self.estimator_period_s is None else self.estimator_period_s
-
-    @staticmethod
-    def from_scenario(
-        scenario: Scenario, index: int, members: Iterable[int] | None = None
-    ) -> FollowerSetup:
-        """Follower `index`'s share of the swarm formed by `members` (default: everyone)."""
-        form = membership(scenario, range(scenario.n) if members is None else members)
-        weights = form.weights()[index]
-        adjacency = form.adjacency()
-        nbrs = form.neighbours(index)
-        fractions = edge_fractions(adjacency, np.full(len(nbrs), index), np.asarray(nbrs, int))
-        return FollowerSetup(
-            index=index,
-            weights=weights,
-            observed=tuple(int(j) for j in np.nonzero(weights)[0]),
-            neighbours=nbrs,
-            nbr_fractions=fractions,
-            successor=form.successor[index],
-            angle_rad=form.angles_rad[index],
-            estimator=estimator_params(scenario),
-            control=control_gains(scenario),
-            period_s=1.0 / scenario.run.rate_hz,
-            estimator_period_s=1.0 / scenario.run.estimator_hz,
-            robust=scenario.network.estimator == "robust",
-        )
 
 
 @dataclass(frozen=True)
@@ -227,7 +167,7 @@ def reference(
     """p~_i and its rate at now_s, from the observed targets' tracks (targets not heard
     yet count as zero: the estimate a follower publishes before it is `ready`)."""
     heard = [j for j in setup.observed if j in memory.targets]
-    w = setup.weights[heard]
+    w = [setup.weights[j] for j in heard]
     tracks = [memory.targets[j] for j in heard]
     limit = setup.hold_after_s
     p_tilde = sum((wj * s.held(now_s, limit) for wj, s in zip(w, tracks, strict=True)), ZERO2)
@@ -268,7 +208,7 @@ def _estimate(
     # stays consistent (fresh data: the lock-step limit).
     ages = np.array([peer_age_s[j] for j in setup.neighbours])
     step = setup.est_period_s
-    fractions = setup.nbr_fractions * step / np.maximum(ages, step)
+    fractions = np.asarray(setup.nbr_fractions) * step / np.maximum(ages, step)
     args = (fractions, setup.estimator, step)
     resume = None
     if memory.rebase_pending and memory.last_r is not None:

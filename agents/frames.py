@@ -7,20 +7,30 @@ the third converts either way (the map is its own inverse).
 
 from __future__ import annotations
 
-import numpy as np
-from numpy.typing import NDArray
+import math
+from typing import TYPE_CHECKING
 
-FloatArray = NDArray[np.float64]
+# numpy only for arrays of vectors (simulator, recorder): the follower's MAVLink adapter
+# uses the float versions and its process must not import numpy (issue 15).
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    FloatArray = NDArray[np.float64]
 
 
 def enu_to_ned(vec_enu: FloatArray) -> FloatArray:
     """Convert (..., 3) ENU vectors to NED."""
+    import numpy as np
+
     vec = np.asarray(vec_enu, dtype=np.float64)
     return np.stack([vec[..., 1], vec[..., 0], -vec[..., 2]], axis=-1)
 
 
 def ned_to_enu(vec_ned: FloatArray) -> FloatArray:
     """Convert (..., 3) NED vectors to ENU."""
+    import numpy as np
+
     vec = np.asarray(vec_ned, dtype=np.float64)
     return np.stack([vec[..., 1], vec[..., 0], -vec[..., 2]], axis=-1)
 
@@ -38,15 +48,15 @@ def ned_to_enu_xyz(x: float, y: float, z: float) -> tuple[float, float, float]:
 
 def yaw_enu_to_ned(yaw_enu_rad: float) -> float:
     """ENU yaw (counter-clockwise from east) to NED yaw (clockwise from north), in (-pi, pi]."""
-    return wrap_pi(0.5 * np.pi - yaw_enu_rad)
+    return wrap_pi(0.5 * math.pi - yaw_enu_rad)
 
 
 def yaw_ned_to_enu(yaw_ned_rad: float) -> float:
     """NED yaw to ENU yaw; the map is its own inverse."""
-    return wrap_pi(0.5 * np.pi - yaw_ned_rad)
+    return wrap_pi(0.5 * math.pi - yaw_ned_rad)
 
 
 def wrap_pi(angle_rad: float) -> float:
     """Wrap an angle to (-pi, pi]."""
-    wrapped = float(np.arctan2(np.sin(angle_rad), np.cos(angle_rad)))
-    return np.pi if wrapped == -np.pi else wrapped
+    wrapped = math.atan2(math.sin(angle_rad), math.cos(angle_rad))
+    return math.pi if wrapped == -math.pi else wrapped

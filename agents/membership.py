@@ -26,13 +26,17 @@ import itertools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
-
-import numpy as np
-from numpy.typing import NDArray
+from typing import TYPE_CHECKING
 
 from agents.scenario import Scenario
 
-FloatArray = NDArray[np.float64]
+# numpy only for the lock-step engine's matrices: the follower process forms its ring
+# from `weight_row` and `edge_fraction` and must not import numpy (issue 15).
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    FloatArray = NDArray[np.float64]
 REBALANCE_POLICIES = ("scale", "keep")
 
 
@@ -51,8 +55,20 @@ class Membership:
         return tuple(sorted({b for a, b in self.edges if a == i} | {a for a, b in self.edges
                                                                      if b == i}))
 
+    def edge_fraction(self, i: int, j: int) -> float:
+        """agents.core.estimator.edge_fractions of the edge i -> j: 1 / max(deg_i, deg_j)."""
+        return 1.0 / max(len(self.neighbours(i)), len(self.neighbours(j)))
+
+    def weight_row(self, i: int) -> tuple[float, ...]:
+        """Follower i's row of W (m,): p~_i = row @ targets, over the members only."""
+        m = len(self.observers)
+        return tuple(len(self.members) / m / len(obs) if i in obs else 0.0
+                     for obs in self.observers)
+
     def adjacency(self) -> FloatArray:
         """(n_total, n_total) 0/1 adjacency; rows of absent followers are zero."""
+        import numpy as np
+
         adj = np.zeros((self.n_total, self.n_total))
         for a, b in self.edges:
             adj[a, b] = adj[b, a] = 1.0
@@ -60,11 +76,10 @@ class Membership:
 
     def weights(self) -> FloatArray:
         """(n_total, m) W with p~_i = W[i] @ targets, over the members only."""
-        m = len(self.observers)
-        w = np.zeros((self.n_total, m))
-        for j, obs in enumerate(self.observers):
-            w[list(obs), j] = len(self.members) / m / len(obs)
-        return w
+        import numpy as np
+
+        return np.array([self.weight_row(i) for i in range(self.n_total)]).reshape(
+            self.n_total, len(self.observers))
 
 
 def ring_order(successor: tuple[int, ...]) -> tuple[int, ...]:

@@ -9,14 +9,19 @@ error names the offending field.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-
-import numpy as np
-from numpy.typing import NDArray
+from typing import TYPE_CHECKING
 
 from agents.scenario_faults import FaultSpec
 
-FloatArray = NDArray[np.float64]
+# numpy only where the lock-step engine asks for matrices: a follower process loads a
+# Scenario too and must not import numpy (issue 15: <= 50 MB per follower).
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    FloatArray = NDArray[np.float64]
 
 PROFILE_KINDS = ("paper_v1", "paper_v2", "constant", "circle", "random_walk")
 ESTIMATORS = ("paper", "robust")
@@ -181,6 +186,8 @@ class Scenario:
 
     def adjacency(self) -> FloatArray:
         """Symmetric 0/1 follower adjacency matrix a_ij."""
+        import numpy as np
+
         adj = np.zeros((self.n, self.n))
         for i, j in self.edges:
             adj[i, j] = adj[j, i] = 1.0
@@ -188,6 +195,8 @@ class Scenario:
 
     def observation(self) -> FloatArray:
         """(n, m) 0/1 matrix: follower i observes target j."""
+        import numpy as np
+
         obs = np.zeros((self.n, self.m))
         for j, target in enumerate(self.targets):
             obs[list(target.observed_by), j] = 1.0
@@ -240,11 +249,13 @@ class Scenario:
         return min(self.pattern.angles_rad)
 
 
-def ccw_order(points_m: FloatArray, center_m: FloatArray) -> tuple[int, ...]:
-    """Successor map i -> i+ of points sorted counter-clockwise around `center_m`."""
-    d = np.asarray(points_m) - np.asarray(center_m)
-    order = [int(k) for k in np.argsort(np.arctan2(d[:, 1], d[:, 0]), kind="stable")]
-    return successor_from_order(order)
+def ccw_order(points_m: Sequence[Sequence[float]],
+              center_m: Sequence[float]) -> tuple[int, ...]:
+    """Successor map i -> i+ of points sorted counter-clockwise around `center_m`
+    (ties keep index order: Python's sort is stable)."""
+    cx, cy = float(center_m[0]), float(center_m[1])
+    angles = [math.atan2(float(p[1]) - cy, float(p[0]) - cx) for p in points_m]
+    return successor_from_order(sorted(range(len(angles)), key=angles.__getitem__))
 
 
 def successor_from_order(order: list[int] | tuple[int, ...]) -> tuple[int, ...]:

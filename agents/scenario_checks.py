@@ -2,21 +2,25 @@
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
-from agents.core.profiles import TargetMotion
 from agents.errors import InadmissibleError, ScenarioError
 from agents.scenario import Scenario, TargetSpec
 
 SPEED_TOL_M_S = 1e-9
 
 
-def check_admissible(scenario: Scenario) -> None:
-    """Raise `InadmissibleError` naming the field that breaks the paper's assumptions."""
+def check_admissible(scenario: Scenario, whole_run: bool = True) -> None:
+    """Raise `InadmissibleError` naming the field that breaks the paper's assumptions.
+
+    `whole_run=False` leaves out the targets' spread over the run, which needs their
+    whole trajectory (numpy): a follower process loads a scenario its launcher (or the
+    user's `enclose` command) checked whole, and stays without numpy (issue 15)."""
     _check_connected(scenario)
     for j, spec in enumerate(scenario.targets):
         _check_speed(spec, j, scenario.beta_m_s)
-    _check_spread(scenario)
+    if whole_run:
+        _check_spread(scenario)
     run = scenario.run
     if run.dt_s >= run.duration_s:
         raise ScenarioError("run.dt_s", f"must be shorter than run.duration_s ({run.duration_s})")
@@ -46,12 +50,12 @@ def _check_speed(spec: TargetSpec, j: int, beta: float) -> None:
     if spec.profile == "paper_v1":
         speed, key = 1.0, "profile"
     elif spec.profile == "paper_v2":
-        speed, key = float(np.hypot(1.0, 0.5)), "profile"
+        speed, key = math.hypot(1.0, 0.5), "profile"
     elif spec.profile == "constant":
-        speed, key = float(np.hypot(*spec.vel_m_s)), "vel_m_s"
+        speed, key = math.hypot(*spec.vel_m_s), "vel_m_s"
     elif spec.profile == "circle":
-        rel = np.subtract(spec.initial_pos_m, spec.center_m)
-        speed, key = float(np.hypot(*rel)) * abs(spec.omega_rad_s), "omega_rad_s"
+        rel = (spec.initial_pos_m[0] - spec.center_m[0], spec.initial_pos_m[1] - spec.center_m[1])
+        speed, key = math.hypot(*rel) * abs(spec.omega_rad_s), "omega_rad_s"
     else:
         speed, key = spec.speed_max_m_s, "speed_max_m_s"
         if speed <= 0.0:
@@ -64,6 +68,10 @@ def _check_speed(spec: TargetSpec, j: int, beta: float) -> None:
 
 def _check_spread(scenario: Scenario) -> None:
     """rho_d must exceed every target's distance to the LAP over the whole run."""
+    import numpy as np
+
+    from agents.core.profiles import TargetMotion
+
     times = np.linspace(0.0, scenario.run.duration_s, int(scenario.run.duration_s) + 2)
     pos, _ = TargetMotion(scenario).states(times)
     spread = np.linalg.norm(pos - pos.mean(axis=1, keepdims=True), axis=2).max()

@@ -6,11 +6,8 @@ import math
 import tomllib
 from collections.abc import Iterable
 from fractions import Fraction
-from importlib import resources
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from agents.errors import InadmissibleError, ScenarioError
 from agents.scenario import (
@@ -35,28 +32,41 @@ DEFAULT_SCENARIO = "paper"
 Table = dict[str, Any]
 
 
-def load_scenario(source: str | Path | None = None) -> Scenario:
-    """A shipped scenario by name (default: the paper's case) or a TOML file by path."""
+def load_scenario(source: str | Path | None = None, whole_run: bool = True) -> Scenario:
+    """A shipped scenario by name (default: the paper's case) or a TOML file by path;
+    `whole_run`: see `agents.scenario_checks.check_admissible`."""
     if source is None or (isinstance(source, str) and not source.endswith(".toml")):
         name = source or DEFAULT_SCENARIO
-        ref = resources.files("agents") / "scenarios" / f"{name}.toml"
-        if not ref.is_file():
-            raise ScenarioError("scenario", f"no shipped scenario named {name!r}")
-        return parse_scenario(ref.read_text(encoding="utf-8"), origin=name)
+        return parse_scenario(_shipped(name), origin=name, whole_run=whole_run)
     path = Path(source)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ScenarioError("scenario", f"cannot read {path}: {exc.strerror}") from exc
-    return parse_scenario(text, origin=str(path))
+    return parse_scenario(text, origin=str(path), whole_run=whole_run)
 
 
-def parse_scenario(text: str, origin: str = "<string>") -> Scenario:
+def _shipped(name: str) -> str:
+    """The text of a shipped scenario.  From the package's folder when it is one (as pip
+    installs it): importlib.resources costs a follower 1.4 MB of imports (tempfile,
+    shutil, compressors; issue 15: <= 50 MB per follower); it serves zipped installs."""
+    path = Path(__file__).with_name("scenarios") / f"{name}.toml"
+    if path.is_file():
+        return path.read_text(encoding="utf-8")
+    from importlib import resources
+
+    ref = resources.files("agents") / "scenarios" / f"{name}.toml"
+    if not ref.is_file():
+        raise ScenarioError("scenario", f"no shipped scenario named {name!r}")
+    return ref.read_text(encoding="utf-8")
+
+
+def parse_scenario(text: str, origin: str = "<string>", whole_run: bool = True) -> Scenario:
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError("scenario", f"{origin} is not valid TOML: {exc}") from exc
-    return build_scenario(doc, default_name=Path(origin).stem)
+    return build_scenario(doc, default_name=Path(origin).stem, whole_run=whole_run)
 
 
 def number(table: Table, key: str, path: str, default: float | None = None) -> float:
@@ -117,7 +127,8 @@ def follower_numbers(raw: Any, where: str, n: int) -> tuple[int, ...]:
     return tuple(v - 1 for v in raw)
 
 
-def build_scenario(doc: Table, default_name: str = "scenario") -> Scenario:
+def build_scenario(doc: Table, default_name: str = "scenario",
+                   whole_run: bool = True) -> Scenario:
     followers = doc.get("followers")
     if not isinstance(followers, list) or len(followers) < 2:
         raise InadmissibleError("followers", "needs at least 2 [[followers]] tables")
@@ -130,8 +141,8 @@ def build_scenario(doc: Table, default_name: str = "scenario") -> Scenario:
     edges = _edges(table_of(doc, "graph"), n)
     pattern_t = table_of(doc, "pattern")
     pattern = _pattern(pattern_t, n)
-    center = np.mean([t.initial_pos_m for t in targets], axis=0)
-    successor = _successor(pattern_t, np.asarray(f_pos), center, n)
+    center = tuple(math.fsum(t.initial_pos_m[k] for t in targets) / len(targets) for k in (0, 1))
+    successor = _successor(pattern_t, f_pos, center, n)
     name = doc.get("name", default_name)
     if not isinstance(name, str) or not name:
         raise ScenarioError("name", "must be a non-empty string")
@@ -150,7 +161,7 @@ def build_scenario(doc: Table, default_name: str = "scenario") -> Scenario:
         network=network(table_of(doc, "network"), n),
         faults=parse_faults(doc.get("faults"), n, len(targets)),
     )
-    check_admissible(scenario)
+    check_admissible(scenario, whole_run)
     return scenario
 
 
@@ -237,7 +248,8 @@ def _pattern(t: Table, n: int) -> Pattern:
     )
 
 
-def _successor(t: Table, f_pos: np.ndarray, center: np.ndarray, n: int) -> tuple[int, ...]:
+def _successor(t: Table, f_pos: tuple[tuple[float, float], ...], center: tuple[float, ...],
+               n: int) -> tuple[int, ...]:
     raw = t.get("order")
     if raw is None:
         return ccw_order(f_pos, center)

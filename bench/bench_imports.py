@@ -16,9 +16,9 @@ import statistics
 import subprocess
 import sys
 
-CHAIN = ("numpy", "msgpack", "zenoh", "pymavlink.dialects.v20.common", "transport.zenoh_bus",
-         "agents.mavlink.adapter", "agents.follower_logic", "agents.follower")
-NOT_IMPORTED = ("cryptography.x509", "matplotlib.pyplot", "mcap.writer", "numba")
+CHAIN = ("msgpack", "zenoh", "pymavlink.dialects.v20.common", "transport.zenoh_bus",
+         "agents.mavlink.adapter", "agents.follower_fast", "agents.follower")
+NOT_IMPORTED = ("numpy", "cryptography.x509", "matplotlib.pyplot", "mcap.writer", "numba")
 
 PROBE = """
 import importlib, json, sys, time

@@ -105,19 +105,28 @@ def _fork(run: Callable[[], int | None], log_path: Path | None, mode: int) -> in
     return pid
 
 
+def fork_pid(module: str, argv: Sequence[str], log_path: Path,
+             close_fds: Sequence[int] = ()) -> int:
+    """Fork a child that runs `module.main(argv)` with its output in `log_path` (new
+    file), after closing `close_fds` (the caller's, which the child must not hold open)."""
+    def run() -> int:
+        for fd in close_fds:
+            os.close(fd)
+        return int(importlib.import_module(module).main(list(argv)))
+
+    return _fork(run, log_path, os.O_TRUNC)
+
+
 def fork_main(module: str, argv: Sequence[str], log_path: Path,
-              import_in_child: bool = False) -> ForkedProcess:
+              import_in_child: bool = False, close_fds: Sequence[int] = ()) -> ForkedProcess:
     """Fork a child that runs `module.main(argv)` with its output in `log_path` (new file).
 
     The module is imported here, once, before the fork, unless `import_in_child`: then
     the child imports it, and what it alone needs stays out of this process (and of the
     children forked after it)."""
-    def run() -> int:
-        return int(importlib.import_module(module).main(list(argv)))
-
     if not import_in_child:
         importlib.import_module(module)
-    return ForkedProcess(_fork(run, log_path, os.O_TRUNC))
+    return ForkedProcess(fork_pid(module, argv, log_path, close_fds))
 
 
 def call_forked(fn: Callable[[], None], what: str,

@@ -33,6 +33,9 @@ IMPAIRED_SCENARIO = "scenario-hosts.toml"
 
 
 class HostLaunch(Launch):
+    # Every process starts through its host's prefix (netns, clock): none is forked.
+    forks_followers = False
+
     def __init__(self, dep: Deployment, local: tuple[int, ...], args: argparse.Namespace,
                  out: Path, duration_s: float) -> None:
         self.dep, self.local = dep, local

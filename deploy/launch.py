@@ -43,6 +43,9 @@ START_REPEAT_S = 1.0  # the start word again, for processes (re)started after it
 class Launch:
     """One run: wiring of all processes, the start word, progress, and an orderly stop."""
 
+    # The followers are forked by a fork server (deploy.zygote), started first thing.
+    forks_followers = True
+
     def __init__(
         self, scenario: Scenario, args: argparse.Namespace, out: Path, swarm: str, duration_s: float
     ) -> None:
@@ -116,12 +119,14 @@ class Launch:
             [*joins, "--out", str(self.out), *sec("recorder"), *recorder_live_argv(self.args)],
             fork=True,
         )
-        for i in range(s.n):
-            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
-            self.sup.start(f"follower-{i}", "agents.follower", argv, fork=True)
+        # Targets first: the followers come from the fork server, which may still be
+        # importing (deploy.zygote).
         for j in range(s.m):
             argv = [*joins, *mav, "--index", str(j), *sec(f"target-{j}")]
             self.sup.start(f"target-{j}", "agents.target", argv, fork=True)
+        for i in range(s.n):
+            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
+            self.sup.start(f"follower-{i}", "agents.follower", argv, fork=True)
 
     def expected_tokens(self) -> set[str]:
         k, s = self.keys, self.scenario
@@ -172,11 +177,18 @@ class Launch:
             self.adapter_base,
         )
         t0 = time.monotonic()
+        if self.forks_followers:
+            self.sup.start_fork_server()
         interrupted = False
-        self.secrets = self.make_secrets()
+        try:
+            self.secrets = self.make_secrets()
+        except BaseException:
+            self.sup.end_forks()
+            raise
         mark("credentials")
         try:
             self.start_all()
+            self.sup.end_forks()
             mark("spawned")
             with self.open_bus() as bus:
                 mark("bus_open")

@@ -15,11 +15,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from agents.errors import DeployError
 from deploy.forked import ForkedProcess, fork_is_safe, fork_main
+from deploy.zygote import Zygote
 
 log = logging.getLogger(__name__)
 Clock = Callable[[], float]
-FORKED_MODULES = ("deploy.swarm_sim", "agents.follower", "agents.target")
+FORKED_MODULES = ("deploy.swarm_sim", "agents.target")
+# Forked by a fork server that imported only these (deploy.zygote): a follower must not
+# inherit the launcher's numpy and simulator pages (issue 15: <= 50 MB per follower).
+LEAN_MODULES = ("agents.follower",)
 
 
 @dataclass
@@ -56,26 +61,51 @@ class Supervisor:
     log_dir: Path
     children: list[Child] = field(default_factory=list)
     clock: Clock = time.monotonic
+    zygote: Zygote | None = None
+
+    def start_fork_server(self) -> None:
+        """Start the fork server of the lean processes as early as possible: its own
+        interpreter start and imports then overlap with the launcher's work."""
+        if self.zygote is None:
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+            try:
+                self.zygote = Zygote(LEAN_MODULES, self.log_dir / "zygote.log")
+            except DeployError as exc:  # not Linux: they are forked from here instead
+                log.warning("%s", exc)
+            self._write_pids()
 
     def preload(self) -> None:
         """Import the modules of the processes the launcher forks, before it forks them."""
         for module in FORKED_MODULES:
             importlib.import_module(module)
 
+    def end_forks(self) -> None:
+        """Every child is started: stop the fork server (restarts start interpreters)."""
+        if self.zygote is not None:
+            self.zygote.close()
+            self.zygote = None
+            self._write_pids()
+
     def start(self, name: str, module: str, args: Sequence[str], fork: bool = False,
               prefix: Sequence[str] = ()) -> Child:
         """Start `python -m module args`, after `prefix` (e.g. `ip netns exec NS env K=V`);
         with `fork` (and no prefix), as a fork of this process that runs `module.main(args)`
         (deploy.forked: no interpreter start-up, no imports; a module not in FORKED_MODULES
-        is imported by its child alone), when that is safe (no other thread, no Zenoh
-        session here yet); else, and on a restart, a fresh interpreter."""
+        or LEAN_MODULES is imported by its child alone), when that is safe (no other
+        thread, no Zenoh session here yet); a LEAN_MODULES one by the fork server when it
+        runs (deploy.zygote); else, and on a restart, a fresh interpreter."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         argv = [*prefix, sys.executable, "-m", module, *args]
         child = Child(name, argv, self.log_dir / f"{name}.log")
-        if fork and not prefix and fork_is_safe():
+        if fork and not prefix and self.zygote is not None and module in self.zygote.modules:
             child.spawned_s = time.monotonic()
+            child.proc = self.zygote.fork(module, args, child.log_path)
+        elif fork and not prefix and fork_is_safe():
+            child.spawned_s = time.monotonic()
+            here = (*FORKED_MODULES, *LEAN_MODULES)  # no fork server: fast, if not lean
             child.proc = fork_main(module, list(args), child.log_path,
-                                   import_in_child=module not in FORKED_MODULES)
+                                   import_in_child=module not in here,
+                                   close_fds=() if self.zygote is None else self.zygote.fds())
         else:
             self._spawn(child, "wb")
         self.children.append(child)
@@ -109,6 +139,8 @@ class Supervisor:
         """PIDs on disk as soon as they exist, so that an outside cleanup can find them
         even if the launcher itself is killed."""
         pids = {c.name: c.pid for c in self.children}
+        if self.zygote is not None:
+            pids["zygote"] = self.zygote.proc.pid
         tmp = self.log_dir / "pids.json.tmp"
         tmp.write_text(json.dumps(pids, indent=2) + "\n")
         tmp.replace(self.log_dir / "pids.json")
@@ -143,6 +175,7 @@ class Supervisor:
             self.wait(alive, 2.0)
 
     def stop_all(self, grace_s: float = 5.0) -> None:
+        self.end_forks()
         self.terminate(self.children, grace_s)
 
 

@@ -1,4 +1,5 @@
-"""A stand-in child for supervisor tests: `sleep S`, `exit CODE` or `print TEXT`.
+"""A stand-in child for supervisor tests: `sleep S`, `exit CODE`, `print TEXT`, or
+`has MODULE` (prints whether MODULE is imported).
 
 Runs as `python -m tests.child_proc ...` or forked (deploy.forked calls `main(argv)`)."""
 
@@ -12,6 +13,8 @@ def main(argv: Sequence[str]) -> int:
         time.sleep(float(argv[1]))
     if argv[0] == "print":
         print(argv[1])
+    if argv[0] == "has":
+        print(argv[1] in sys.modules)
     return int(argv[1]) if argv[0] == "exit" else 0
 
 

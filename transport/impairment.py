@@ -36,8 +36,7 @@ import heapq
 import itertools
 from collections import deque
 from dataclasses import dataclass
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from agents.scenario import LinkImpairment, NetworkConfig
 from transport.bus import (
@@ -56,6 +55,9 @@ from transport.link_stats import Link, link_of
 MAX_WAITING = 16  # held-back messages per link; beyond, a message goes normally
 _DRAW_BLOCK = 256
 _SEED_MOD = 2**63
+
+if TYPE_CHECKING:
+    from numpy.random import Generator
 _SENSOR_KIND, _FOLLOWER_KIND = 2, 1
 COUNTS = ("offered", "dropped", "duplicated", "reordered", "delivered", "overflow")
 
@@ -86,22 +88,30 @@ class LinkImpairer:
         self.spec = spec
         self.identity = spec.is_identity
         self.counts = LinkCounts()
-        self._rng = np.random.default_rng(entropy)
-        self._u = np.empty((0, 3))
-        self._z = np.empty(0)
+        self._entropy = entropy
+        # Made at the first draw: a link left alone never draws, and a follower whose
+        # links are all left alone runs without numpy (issue 15: <= 50 MB per follower).
+        self._rng: Generator | None = None
+        self._u: list[list[float]] = []
+        self._z: list[float] = []
         self._k = 0
         burst = max(1.0, spec.burst_len)
         self._p_bad_good = 1.0 / burst
         self._p_good_bad = min(1.0, spec.loss / (burst * (1.0 - spec.loss)))
-        self._bad = bool(self._rng.random() < spec.loss)  # start in the stationary law
+        self._bad = False
 
     def _draws(self) -> tuple[float, float, float, float]:
         if self._k >= len(self._z):
-            self._u, self._z, self._k = self._rng.random((_DRAW_BLOCK, 3)), \
-                self._rng.standard_normal(_DRAW_BLOCK), 0
-        u, z = self._u[self._k], float(self._z[self._k])
+            if self._rng is None:
+                import numpy as np
+
+                self._rng = np.random.default_rng(self._entropy)
+                self._bad = bool(self._rng.random() < self.spec.loss)  # the stationary law
+            self._u, self._z, self._k = self._rng.random((_DRAW_BLOCK, 3)).tolist(), \
+                self._rng.standard_normal(_DRAW_BLOCK).tolist(), 0
+        u, z = self._u[self._k], self._z[self._k]
         self._k += 1
-        return float(u[0]), float(u[1]), float(u[2]), z
+        return u[0], u[1], u[2], z
 
     def fate(self) -> Fate:
         u_loss, u_dup, u_hold, z = self._draws()

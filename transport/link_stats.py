@@ -28,10 +28,9 @@ that reach the agent.  Its `counters()` add, for each link L seen:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import lru_cache
-
-import numpy as np
 
 from transport.bus import Received
 from transport.checks import Limits
@@ -75,21 +74,21 @@ def link_of(key: str) -> Link | None:
 class AgeHistogram:
     """Fixed-bin histogram of ages: O(1) per sample, whole-run percentiles, bounded memory.
 
-    Bins are grouped in blocks with running block totals, so a percentile scans about
-    a thousand numbers rather than the 100k bins (it is asked for every loop tick).
-    A sample only counts its bin in a dict; the numpy bins take the counts when read
-    (a numpy scalar increment costs more than the rest of `add`).
+    Sparse: only bins that hold samples exist (dicts), so a 100k-bin histogram costs
+    memory per distinct age, not per bin (a follower holds several, and its process must
+    stay small and without numpy: issue 15).  Bins are grouped in blocks with running
+    block totals, so a percentile scans the blocks in use and one block's bins rather
+    than every bin (it is asked for every loop tick).
     """
 
     BLOCK = 100
 
     def __init__(self, bin_s: float = AGE_BIN_S, max_s: float = AGE_MAX_S) -> None:
         self.bin_s = bin_s
-        n_bins = round(max_s / bin_s)
-        self._last = n_bins - 1
-        self._bins = np.zeros(n_bins, dtype=np.int64)
-        self._blocks = np.zeros(n_bins // self.BLOCK, dtype=np.int64)
-        self._pending: dict[int, int] = {}  # bin -> samples not yet in _bins
+        self.n_bins = round(max_s / bin_s)
+        self._last = self.n_bins - 1
+        self._bins: dict[int, int] = {}  # bin -> samples
+        self._blocks: dict[int, int] = {}  # block -> samples
         self.count = 0
         self.sum_s = 0.0
 
@@ -100,32 +99,30 @@ class AgeHistogram:
             self.sum_s += age_s if age_s < AGE_MAX_S else AGE_MAX_S
         else:
             k = 0
-        pending = self._pending
-        pending[k] = pending.get(k, 0) + 1
+        bins, blocks, b = self._bins, self._blocks, k // self.BLOCK
+        bins[k] = bins.get(k, 0) + 1
+        blocks[b] = blocks.get(b, 0) + 1
         self.count += 1
 
-    def _flush(self) -> None:
-        if self._pending:
-            k = np.fromiter(self._pending.keys(), dtype=np.int64, count=len(self._pending))
-            n = np.fromiter(self._pending.values(), dtype=np.int64, count=len(self._pending))
-            np.add.at(self._bins, k, n)
-            np.add.at(self._blocks, k // self.BLOCK, n)
-            self._pending.clear()
+    @property
+    def bins(self) -> list[int]:
+        """Every bin's count (a dense copy: for tests and reports, not per sample)."""
+        out = [0] * self.n_bins
+        for k, n in self._bins.items():
+            out[k] = n
+        return out
 
     @property
-    def bins(self) -> np.ndarray:
-        self._flush()
-        return self._bins
-
-    @property
-    def blocks(self) -> np.ndarray:
-        self._flush()
-        return self._blocks
+    def blocks(self) -> list[int]:
+        out = [0] * (self.n_bins // self.BLOCK)
+        for b, n in self._blocks.items():
+            out[b] = n
+        return out
 
     def merge(self, other: AgeHistogram) -> None:
-        self._flush()
-        self._bins += other.bins
-        self._blocks += other.blocks
+        for mine, theirs in ((self._bins, other._bins), (self._blocks, other._blocks)):
+            for k, n in theirs.items():
+                mine[k] = mine.get(k, 0) + n
         self.count += other.count
         self.sum_s += other.sum_s
 
@@ -133,13 +130,16 @@ class AgeHistogram:
         """The q-th percentile (0..100), at the middle of its bin; None when empty."""
         if self.count == 0:
             return None
-        self._flush()
-        rank = max(1, int(np.ceil(q / 100.0 * self.count)))
-        block_cum = np.cumsum(self._blocks)
-        b = int(np.searchsorted(block_cum, rank))
-        before = int(block_cum[b - 1]) if b > 0 else 0
-        inner = np.cumsum(self._bins[b * self.BLOCK:(b + 1) * self.BLOCK])
-        k = b * self.BLOCK + int(np.searchsorted(inner, rank - before))
+        rank = max(1, math.ceil(q / 100.0 * self.count))
+        before = 0
+        for b in sorted(self._blocks):  # the first block whose running total reaches rank
+            if before + self._blocks[b] >= rank:
+                break
+            before += self._blocks[b]
+        for k in range(b * self.BLOCK, (b + 1) * self.BLOCK):
+            before += self._bins.get(k, 0)
+            if before >= rank:
+                break
         return (k + 0.5) * self.bin_s
 
 

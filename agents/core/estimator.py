@@ -8,19 +8,20 @@ clocks or networks: time steps and neighbour values are arguments.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.core.geometry import limited_sig, limited_sig_one, rate_cap
+# The parameters and the one-follower twins live without numpy, for the follower process.
+from agents.core.estimator_one import EstimatorParams as EstimatorParams
+from agents.core.estimator_one import consensus_flows_c as consensus_flows_c
+from agents.core.estimator_one import finite_difference_velocity as finite_difference_velocity
+from agents.core.estimator_one import link_balance_c as link_balance_c
+from agents.core.geometry import limited_sig, rate_cap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
-# A plane vector: a (2,) array, or x + iy (the networked follower's scalar twins).
-Vec = TypeVar("Vec", FloatArray, complex)
 
 
 def observation_weights(observation: FloatArray) -> FloatArray:
@@ -35,15 +36,6 @@ def observation_weights(observation: FloatArray) -> FloatArray:
 def local_reference(weights_row: FloatArray, observed_pos_m: FloatArray) -> FloatArray:
     """p~ for followers whose weight rows are `weights_row` ((k, m) or (m,)) and targets (m, 2)."""
     return weights_row @ observed_pos_m
-
-
-@dataclass(frozen=True)
-class EstimatorParams:
-    """k_e and alpha1 of the paper; `step_fraction` caps one step's flow (0: plain Euler)."""
-
-    k_e: float
-    alpha1: float
-    step_fraction: float = 0.5
 
 
 def edge_fractions(adjacency: FloatArray, tails: IntArray, heads: IntArray) -> FloatArray:
@@ -63,24 +55,6 @@ def consensus_flows(
     """(d, 2) flows of one follower's links: k_e sig(r_j - r_i)^(1/alpha1), step-limited."""
     cap = rate_cap(params.step_fraction, dt_s) * nbr_fractions[:, None]
     return limited_sig(r_nbrs_m - r_self_m, 1.0 / params.alpha1, params.k_e, cap)
-
-
-def consensus_flows_c(
-    r_self_m: complex,
-    r_nbrs_m: Sequence[complex],
-    nbr_fractions: Sequence[float],
-    params: EstimatorParams,
-    dt_s: float,
-) -> list[complex]:
-    """`consensus_flows` with plane vectors as complex x + iy (one list entry per link):
-    the same law, component by component, without numpy's per-call cost."""
-    base, exponent, gain = rate_cap(params.step_fraction, dt_s), 1.0 / params.alpha1, params.k_e
-    flows = []
-    for r_j, fraction in zip(r_nbrs_m, nbr_fractions, strict=True):
-        gap, cap = r_j - r_self_m, base * fraction
-        flows.append(complex(limited_sig_one(gap.real, exponent, gain, cap),
-                             limited_sig_one(gap.imag, exponent, gain, cap)))
-    return flows
 
 
 def consensus_rate(
@@ -105,14 +79,6 @@ def link_balance(own_sums_m: FloatArray, their_sums_m: FloatArray) -> FloatArray
     paper's increments a lost or late message shifts the mean for good.
     """
     return np.asarray(0.5 * (own_sums_m - their_sums_m).sum(axis=0))
-
-
-def link_balance_c(own_sums_m: Sequence[complex], their_sums_m: Sequence[complex]) -> complex:
-    """`link_balance` with plane vectors as complex x + iy, one per link."""
-    total = 0j
-    for own, theirs in zip(own_sums_m, their_sums_m, strict=True):
-        total += own - theirs
-    return 0.5 * total
 
 
 @dataclass(frozen=True)
@@ -157,26 +123,3 @@ def estimate(phi_m: FloatArray, p_tilde_m: FloatArray) -> FloatArray:
 def step_phi(phi_m: FloatArray, phi_rate_m_s: FloatArray, dt_s: float) -> FloatArray:
     """Explicit Euler step of the estimator's integrator state."""
     return phi_m + dt_s * phi_rate_m_s
-
-
-def finite_difference_velocity(
-    prev_pos_m: Vec,
-    prev_stamp_s: float,
-    pos_m: Vec,
-    stamp_s: float,
-    prev_vel_m_s: Vec,
-    tau_s: float = 0.0,
-) -> Vec:
-    """Velocity from two timestamped observations, optionally low-passed with time constant tau.
-
-    A zero or negative stamp difference (duplicate or reordered data) keeps the old estimate.
-    Vectors are (2,) arrays or complex x + iy: plain arithmetic, the same for both.
-    """
-    dt = stamp_s - prev_stamp_s
-    if dt <= 0.0:
-        return prev_vel_m_s
-    raw = (pos_m - prev_pos_m) / dt
-    if tau_s <= 0.0:
-        return raw
-    gain = dt / (tau_s + dt)
-    return prev_vel_m_s + gain * (raw - prev_vel_m_s)

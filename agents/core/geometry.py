@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numpy.typing import NDArray
 
+# The float twins (numpy-free, for the follower process) and the constants both use.
+from agents.core.geometry_one import NO_CAP_PER_S as NO_CAP_PER_S
+from agents.core.geometry_one import TWO_PI as TWO_PI
+from agents.core.geometry_one import limited_sig_one as limited_sig_one
+from agents.core.geometry_one import rate_cap as rate_cap
+
 FloatArray = NDArray[np.float64]
-TWO_PI = 2.0 * math.pi
-# Finite so that cap * 0 stays 0; it binds only below ~1e-17 of error, where the laws agree.
-NO_CAP_PER_S = 1e12
 
 
 def sig(x: FloatArray, exponent: float) -> FloatArray:
@@ -56,19 +57,7 @@ def limited_sig(
     overshoots zero and settles into a 2-cycle (the numerical dithering the paper
     claims to avoid).  Capping the rate at fraction/dt * |x| lets one step remove
     at most that fraction of the error; as dt -> 0 the cap vanishes and the law
-    is the paper's.  `NO_CAP_PER_S` gives the plain law.
+    is the paper's.  `NO_CAP_PER_S` gives the plain law (geometry_one: `rate_cap`).
     """
     mag = np.abs(x)
     return np.copysign(np.minimum(gain * mag**exponent, rate_cap_per_s * mag), x)
-
-
-def limited_sig_one(x: float, exponent: float, gain: float, rate_cap_per_s: float) -> float:
-    """`limited_sig` of one float (the networked follower's plane vectors are complex,
-    their components plain floats: numpy's per-call cost is most of a 2-vector's)."""
-    mag = abs(x)
-    return math.copysign(min(gain * mag**exponent, rate_cap_per_s * mag), x)
-
-
-def rate_cap(step_fraction: float, dt_s: float) -> float:
-    """The cap of `limited_sig` for a step of dt: `NO_CAP_PER_S` when the fraction is <= 0."""
-    return step_fraction / dt_s if step_fraction > 0.0 else NO_CAP_PER_S

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from agents.core.controller import ControlGains
-from agents.core.estimator import EstimatorParams
+from agents.core.controller_one import ControlGains
+from agents.core.estimator_one import EstimatorParams
 from agents.scenario import Scenario
 
 

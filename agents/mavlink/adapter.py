@@ -17,11 +17,14 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
-import numpy as np
 from pymavlink.dialects.v20.common import MAVLink_set_position_target_local_ned_message
 
 from agents.errors import LinkLostError, MavlinkError
+
+if TYPE_CHECKING:  # the follower's process runs without numpy (issue 15)
+    import numpy as np
 from agents.frames import enu_to_ned_xyz, ned_to_enu_xyz, yaw_enu_to_ned
 from agents.mavlink.modes import (
     MAV_MODE_FLAG_SAFETY_ARMED,

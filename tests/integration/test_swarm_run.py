@@ -196,6 +196,9 @@ def test_a_dying_follower_fails_the_run_and_stops_the_rest(tmp_path: Path) -> No
     with launched(out, "--duration", "600") as proc:
         pids_file = out / "logs" / "pids.json"
         wait_for(lambda: (out / "progress.json").exists(), 120.0, "the run to start")
+        # The recorder writes progress.json; the followers may start after it.
+        wait_for(lambda: "follower-2" in json.loads(pids_file.read_text()), 60.0,
+                 "follower-2 to start")
         victim = json.loads(pids_file.read_text())["follower-2"]
         os.kill(victim, signal.SIGKILL)
         output, _ = proc.communicate(timeout=150)

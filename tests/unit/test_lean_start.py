@@ -3,7 +3,9 @@ start-up phase stamps, and one-way latency from stamped arrivals."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -33,11 +35,35 @@ def imported_by(code: str) -> set[str]:
     return {m.split(".")[0] for m in out.split()}
 
 
+# What a follower does before its loop, in a fresh interpreter: what it imports then.
+FOLLOWER_SET_UP = """
+import agents.follower
+from agents.follower_fast import FastSetup
+from agents.scenario_file import load_scenario
+from transport.impairment import ImpairedBus
+from transport.keys import SwarmKeys
+from transport.link_stats import AgeHistogram
+for name in ("paper", "ring16"):
+    s = load_scenario(name, whole_run=False)
+    for i in range(s.n):
+        FastSetup.from_scenario(s, i, set(range(s.n)) - {(i + 1) % s.n})
+    bus = ImpairedBus(None, s.network, receiver=0)
+    bus.impairer(bus.link(SwarmKeys("lean").follower_state(1)))
+    ages = AgeHistogram()
+    ages.add(0.01)
+    assert ages.percentile_s(99) is not None
+"""
+
+
 @pytest.mark.timeout(90)
 def test_a_follower_and_the_launcher_import_none_of_the_heavy_packages() -> None:
-    follower = imported_by("import agents.follower, agents.target, deploy.swarm_sim")
-    assert "numpy" in follower and "zenoh" in follower  # the check can fail
-    assert not follower & set(NOT_IN_A_FOLLOWER)
+    swarm = imported_by("import agents.follower, agents.target, deploy.swarm_sim")
+    assert "numpy" in swarm and "zenoh" in swarm  # the check can fail
+    assert not swarm & set(NOT_IN_A_FOLLOWER)
+    # Not even numpy (16.7 MB) in a follower (issue 15: <= 50 MB per follower).
+    follower = imported_by(FOLLOWER_SET_UP)
+    assert "zenoh" in follower and "agents" in follower
+    assert not follower & {"numpy", *NOT_IN_A_FOLLOWER}
     launcher = imported_by("from deploy.cli import build_parser; build_parser(['run'])")
     assert "deploy" in launcher
     assert not launcher & set(NOT_IN_A_FOLLOWER)
@@ -147,3 +173,78 @@ def test_no_fork_while_a_thread_runs(tmp_path: Path) -> None:
     finally:
         stop.set()
         helper.join()
+
+
+@pytest.mark.timeout(60)
+def test_the_fork_server_forks_lean_children_that_this_process_waits_for(
+        tmp_path: Path) -> None:
+    import numpy  # noqa: F401  # this process has it; the server's children must not
+
+    from deploy.supervisor import Supervisor
+    from deploy.zygote import Zygote
+
+    sup = Supervisor(tmp_path)
+    zygote = sup.zygote = Zygote(["tests.child_proc"], tmp_path / "zygote.log")
+    try:
+        child = sup.start("c", "tests.child_proc", ["has", "numpy"], fork=True)
+        failing = sup.start("f", "tests.child_proc", ["exit", "3"], fork=True)
+        waiting = sup.start("w", "tests.child_proc", ["sleep", "30"], fork=True)
+        # A child forked here meanwhile must not hold the server's pipes open.
+        sleeper = fork_main("tests.child_proc", ["sleep", "30"], tmp_path / "s.log",
+                            close_fds=zygote.fds())
+    finally:
+        sup.end_forks()
+    try:
+        assert zygote.proc.returncode == 0  # it ended when asked, not killed at the timeout
+        stat = Path(f"/proc/{waiting.pid}/stat").read_text()
+        assert int(stat.rsplit(")", 1)[1].split()[1]) == os.getpid()  # reparented to us
+        assert sup.wait([child, failing], 20.0)  # and so waited for by PID
+        assert child.poll() == 0 and failing.poll() == 3
+        assert child.log_path.read_text().split() == ["False"]
+    finally:
+        sup.stop_all(grace_s=5.0)
+        sleeper.send_signal(signal.SIGKILL)
+        assert wait_exit(sleeper) is not None
+
+
+# A launcher that starts a fork server, forks a helper that keeps the server's pipes open
+# (as the launcher's own children could), and is killed.
+KILLED_LAUNCHER = """
+import os, sys, time
+from pathlib import Path
+from deploy.zygote import Zygote
+z = Zygote(["tests.child_proc"], Path(sys.argv[1]))
+z.fork("tests.child_proc", ["exit", "0"], Path(sys.argv[1] + ".child"))  # it is serving
+helper = os.fork()
+if helper == 0:  # not the test's output pipe: only the server's
+    os.close(1)
+    os.close(2)
+    time.sleep(30)
+    os._exit(0)
+print(z.proc.pid, helper, flush=True)
+os.kill(os.getpid(), 9)
+"""
+
+
+def zygote_alive(pid: int) -> bool:
+    try:
+        return "zygote" in Path(f"/proc/{pid}/cmdline").read_text(errors="replace")
+    except OSError:
+        return False
+
+
+@pytest.mark.timeout(60)
+def test_the_fork_server_dies_with_a_killed_launcher(tmp_path: Path) -> None:
+    launcher = subprocess.run([sys.executable, "-c", KILLED_LAUNCHER, str(tmp_path / "z.log")],
+                              capture_output=True, text=True, timeout=30, check=False)
+    assert launcher.returncode == -signal.SIGKILL
+    pid, helper = map(int, launcher.stdout.split())
+    try:
+        deadline = time.monotonic() + 20.0
+        while zygote_alive(pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not zygote_alive(pid)  # not left waiting for the end of its input
+    finally:
+        for stray in (pid, helper):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(stray, signal.SIGKILL)
