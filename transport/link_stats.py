@@ -154,21 +154,17 @@ class LinkTally:
     seq_last: int | None = None
     ages: AgeHistogram = field(default_factory=AgeHistogram)
     latencies: AgeHistogram | None = None  # only when arrivals are stamped
-    _seen: set[int] = field(default_factory=set)
-    _floor: int = -1
+    # The sequence numbers seen, as an anti-replay window (RFC 4303 3.4.3): bit k of
+    # `_window` is `_top - k`.  A set of them grew by table doublings to ~0.5 MB per link
+    # within two minutes, a follower's largest growth (issue 15: <= 50 MB per follower).
+    _top: int = -1
+    _window: int = 0
 
     def observe(self, seq: int, age_s: float | None, latency_s: float | None = None) -> None:
         """One delivery; `age_s` None: counted, but its age (and latency) not of interest."""
-        # Sequence numbers below the floor were pruned from `_seen`; one arriving that
-        # late (thousands of messages) can only be a copy.
-        seen = self._seen
-        if seq < self._floor or seq in seen:
+        if not self._fresh(seq):
             self.rx_dup += 1
             return
-        seen.add(seq)
-        if len(seen) > 2 * SEEN_WINDOW:
-            self._floor = max(seen) - SEEN_WINDOW
-            self._seen = {s for s in seen if s >= self._floor}
         self.rx += 1
         if self.seq_first is None or seq < self.seq_first:
             self.seq_first = seq
@@ -180,6 +176,23 @@ class LinkTally:
                 if self.latencies is None:
                     self.latencies = latency_histogram()
                 self.latencies.add(latency_s)
+
+    def _fresh(self, seq: int) -> bool:
+        """Mark `seq` seen; False for a copy, or for one older than the window (arriving
+        thousands of messages late, it can only be a copy)."""
+        back = self._top - seq
+        if back < 0:  # the newest yet: slide the window up to it (a jump: start anew)
+            shifted = self._window << -back if back > -SEEN_WINDOW else 0
+            self._window = (shifted | 1) & _WINDOW_MASK
+            self._top = seq
+            return True
+        if back >= SEEN_WINDOW or self._window >> back & 1:
+            return False
+        self._window |= 1 << back
+        return True
+
+
+_WINDOW_MASK = (1 << SEEN_WINDOW) - 1
 
 
 def latency_histogram() -> AgeHistogram:
