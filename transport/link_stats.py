@@ -155,9 +155,8 @@ class LinkTally:
     ages: AgeHistogram = field(default_factory=AgeHistogram)
     latencies: AgeHistogram | None = None  # only when arrivals are stamped
     # The sequence numbers seen, as an anti-replay window (RFC 4303 3.4.3): bit k of
-    # `_window` is `_top - k`.  A set of them grew by table doublings to ~0.5 MB per link
-    # within two minutes, a follower's largest growth (issue 15: <= 50 MB per follower).
-    _top: int = -1
+    # `_window` is `seq_last - k`.  A set of them grew by table doublings to ~0.5 MB per
+    # link within two minutes, a follower's largest growth (issue 15: <= 50 MB per follower).
     _window: int = 0
 
     def observe(self, seq: int, age_s: float | None, latency_s: float | None = None) -> None:
@@ -179,12 +178,12 @@ class LinkTally:
 
     def _fresh(self, seq: int) -> bool:
         """Mark `seq` seen; False for a copy, or for one older than the window (arriving
-        thousands of messages late, it can only be a copy)."""
-        back = self._top - seq
+        thousands of messages late, it can only be a copy).  The window's top is
+        `seq_last`, which `observe` moves up to a fresh newest `seq`."""
+        back = (-1 if self.seq_last is None else self.seq_last) - seq
         if back < 0:  # the newest yet: slide the window up to it (a jump: start anew)
             shifted = self._window << -back if back > -SEEN_WINDOW else 0
             self._window = (shifted | 1) & _WINDOW_MASK
-            self._top = seq
             return True
         if back >= SEEN_WINDOW or self._window >> back & 1:
             return False
