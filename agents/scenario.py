@@ -214,6 +214,9 @@ class Scenario:
         ring of even length) every link then carries data exactly half a period old both
         ways, which keeps each link's two flows alike.  Odd cycles keep the first colour.
         """
+        return self._tick_groups()[i]
+
+    def _tick_groups(self) -> tuple[int, ...]:
         colour = {0: 0}
         frontier = [0]
         while frontier:
@@ -222,7 +225,7 @@ class Scenario:
                 if b not in colour:
                     colour[b] = 1 - colour[a]
                     frontier.append(b)
-        return colour.get(i, 0)
+        return tuple(colour.get(i, 0) for i in range(self.n))
 
     def tick_phase(self, i: int) -> float:
         """Follower i's tick as a fraction of the period, in [0, 1).
@@ -234,11 +237,11 @@ class Scenario:
         so that members next to each other in index order are at most two slots apart and
         every ring link still carries data about half a period old both ways.
         """
-        group = self.tick_group(i)
-        members = [j for j in range(self.n) if self.tick_group(j) == group]
+        groups = self._tick_groups()
+        members = [j for j in range(self.n) if groups[j] == groups[i]]
         m, k = len(members), members.index(i)
         slot = 2 * k if k < (m + 1) // 2 else 2 * (m - 1 - k) + 1
-        return 0.5 * group + 0.5 * slot / m
+        return 0.5 * groups[i] + 0.5 * slot / m
 
     def steady_from_s(self) -> float:
         start = self.run.steady_from_s
