@@ -159,6 +159,8 @@ class VehicleEndpoint:
     # ---- send ---------------------------------------------------------------------------
     def build(self, msg_id: int, row: tm.Row) -> bytes | None:
         """One packed message of id msg_id describing `row`, or None if not produced here."""
+        if msg_id in tm.FAST_IDS:  # streamed at the control rate: no packer made for it
+            return tm.fast_bytes(self.mav, msg_id, row, self.home)
         pack = self.packer(msg_id, row)
         return None if pack is None else pack()
 
@@ -198,8 +200,7 @@ class VehicleEndpoint:
                 continue
             due = self.next_due[msg_id] + interval
             self.next_due[msg_id] = due if due > now_s else now_s + interval
-            data = (tm.fast_bytes(self.mav, msg_id, row, self.home) if msg_id in tm.FAST_IDS
-                    else self.build(msg_id, row))
+            data = self.build(msg_id, row)
             if data is not None:
                 out += data
         if out:
