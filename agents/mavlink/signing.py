@@ -22,6 +22,7 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from agents.errors import ConfigError
 
@@ -69,8 +70,19 @@ def load_key(path: str | Path) -> bytes:
     return key
 
 
+# A sha256 that has taken each key, copied per frame: the key is hashed once per key, not
+# once per frame (signing and checking run at the control rate).  Keys are configured, few.
+_KEYED: dict[bytes, Any] = {}
+
+
 def signature(key: bytes, frame_to_timestamp: bytes) -> bytes:
-    return hashlib.sha256(key + frame_to_timestamp).digest()[:6]
+    """MAVLink 2's signature: sha256(key + frame up to its timestamp), first 6 bytes."""
+    base = _KEYED.get(key)
+    if base is None:
+        base = _KEYED[key] = hashlib.sha256(key)
+    digest = base.copy()
+    digest.update(frame_to_timestamp)
+    return digest.digest()[:6]
 
 
 class SignatureVerifier:
@@ -85,7 +97,6 @@ class SignatureVerifier:
         if len(key) != KEY_LEN:
             raise ConfigError("signing_key", f"a key is {KEY_LEN} bytes")
         self.key = key
-        self._keyed = hashlib.sha256(key)  # copied per frame: the key is hashed once
         self.clock = clock
         self.allowed_unsigned = allowed_unsigned
         self.streams: dict[tuple[int, int, int], int] = {}
@@ -107,9 +118,7 @@ class SignatureVerifier:
         if len(frame) < 12 + SIGNATURE_LEN:
             return "bad_signature"
         # Signature first: nothing about a badly signed frame may change our state.
-        digest = self._keyed.copy()
-        digest.update(frame[:-6])
-        if not hmac.compare_digest(digest.digest()[:6], frame[-6:]):
+        if not hmac.compare_digest(signature(self.key, frame[:-6]), frame[-6:]):
             return "bad_signature"
         link_id = frame[-SIGNATURE_LEN]
         stamp = int.from_bytes(frame[-12:-6], "little")

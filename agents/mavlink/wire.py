@@ -12,19 +12,17 @@ leaves unparsed can never corrupt the next one.
 
 from __future__ import annotations
 
-import hashlib
 import re
 import struct
 import time
 from collections import Counter
 from dataclasses import dataclass
-from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.dialects.v20.common import MAVError, mcrf4xx
 from pymavlink.dialects.v20.common import MAVLink_message as MAVLinkMessage
 
-from agents.mavlink.signing import SignatureVerifier, signing_timestamp
+from agents.mavlink.signing import SignatureVerifier, signature, signing_timestamp
 
 STX_V2, STX_V1 = 0xFD, 0xFE
 _MARKER = re.compile(b"[\xfd\xfe]")
@@ -215,20 +213,7 @@ def encode_payload(mav: mavlink2.MAVLink, msg_id: int, crc_extra: int, payload: 
     _advance_signing_clock(mav)
     stamped = frame + _STAMP.pack(signing.link_id, signing.timestamp)[:7]
     signing.timestamp += 1
-    digest = _keyed_hash(signing.secret_key)
-    digest.update(stamped)
-    return stamped + digest.digest()[:6]
-
-
-_HASHERS: dict[bytes, Any] = {}
-
-
-def _keyed_hash(key: bytes) -> Any:
-    """A fresh sha256 that has taken `key` (signature = sha256(key + frame + stamp)[:6])."""
-    base = _HASHERS.get(key)
-    if base is None:
-        base = _HASHERS[key] = hashlib.sha256(key)
-    return base.copy()
+    return stamped + signature(signing.secret_key, stamped)
 
 
 def _advance_signing_clock(mav: mavlink2.MAVLink) -> None:
