@@ -270,6 +270,8 @@ class FollowerNode:
             _xy(u),
             state.stamp_s,
             link_flows(self.memory, self.setup),
+            _xy(self.memory.rv_m_s),
+            link_flows(self.memory, self.setup, velocity=True),
         )
         (self.est_out if estimate else self.out).put(encode(msg))
 

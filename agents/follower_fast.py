@@ -58,6 +58,8 @@ class PeerView(NamedTuple):
     r: Sample
     pos: Sample
     flow: Sample | None = None
+    rv: complex | None = None  # order 2: its estimate of the targets' mean velocity
+    vel_flow: Sample | None = None  # order 2: its velocity stage's sum and rate towards us
 
 
 class FollowerMemory(NamedTuple):
@@ -73,6 +75,9 @@ class FollowerMemory(NamedTuple):
     last_r: Sample | None = None
     carry_m: complex = 0j
     rebase_pending: bool = False
+    vel_sums_m_s: tuple[complex, ...] | None = None
+    vel_rates_m_s2: tuple[complex, ...] | None = None
+    rv_m_s: complex = 0j
 
 
 class TickOutput(NamedTuple):
@@ -96,6 +101,7 @@ class FastSetup:
     angle_rad: float
     est_period_s: float
     robust: bool
+    second_order: bool  # the velocity stage (estimator order 2)
     hold_s: float  # ref.hold_after_s
     stale_s: float  # ref.stale_after_s
     peers: tuple[int, ...]  # neighbours and successor, sorted
@@ -111,7 +117,8 @@ class FastSetup:
         step = setup.est_period_s
         return FastSetup(
             setup, setup.index, setup.neighbours, setup.successor, setup.observed,
-            setup.angle_rad, step, setup.robust, setup.hold_after_s, setup.stale_after_s, peers,
+            setup.angle_rad, step, setup.robust, setup.estimator.order == 2, setup.hold_after_s,
+            setup.stale_after_s, peers,
             tuple((j, float(setup.weights[j])) for j in setup.observed),
             tuple((j, float(f) * step)
                   for j, f in zip(setup.neighbours, setup.nbr_fractions, strict=True)),
@@ -133,14 +140,19 @@ _new = tuple.__new__
 def peer_view(msg: FollowerState, receiver: int) -> PeerView:
     """What `receiver` keeps of a neighbour's state (its robust link sum towards `receiver`)."""
     stamp = msg.header.stamp_s
-    flow = None
+    flow = vel_flow = None
     for f in msg.link_flows:
         if f[0] == receiver:
             flow = _new(Sample, (complex(f[1], f[2]), complex(f[3], f[4]), stamp))
             break
+    for f in msg.rv_flows:
+        if f[0] == receiver:
+            vel_flow = _new(Sample, (complex(f[1], f[2]), complex(f[3], f[4]), stamp))
+            break
     return _new(PeerView, (_new(Sample, (complex(*msg.r_m), complex(*msg.dr_m_s), stamp)),
                            _new(Sample, (complex(*msg.pos_m), complex(*msg.vel_m_s),
-                                         msg.vehicle_stamp_s)), flow))
+                                         msg.vehicle_stamp_s)), flow, complex(*msg.rv_m_s),
+                           vel_flow))
 
 
 def observe_target(
@@ -161,7 +173,8 @@ def observe_target(
     m = memory
     return _new(FollowerMemory, (m.phi_m, m.phi_rate_m_s, m.last_tick_s, m.peer_age_s,
                                  {**m.targets, target: track}, m.link_sums_m, m.link_rates_m_s,
-                                 m.last_r, m.carry_m, m.rebase_pending))
+                                 m.last_r, m.carry_m, m.rebase_pending, m.vel_sums_m_s,
+                                 m.vel_rates_m_s2, m.rv_m_s))
 
 
 def ready(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView]) -> bool:
@@ -255,6 +268,11 @@ def _advance(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerV
                               setup.est_period_s)
     if not all(live):
         flows = [f if ok else 0j for f, ok in zip(flows, live, strict=True)]
+    vel_sums, vel_rates, rv = memory.vel_sums_m_s, memory.vel_rates_m_s2, memory.rv_m_s
+    if setup.second_order:
+        vel_sums, vel_rates, rv = _velocity_stage(memory, setup, peers, now_s, dt,
+                                                  p_tilde_rate, live, fractions)
+        flows = [f + s if ok else 0j for f, s, ok in zip(flows, vel_sums, live, strict=True)]
     if setup.robust:
         phi_rate = link_balance_c(flows, their_rates)
         rates = tuple(flows)
@@ -265,8 +283,35 @@ def _advance(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerV
     # A target newly ours is not heard yet: p~_i lacks it, so r_i stays carried until it is.
     pending = memory.rebase_pending and not all(j in memory.targets for j in setup.observed)
     new = _new(FollowerMemory, (phi, phi_rate, now_s, ages, memory.targets, sums, rates,
-                                _new(Sample, (r, dr, now_s)), carry, pending))
+                                _new(Sample, (r, dr, now_s)), carry, pending, vel_sums,
+                                vel_rates, rv))
     return new, r, dr
+
+
+Stage = tuple[tuple[complex, ...], tuple[complex, ...], complex]
+
+
+def _velocity_stage(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView],
+                    now_s: float, dt: float, p_tilde_rate: complex, live: list[bool],
+                    fractions: list[float]) -> Stage:
+    """Order 2 (follower_logic._velocity_stage): its link sums, new flows, and rv_i."""
+    zeros = (0j,) * len(live)
+    sums = tuple([s + dt * f for s, f in zip(memory.vel_sums_m_s or zeros,
+                                             memory.vel_rates_m_s2 or zeros, strict=True)])
+    hold, theirs, rv_nbrs = setup.hold_s, [], []
+    for j, _ in setup.nbr_steps:
+        view = peers[j]
+        flow = view.vel_flow
+        if flow is None:
+            theirs.append(0j)
+        else:
+            value, rate, stamp = flow
+            theirs.append(value + rate * (min(now_s, stamp + hold) - stamp))
+        rv_nbrs.append(view.rv)
+    rv = link_balance_c(sums, theirs) + p_tilde_rate
+    flows = consensus_flows_c(rv, [rv if v is None else v for v in rv_nbrs], fractions,
+                              setup.ref.estimator, setup.est_period_s)
+    return sums, tuple([f if ok else 0j for f, ok in zip(flows, live, strict=True)]), rv
 
 
 def estimator_tick(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerView],
@@ -297,10 +342,13 @@ def follower_tick(memory: FollowerMemory, setup: FastSetup, own: Sample,
     return new_memory, _new(TickOutput, (u, r, dr, z, delta, _stale(memory, setup, peers, now_s)))
 
 
-def link_flows(memory: FollowerMemory,
-               setup: FastSetup) -> tuple[tuple[int, float, float, float, float], ...]:
-    """What the robust estimator publishes: (j, sum x, y, rate x, y) per neighbour."""
+def link_flows(memory: FollowerMemory, setup: FastSetup, velocity: bool = False,
+               ) -> tuple[tuple[int, float, float, float, float], ...]:
+    """What the robust estimator publishes: (j, sum x, y, rate x, y) per neighbour
+    (`velocity`: its velocity stage's, order 2)."""
     sums, rates = memory.link_sums_m, memory.link_rates_m_s
+    if velocity:
+        sums, rates = memory.vel_sums_m_s, memory.vel_rates_m_s2
     if sums is None or rates is None:
         return ()
     return tuple([(j, s.real, s.imag, f.real, f.imag)

@@ -24,14 +24,19 @@ def regroup(memory: FollowerMemory, old: FastSetup, new: FastSetup) -> FollowerM
     peers = set(new.peers)
     ages = {j: a for j, a in memory.peer_age_s.items() if j in peers}
     targets = {j: s for j, s in memory.targets.items() if j in new.observed}
-    sums, rates = memory.link_sums_m, memory.link_rates_m_s
-    if sums is not None and rates is not None:
-        kept = {j: k for k, j in enumerate(old.neighbours)}
-        sums = tuple(sums[kept[j]] if j in kept else 0j for j in new.neighbours)
-        rates = tuple(rates[kept[j]] if j in kept else 0j for j in new.neighbours)
+    kept = {j: k for k, j in enumerate(old.neighbours)}
+
+    def per_new_link(per_old: tuple[complex, ...] | None) -> tuple[complex, ...] | None:
+        if per_old is None:
+            return None
+        return tuple(per_old[kept[j]] if j in kept else 0j for j in new.neighbours)
+
     m = memory
-    return FollowerMemory(m.phi_m, m.phi_rate_m_s, m.last_tick_s, ages, targets, sums, rates,
-                          m.last_r, m.carry_m, True)
+    return m._replace(peer_age_s=ages, targets=targets, rebase_pending=True,
+                      link_sums_m=per_new_link(m.link_sums_m),
+                      link_rates_m_s=per_new_link(m.link_rates_m_s),
+                      vel_sums_m_s=per_new_link(m.vel_sums_m_s),
+                      vel_rates_m_s2=per_new_link(m.vel_rates_m_s2))
 
 
 def with_missing(peers: Mapping[int, PeerView], setup: FastSetup, memory: FollowerMemory,
@@ -56,7 +61,4 @@ def join_running(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, P
     hold = setup.ref.hold_after_s
     value = sum((s.held(now_s, hold) for s in heard), 0j) / len(heard)
     rate = sum((s.held_rate(now_s, hold) for s in heard), 0j) / len(heard)
-    m = memory
-    return FollowerMemory(m.phi_m, m.phi_rate_m_s, m.last_tick_s, m.peer_age_s, m.targets,
-                          m.link_sums_m, m.link_rates_m_s, Sample(value, rate, now_s),
-                          m.carry_m, True)
+    return memory._replace(last_r=Sample(value, rate, now_s), rebase_pending=True)

@@ -29,7 +29,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.core.controller import enclosing_control
-from agents.core.estimator import consensus_flows, finite_difference_velocity, link_balance
+from agents.core.estimator import (
+    EstimatorParams,
+    consensus_flows,
+    finite_difference_velocity,
+    link_balance,
+)
 from agents.estimate_carry import REBASE_TAU_S, next_carry
 
 # Its weights and edge fractions are tuples: the follower process builds one too, without
@@ -72,6 +77,8 @@ class PeerView:
     r: Sample  # its estimate r_j and dr_j/dt
     pos: Sample  # its position and velocity
     flow: Sample | None = None  # robust: its running sum and rate on its link to us
+    rv: Sample | None = None  # order 2: its estimate of the targets' mean velocity (held)
+    vel_flow: Sample | None = None  # order 2: its velocity stage's sum and rate towards us
 
 
 @dataclass(frozen=True)
@@ -92,6 +99,11 @@ class FollowerMemory:
     last_r: Sample | None = None
     carry_m: FloatArray = field(default_factory=lambda: np.zeros(2))
     rebase_pending: bool = False
+    # Order 2 (agents.scenario.Gains.estimator_order): the velocity stage's own running
+    # sum and flow per neighbour (d, 2), and the estimate rv_i it published last.
+    vel_sums_m_s: FloatArray | None = None
+    vel_rates_m_s2: FloatArray | None = None
+    rv_m_s: FloatArray = field(default_factory=lambda: np.zeros(2))
 
 
 @dataclass(frozen=True)
@@ -107,18 +119,17 @@ class TickOutput:
 def peer_view(msg: FollowerState, receiver: int) -> PeerView:
     """What `receiver` keeps of a neighbour's state (its robust link sum towards `receiver`)."""
     stamp = msg.header.stamp_s
-    flow = next(
-        (
-            Sample(np.array(f[1:3]), np.array(f[3:5]), stamp)
-            for f in msg.link_flows
-            if f[0] == receiver
-        ),
-        None,
-    )
+
+    def towards_us(flows: tuple[tuple[int, float, float, float, float], ...]) -> Sample | None:
+        return next((Sample(np.array(f[1:3]), np.array(f[3:5]), stamp)
+                     for f in flows if f[0] == receiver), None)
+
     return PeerView(
         Sample(np.asarray(msg.r_m), np.asarray(msg.dr_m_s), stamp),
         Sample(np.asarray(msg.pos_m), np.asarray(msg.vel_m_s), msg.vehicle_stamp_s),
-        flow,
+        towards_us(msg.link_flows),
+        Sample(np.asarray(msg.rv_m_s), ZERO2, stamp),
+        towards_us(msg.rv_flows),
     )
 
 
@@ -176,13 +187,14 @@ def reference(
 
 
 def _their_flows(
-    setup: FollowerSetup, peers: dict[int, PeerView], now_s: float
+    setup: FollowerSetup, peers: dict[int, PeerView], now_s: float, velocity: bool = False
 ) -> tuple[FloatArray, FloatArray]:
-    """(d, 2) each neighbour's running sum on its link to us, carried to now_s, and its rate."""
+    """(d, 2) each neighbour's running sum on its link to us, carried to now_s, and its rate
+    (`velocity`: its velocity stage's)."""
     sums, rates = np.zeros((len(setup.neighbours), 2)), np.zeros((len(setup.neighbours), 2))
     limit = setup.hold_after_s
     for k, j in enumerate(setup.neighbours):
-        flow = peers[j].flow
+        flow = peers[j].vel_flow if velocity else peers[j].flow
         if flow is not None:
             sums[k], rates[k] = flow.held(now_s, limit), flow.held_rate(now_s, limit)
     return sums, rates
@@ -218,8 +230,8 @@ def _estimate(
         phi = memory.phi_m + dt * memory.phi_rate_m_s
         carry = next_carry(memory.carry_m, phi + p_tilde, resume, dt)
         phi_rate = (live * consensus_flows(phi + p_tilde + carry, r_nbrs, *args)).sum(axis=0)
-        fields = {"phi_m": phi, "phi_rate_m_s": phi_rate, "carry_m": carry}
-        return fields, phi + p_tilde + carry, phi_rate + p_tilde_rate - carry / tau
+        paper = {"phi_m": phi, "phi_rate_m_s": phi_rate, "carry_m": carry}
+        return paper, phi + p_tilde + carry, phi_rate + p_tilde_rate - carry / tau
     d = len(setup.neighbours)
     sums = np.zeros((d, 2)) if memory.link_sums_m is None else memory.link_sums_m
     rates = np.zeros((d, 2)) if memory.link_rates_m_s is None else memory.link_rates_m_s
@@ -228,10 +240,40 @@ def _estimate(
     phi = link_balance(sums, their_sums)
     carry = next_carry(memory.carry_m, phi + p_tilde, resume, dt)
     flows = live * consensus_flows(phi + p_tilde + carry, r_nbrs, *args)
+    fields: dict[str, object] = {"link_sums_m": sums, "carry_m": carry}  # robust
+    if setup.estimator.order == 2:
+        vel_sums, vel_flows, rv = _velocity_stage(memory, setup, peers, now_s, dt, p_tilde_rate,
+                                                  live, args)
+        fields.update(vel_sums_m_s=vel_sums, vel_rates_m_s2=vel_flows, rv_m_s=rv)
+        # Each link's sum also integrates its velocity sum: Phi_i' = consensus + Psi_i,
+        # and the link's two ends still balance exactly.
+        flows = flows + live * vel_sums
     phi_rate = link_balance(flows, their_rates)
-    fields = {"phi_m": phi, "phi_rate_m_s": phi_rate, "link_sums_m": sums,
-              "link_rates_m_s": flows, "carry_m": carry}
+    fields.update(phi_m=phi, phi_rate_m_s=phi_rate, link_rates_m_s=flows)
     return fields, phi + p_tilde + carry, phi_rate + p_tilde_rate - carry / tau
+
+
+def _velocity_stage(
+    memory: FollowerMemory,
+    setup: FollowerSetup,
+    peers: dict[int, PeerView],
+    now_s: float,
+    dt: float,
+    p_tilde_rate: FloatArray,
+    live: FloatArray,
+    args: tuple[FloatArray, EstimatorParams, float],
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Order 2: the same robust consensus on rv_i = Psi_i + dp~_i/dt, the targets' mean
+    velocity; returns its link sums (Psi_i = their balance), its new flows, and rv_i."""
+    d = len(setup.neighbours)
+    sums = np.zeros((d, 2)) if memory.vel_sums_m_s is None else memory.vel_sums_m_s
+    rates = np.zeros((d, 2)) if memory.vel_rates_m_s2 is None else memory.vel_rates_m_s2
+    sums = sums + dt * rates
+    their_sums, _ = _their_flows(setup, peers, now_s, velocity=True)
+    rv = link_balance(sums, their_sums) + p_tilde_rate
+    heard = [peers[j].rv for j in setup.neighbours]
+    rv_nbrs = np.array([rv if h is None else h.value for h in heard]).reshape(-1, 2)
+    return sums, live * consensus_flows(rv, rv_nbrs, *args), rv
 
 
 def _smoothed_ages(
@@ -312,12 +354,16 @@ def follower_tick(
 
 
 def link_flows(
-    memory: FollowerMemory, setup: FollowerSetup
+    memory: FollowerMemory, setup: FollowerSetup, velocity: bool = False
 ) -> tuple[tuple[int, float, float, float, float], ...]:
-    """What the robust estimator publishes: (j, sum x, y, rate x, y) per neighbour."""
-    if memory.link_sums_m is None or memory.link_rates_m_s is None:
+    """What the robust estimator publishes: (j, sum x, y, rate x, y) per neighbour
+    (`velocity`: its velocity stage's, order 2)."""
+    sums, rates = memory.link_sums_m, memory.link_rates_m_s
+    if velocity:
+        sums, rates = memory.vel_sums_m_s, memory.vel_rates_m_s2
+    if sums is None or rates is None:
         return ()
     return tuple(
         (j, float(s[0]), float(s[1]), float(f[0]), float(f[1]))
-        for j, s, f in zip(setup.neighbours, memory.link_sums_m, memory.link_rates_m_s, strict=True)
+        for j, s, f in zip(setup.neighbours, sums, rates, strict=True)
     )

@@ -57,12 +57,23 @@ def regroup(memory: FollowerMemory, old: FollowerSetup, new: FollowerSetup) -> F
     memory = replace(memory, peer_age_s=ages, targets=targets, rebase_pending=True)
     if memory.link_sums_m is None or memory.link_rates_m_s is None:
         return memory
-    sums, rates = np.zeros((len(new.neighbours), 2)), np.zeros((len(new.neighbours), 2))
+    m = memory
+    return replace(m, link_sums_m=_per_new_link(m.link_sums_m, old, new),
+                   link_rates_m_s=_per_new_link(m.link_rates_m_s, old, new),
+                   vel_sums_m_s=_per_new_link(m.vel_sums_m_s, old, new),
+                   vel_rates_m_s2=_per_new_link(m.vel_rates_m_s2, old, new))
+
+
+def _per_new_link(per_old: FloatArray | None, old: FollowerSetup,
+                  new: FollowerSetup) -> FloatArray | None:
+    """(d_new, 2): a kept link's row, zero for a new link; None stays None."""
+    if per_old is None:
+        return None
+    out = np.zeros((len(new.neighbours), 2))
     for k, j in enumerate(new.neighbours):
         if j in old.neighbours:
-            sums[k] = memory.link_sums_m[old.neighbours.index(j)]
-            rates[k] = memory.link_rates_m_s[old.neighbours.index(j)]
-    return replace(memory, link_sums_m=sums, link_rates_m_s=rates)
+            out[k] = per_old[old.neighbours.index(j)]
+    return out
 
 
 def with_missing(peers: dict[int, PeerView], setup: FollowerSetup, memory: FollowerMemory,

@@ -21,6 +21,9 @@ def check_admissible(scenario: Scenario, whole_run: bool = True) -> None:
         _check_speed(spec, j, scenario.beta_m_s)
     if whole_run:
         _check_spread(scenario)
+    if scenario.gains.estimator_order == 2 and scenario.network.estimator != "robust":
+        raise ScenarioError("gains.estimator_order",
+                            "2 needs the robust estimator (network.estimator = \"robust\")")
     run = scenario.run
     if run.dt_s >= run.duration_s:
         raise ScenarioError("run.dt_s", f"must be shorter than run.duration_s ({run.duration_s})")

@@ -269,11 +269,14 @@ def _share(t: Table, key: str, default: float) -> float:
 def _gains(t: Table) -> Gains:
     d = Gains()
     known_keys(t, d.__dataclass_fields__, "gains")
-    shares = ("step_fraction", "estimator_step_fraction")
-    names = [k for k in d.__dataclass_fields__ if k not in shares]
+    special = ("step_fraction", "estimator_step_fraction", "estimator_order")
+    names = [k for k in d.__dataclass_fields__ if k not in special]
     fraction = _share(t, "step_fraction", d.step_fraction)
     est = None if "estimator_step_fraction" not in t else _share(t, "estimator_step_fraction", 0)
-    g = Gains(step_fraction=fraction, estimator_step_fraction=est,
+    order = t.get("estimator_order", d.estimator_order)
+    if isinstance(order, bool) or order not in (1, 2):
+        raise ScenarioError("gains.estimator_order", f"must be 1 or 2, got {order!r}")
+    g = Gains(step_fraction=fraction, estimator_step_fraction=est, estimator_order=int(order),
               **{k: positive(t, k, "gains", getattr(d, k)) for k in names})
     for key in ("alpha1", "alpha2", "alpha3"):
         if getattr(g, key) < 1.0:

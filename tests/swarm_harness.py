@@ -26,7 +26,8 @@ from agents.follower_logic import (
 )
 from agents.scenario import NetworkConfig, Scenario
 
-Published = tuple[Sample, Sample, dict[int, Sample]]  # r, pos, flow towards each neighbour
+# r, pos, flow towards each neighbour, and (estimator order 2) rv and velocity flows
+Published = tuple[Sample, Sample, dict[int, Sample], Sample, dict[int, Sample]]
 
 
 def with_estimator(scenario: Scenario, estimator: str) -> Scenario:
@@ -43,11 +44,13 @@ def _publish(
     vel: np.ndarray,
     t: float,
 ) -> Published:
-    flows = {
-        j: Sample(np.array([sx, sy]), np.array([fx, fy]), t)
-        for j, sx, sy, fx, fy in link_flows(memory, setup)
-    }
-    return Sample(r.copy(), dr.copy(), t), Sample(pos.copy(), vel.copy(), t), flows
+    flows, vel_flows = (
+        {j: Sample(np.array([sx, sy]), np.array([fx, fy]), t)
+         for j, sx, sy, fx, fy in link_flows(memory, setup, velocity)}
+        for velocity in (False, True)
+    )
+    rv = Sample(memory.rv_m_s.copy(), np.zeros(2), t)
+    return Sample(r.copy(), dr.copy(), t), Sample(pos.copy(), vel.copy(), t), flows, rv, vel_flows
 
 
 Mail = dict[int, list[tuple[int, int, Published]]]  # tick -> (receiver, sender, message)
@@ -117,7 +120,8 @@ def _post(
 
 
 def _deliver(arrivals: list[tuple[int, int, Published]], views: list[dict[int, PeerView]]) -> None:
-    for receiver, sender, (r, pos, flows) in arrivals:
+    for receiver, sender, (r, pos, flows, rv, vel_flows) in arrivals:
         known = views[receiver].get(sender)
         if known is None or r.stamp_s > known.r.stamp_s:  # a late old message loses
-            views[receiver][sender] = PeerView(r, pos, flows.get(receiver))
+            views[receiver][sender] = PeerView(r, pos, flows.get(receiver), rv,
+                                               vel_flows.get(receiver))

@@ -87,6 +87,11 @@ class FollowerState:
     # Robust estimator (codec v2): per neighbour j, (j, running sum of this follower's
     # flow on link j [m] x, y, its current rate [m/s] x, y).  Empty for the paper's.
     link_flows: tuple[LinkFlow, ...] = ()
+    # Second-order robust estimator (codec v3): the follower's consensus estimate of the
+    # targets' mean velocity rv_i [m/s], and per neighbour j its velocity stage's link flow
+    # (j, running sum x, y [m/s], current rate x, y [m/s^2]).  Zero and empty at order 1.
+    rv_m_s: Vec2 = (0.0, 0.0)
+    rv_flows: tuple[LinkFlow, ...] = ()
 
 
 @dataclass(frozen=True)

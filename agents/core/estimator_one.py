@@ -25,11 +25,13 @@ else:
 
 @dataclass(frozen=True)
 class EstimatorParams:
-    """k_e and alpha1 of the paper; `step_fraction` caps one step's flow (0: plain Euler)."""
+    """k_e and alpha1 of the paper; `step_fraction` caps one step's flow (0: plain Euler);
+    `order` 2 adds the velocity stage (agents.scenario.Gains.estimator_order)."""
 
     k_e: float
     alpha1: float
     step_fraction: float = 0.5
+    order: int = 1
 
 
 def consensus_flows_c(

@@ -48,23 +48,27 @@ def _steps(
     p_tilde: FloatArray,
     p_tilde_rate: FloatArray,
     phi: FloatArray,
+    psi: FloatArray,
     pos: FloatArray,
     est: FloatArray,
     cmd: FloatArray,
 ) -> None:
     """Advance steps k0..k1-1 in place.
 
-    gains = (k_e, alpha1, k_z, alpha2, k_d, alpha3, rho_d, w_d, the controller's cap);
-    cap is the estimator step's.
+    gains = (k_e, alpha1, k_z, alpha2, k_d, alpha3, rho_d, w_d, the controller's cap,
+    the estimator's order); cap is the estimator step's; psi the velocity stage's state.
     """
     n = phi.shape[0]
     k_e, inv_a1, k_z, inv_a2 = gains[0], 1.0 / gains[1], gains[2], 1.0 / gains[3]
     k_d, inv_a3, rho_d, w_d = gains[4], 1.0 / gains[5], gains[6], gains[7]
-    rate = np.zeros((n, 2))
-    dt_e, cap_u = dt / substeps, gains[8]
+    rate, vrate = np.zeros((n, 2)), np.zeros((n, 2))
+    dt_e, cap_u, second = dt / substeps, gains[8], gains[9] > 1.5
     for k in range(k0, k1):
         r = phi + p_tilde[k]
         _consensus(r, tails, heads, fractions, inv_a1, k_e, cap, rate)
+        if second:
+            _consensus(psi + p_tilde_rate[k], tails, heads, fractions, inv_a1, k_e, cap, vrate)
+            rate += psi
         for i in range(n):
             s = succ[i]
             rel_x, rel_y = pos[k, i, 0] - r[i, 0], pos[k, i, 1] - r[i, 1]
@@ -81,11 +85,17 @@ def _steps(
         if k + 1 < pos.shape[0]:
             pos[k + 1] = pos[k] + dt * cmd[k]
             phi += dt_e * rate
+            psi += dt_e * vrate
             # Between control steps p~ moves linearly to its next sample.
             for j in range(1, substeps):
                 r = phi + p_tilde[k] + (j * dt_e) * p_tilde_rate[k + 1]
                 _consensus(r, tails, heads, fractions, inv_a1, k_e, cap, rate)
+                if second:
+                    rv = psi + p_tilde_rate[k + 1]
+                    _consensus(rv, tails, heads, fractions, inv_a1, k_e, cap, vrate)
+                    rate += psi
                 phi += dt_e * rate
+                psi += dt_e * vrate
 
 
 def _consensus(

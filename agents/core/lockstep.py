@@ -20,6 +20,7 @@ from agents.core import fastloop
 from agents.core.controller import enclosing_control
 from agents.core.estimator import (
     EdgeOperators,
+    EstimatorParams,
     edge_fractions,
     estimator_rate,
     observation_weights,
@@ -46,6 +47,7 @@ class _Loop:
     p_tilde: FloatArray  # (k, n, 2) references from exact observations
     p_tilde_rate: FloatArray  # (k, n, 2) their finite-difference rates
     phi: FloatArray  # (n, 2) estimator state
+    psi: FloatArray  # (n, 2) its velocity stage's (estimator order 2; stays zero at order 1)
     pos: FloatArray  # (k, n, 2)
     est: FloatArray
     cmd: FloatArray
@@ -56,10 +58,10 @@ class _Loop:
         edges = EdgeOperators.from_adjacency(s.adjacency())
         params, gains = estimator_params(s), control_gains(s)
         succ, angles = np.asarray(s.successor), np.asarray(s.pattern.angles_rad)
-        phi = self.phi
+        phi, psi = self.phi, self.psi
         for k in range(k0, k1):
             r = phi + self.p_tilde[k]
-            phi_rate = estimator_rate(r, edges, params, dt_e)
+            phi_rate, psi_rate = self._rates(r, psi, self.p_tilde_rate[k], edges, params, dt_e)
             p = self.pos[k]
             out = enclosing_control(
                 p, p[succ], r, phi_rate + self.p_tilde_rate[k], angles, gains, dt
@@ -68,12 +70,23 @@ class _Loop:
             self.cmd[k] = out.u_m_s
             if k + 1 < len(self.pos):
                 self.pos[k + 1] = p + dt * out.u_m_s
-                phi = phi + dt_e * phi_rate
+                phi, psi = phi + dt_e * phi_rate, psi + dt_e * psi_rate
                 # Between control steps p~ moves linearly to its next sample.
                 for j in range(1, sub):
                     r = phi + self.p_tilde[k] + (j * dt_e) * self.p_tilde_rate[k + 1]
-                    phi = phi + dt_e * estimator_rate(r, edges, params, dt_e)
-        self.phi[:] = phi
+                    phi_rate, psi_rate = self._rates(
+                        r, psi, self.p_tilde_rate[k + 1], edges, params, dt_e)
+                    phi, psi = phi + dt_e * phi_rate, psi + dt_e * psi_rate
+        self.phi[:], self.psi[:] = phi, psi
+
+    @staticmethod
+    def _rates(r: FloatArray, psi: FloatArray, p_tilde_rate: FloatArray, edges: EdgeOperators,
+               params: EstimatorParams, dt_e: float) -> tuple[FloatArray, FloatArray]:
+        """dPhi/dt and dPsi/dt: the velocity stage agrees on psi + dp~/dt and feeds psi in."""
+        phi_rate = estimator_rate(r, edges, params, dt_e)
+        if params.order == 1:
+            return phi_rate, np.zeros_like(psi)
+        return phi_rate + psi, estimator_rate(psi + p_tilde_rate, edges, params, dt_e)
 
     def numba_steps(self, k0: int, k1: int) -> None:
         s = self.scenario
@@ -82,7 +95,7 @@ class _Loop:
         tails, heads = np.nonzero(adjacency)
         gains = np.array(
             [g.k_e, g.alpha1, g.k_z, g.alpha2, g.k_d, g.alpha3, pat.rho_d_m, pat.w_d_rad_s,
-             rate_cap(g.step_fraction, self.dt_s)]
+             rate_cap(g.step_fraction, self.dt_s), g.estimator_order]
         )
         fastloop.run_steps(
             k0,
@@ -99,6 +112,7 @@ class _Loop:
             self.p_tilde,
             self.p_tilde_rate,
             self.phi,
+            self.psi,
             self.pos,
             self.est,
             self.cmd,
@@ -138,6 +152,7 @@ def simulate_lockstep(
         substeps,
         p_tilde,
         p_tilde_rate,
+        np.zeros((scenario.n, 2)),
         np.zeros((scenario.n, 2)),
         pos,
         np.empty_like(pos),

@@ -14,4 +14,4 @@ def control_gains(scenario: Scenario) -> ControlGains:
 
 def estimator_params(scenario: Scenario) -> EstimatorParams:
     g = scenario.gains
-    return EstimatorParams(g.k_e, g.alpha1, g.est_step_fraction)
+    return EstimatorParams(g.k_e, g.alpha1, g.est_step_fraction, g.estimator_order)

@@ -41,6 +41,18 @@ def test_numba_engine_matches_on_a_general_graph() -> None:
     np.testing.assert_allclose(fast.command_m_s, ref.command_m_s, atol=1e-8)
 
 
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("estimator_dt_s", [None, 0.005])
+def test_numba_engine_matches_with_the_velocity_stage(estimator_dt_s: float | None) -> None:
+    ring = load_scenario("ring16")
+    scenario = dataclasses.replace(ring, gains=dataclasses.replace(ring.gains, estimator_order=2))
+    ref = simulate_lockstep(scenario, 0.02, 10.0, engine="numpy", estimator_dt_s=estimator_dt_s)
+    fast = simulate_lockstep(scenario, 0.02, 10.0, engine="numba", estimator_dt_s=estimator_dt_s)
+    np.testing.assert_allclose(fast.follower_pos_m, ref.follower_pos_m, atol=1e-9)
+    np.testing.assert_allclose(fast.estimate_m, ref.estimate_m, atol=1e-9)
+    np.testing.assert_allclose(fast.command_m_s, ref.command_m_s, atol=1e-8)
+
+
 def test_unknown_engine_is_refused() -> None:
     with pytest.raises(ValueError, match="engine"):
         simulate_lockstep(load_scenario(), 0.1, 1.0, engine="gpu")

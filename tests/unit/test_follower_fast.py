@@ -24,7 +24,7 @@ from agents import follower_fast as fast
 from agents import follower_fast_membership as fast_m
 from agents import follower_logic as ref
 from agents import follower_membership as ref_m
-from agents.scenario import NetworkConfig
+from agents.scenario import NetworkConfig, Scenario
 from agents.scenario_file import load_scenario
 from transport.messages import FollowerState, Header
 
@@ -41,6 +41,14 @@ OPS = ("observe", "observe_all", "hear", "hear_all", "hear_all", "est", "est", "
        "tick", "tick", "regroup", "drop")
 
 
+def with_estimator(scenario: Scenario, estimator: str) -> Scenario:
+    """`robust2`: the robust estimator with its velocity stage (estimator order 2)."""
+    order = 2 if estimator == "robust2" else 1
+    gains = dataclasses.replace(scenario.gains, estimator_order=order)
+    return dataclasses.replace(scenario, gains=gains,
+                               network=NetworkConfig(estimator.removesuffix("2")))
+
+
 def arr(c: complex) -> np.ndarray:
     return np.array([c.real, c.imag])
 
@@ -50,8 +58,10 @@ def ref_sample(s: fast.Sample) -> ref.Sample:
 
 
 def ref_view(v: fast.PeerView) -> ref.PeerView:
+    rv = None if v.rv is None else ref.Sample(arr(v.rv), np.zeros(2), v.r.stamp_s)
     return ref.PeerView(ref_sample(v.r), ref_sample(v.pos),
-                        None if v.flow is None else ref_sample(v.flow))
+                        None if v.flow is None else ref_sample(v.flow), rv,
+                        None if v.vel_flow is None else ref_sample(v.vel_flow))
 
 
 def close(a: Any, b: Any, what: str) -> None:
@@ -83,8 +93,11 @@ def same_memory(r: ref.FollowerMemory, f: fast.FollowerMemory) -> None:
     for j, track in r.targets.items():
         same_sample(track, f.targets[j], f"target {j}")
     same_sample(r.last_r, f.last_r, "last r")
+    close(r.rv_m_s, arr(f.rv_m_s), "rv")
     for a, b, what in ((r.link_sums_m, f.link_sums_m, "sums"),
-                       (r.link_rates_m_s, f.link_rates_m_s, "rates")):
+                       (r.link_rates_m_s, f.link_rates_m_s, "rates"),
+                       (r.vel_sums_m_s, f.vel_sums_m_s, "velocity sums"),
+                       (r.vel_rates_m_s2, f.vel_rates_m_s2, "velocity rates")):
         assert (a is None) == (b is None), what
         if a is not None and b is not None:
             close(a, planar(b), what)
@@ -94,7 +107,7 @@ class Twins:
     """One follower, run by the reference and by the twin on the same inputs."""
 
     def __init__(self, name: str, estimator: str, index: int, est_period_s: float) -> None:
-        self.scenario = dataclasses.replace(SCENARIOS[name], network=NetworkConfig(estimator))
+        self.scenario = with_estimator(SCENARIOS[name], estimator)
         self.index, self.est_period_s = index, est_period_s
         self.members = set(range(self.scenario.n))
         self.ref_setup, self.fast_setup = self._setups(self.members)
@@ -109,10 +122,11 @@ class Twins:
 
     def check(self) -> None:
         same_memory(self.ref_mem, self.fast_mem)
-        a = ref.link_flows(self.ref_mem, self.ref_setup)
-        b = fast.link_flows(self.fast_mem, self.fast_setup)
-        assert [f[0] for f in a] == [f[0] for f in b]
-        close([f[1:] for f in a], [f[1:] for f in b], "published link flows")
+        for velocity in (False, True):
+            a = ref.link_flows(self.ref_mem, self.ref_setup, velocity)
+            b = fast.link_flows(self.fast_mem, self.fast_setup, velocity)
+            assert [f[0] for f in a] == [f[0] for f in b]
+            close([f[1:] for f in a], [f[1:] for f in b], f"published link flows {velocity}")
 
     def observe(self, target: int, pos: complex, back_s: float) -> None:
         stamp = self.now_s - back_s
@@ -124,19 +138,24 @@ class Twins:
         `flow`, its link sums towards us and towards another follower (both from `values`)."""
         stamp = self.now_s - age_s
         links: tuple[tuple[int, float, float, float, float], ...] = ()
+        vel_links: tuple[tuple[int, float, float, float, float], ...] = ()
         if flow:
             sums = [(values[4], values[5]), (values[5], values[4])]
             links = tuple((k, f.real, f.imag, g.real, g.imag)
                           for k, (f, g) in zip((self.index, j + 1), sums, strict=True))
+            vel_links = tuple((k, g.imag, g.real, f.imag, -f.real)
+                              for k, (f, g) in zip((self.index, j + 1), sums, strict=True))
         xy = [(v.real, v.imag) for v in values]
+        rv = (values[5].imag, values[1].real) if vel_links else (0.0, 0.0)
         msg = FollowerState(Header(f"follower-{j}", 0, stamp), j, xy[0], xy[1], (0.0, 0.0),
-                            xy[2], xy[3], (0.0, 0.0), stamp - 0.01, links)
+                            xy[2], xy[3], (0.0, 0.0), stamp - 0.01, links, rv, vel_links)
         view = fast.peer_view(msg, self.index)
         expected = ref.peer_view(msg, self.index)
         got = ref_view(view)
         for a, b in ((expected.r, got.r), (expected.pos, got.pos)):
             same_sample(a, fast.Sample(complex(*b.value), complex(*b.rate), b.stamp_s), "view")
         assert (expected.flow is None) == (view.flow is None)
+        assert (expected.vel_flow is None) == (view.vel_flow is None)
         if j in self.members and j != self.index:
             self.peers[j] = view
 
@@ -236,7 +255,7 @@ def _apply(twins: Twins, op: str, draws: Draws) -> None:
 @settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     name=st.sampled_from(sorted(SCENARIOS)),
-    estimator=st.sampled_from(["robust", "paper"]),
+    estimator=st.sampled_from(["robust", "robust2", "paper"]),
     index=st.integers(0, 3),
     est_period_s=st.sampled_from([0.02, 0.005]),
     ops=st.lists(st.tuples(st.sampled_from(OPS), st.integers(0, 2**32)), min_size=20,
@@ -251,7 +270,7 @@ def test_the_fast_follower_is_the_reference_over_random_runs(
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("estimator", ["robust", "paper"])
+@pytest.mark.parametrize("estimator", ["robust", "robust2", "paper"])
 def test_a_lockstep_ring_through_both_agrees_while_it_converges(estimator: str) -> None:
     """Not only random states: the paper's case, every follower on both paths, checked at
     every step while the estimates travel metres and their gaps end near zero (where the
@@ -261,7 +280,7 @@ def test_a_lockstep_ring_through_both_agrees_while_it_converges(estimator: str) 
 
 def _ring(estimator: str, steps: int) -> float:
     """Every follower's final distance to the LAP (the twins agree all the way there)."""
-    scenario = dataclasses.replace(SCENARIOS["paper"], network=NetworkConfig(estimator))
+    scenario = with_estimator(SCENARIOS["paper"], estimator)
     n, dt = scenario.n, 0.02
     twins = [Twins("paper", estimator, i, dt) for i in range(n)]
     targets = [complex(*t.initial_pos_m) for t in scenario.targets]
@@ -275,11 +294,13 @@ def _ring(estimator: str, steps: int) -> float:
                      tw.fast_setup, tw.now_s)[0], 0j, tw.now_s) for tw in twins]
         for tw in twins:
             for j in tw.fast_setup.peers:
-                flows = fast.link_flows(twins[j].fast_mem, twins[j].fast_setup)
-                link = next((fast.Sample(complex(f[1], f[2]), complex(f[3], f[4]), tw.now_s)
-                             for f in flows if f[0] == tw.index), None)
+                link, vel_link = (
+                    next((fast.Sample(complex(f[1], f[2]), complex(f[3], f[4]), tw.now_s)
+                          for f in fast.link_flows(twins[j].fast_mem, twins[j].fast_setup, v)
+                          if f[0] == tw.index), None)
+                    for v in (False, True))
                 tw.peers[j] = fast.PeerView(published[j], fast.Sample(pos[j], 0j, tw.now_s),
-                                            link)
+                                            link, twins[j].fast_mem.rv_m_s, vel_link)
         for i, tw in enumerate(twins):
             tw.step(0.0, True, pos[i])  # compares the outputs
             if k % 10 == 0:

@@ -172,3 +172,19 @@ def test_estimator_step_fraction_is_its_own_share_and_checked() -> None:
     assert (own.gains.est_step_fraction, own.gains.step_fraction) == (0.9, 0.5)
     with pytest.raises(ScenarioError, match=r"gains\.estimator_step_fraction"):
         parse_scenario(with_share("1.5"))
+
+
+def test_estimator_order_is_one_or_two_and_two_needs_the_robust_estimator() -> None:
+    base = load_scenario_text()
+
+    def with_order(value: str, extra: str = "") -> str:
+        return base.replace("alpha3 = 3.0", f"alpha3 = 3.0\nestimator_order = {value}") + extra
+
+    assert parse_scenario(base).gains.estimator_order == 1
+    assert parse_scenario(with_order("2")).gains.estimator_order == 2
+    assert load_scenario("ring16").gains.estimator_order == 2
+    for bad in ("3", "1.5", "true", '"2"'):
+        with pytest.raises(ScenarioError, match=r"gains\.estimator_order"):
+            parse_scenario(with_order(bad))
+    with pytest.raises(ScenarioError, match=r"gains\.estimator_order.*robust"):
+        parse_scenario(with_order("2", '\n[network]\nestimator = "paper"\n'))
