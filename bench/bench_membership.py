@@ -9,6 +9,7 @@ Cases:
   kill      paper, follower 1 SIGKILLed at FAULT_AT, restarted by the launcher
   sim       paper, the simulator restarts at FAULT_AT (vehicles reboot: take-off again)
   ring16x3  ring16, followers 2, 7 and 12 SIGKILLed at once, --restart never
+  ring16x3r ring16, the same three SIGKILLed at once, restarted by the launcher (default)
 
 Run: python bench/bench_membership.py [--cases leave,join] [--duration 100] [--at 30]
 [--repeats 3] (each run takes its duration plus ~20 s of start-up).  With several repeats
@@ -32,14 +33,14 @@ JOIN_AFTER_S = 15.0
 
 def cases(at_s: float) -> dict[str, tuple[str, list[str]]]:
     a = f"{at_s:g}"
+    kills = [x for j in (2, 7, 12) for x in ("--fault", f"{a}:kill:follower-{j}")]
     return {
         "leave": ("paper", ["--fault", f"{a}:leave:follower-2"]),
         "join": ("paper", ["--fault", f"{a}:leave:follower-2:{JOIN_AFTER_S:g}"]),
         "kill": ("paper", ["--fault", f"{a}:kill:follower-1"]),
         "sim": ("paper", ["--fault", f"{a}:restart:sim:1"]),
-        "ring16x3": ("ring16", ["--restart", "never", "--fault", f"{a}:kill:follower-2",
-                                "--fault", f"{a}:kill:follower-7", "--fault",
-                                f"{a}:kill:follower-12"]),
+        "ring16x3": ("ring16", ["--restart", "never", *kills]),
+        "ring16x3r": ("ring16", kills),
     }
 
 
