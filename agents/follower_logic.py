@@ -22,11 +22,10 @@ of chasing a stale bearing.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import NDArray
 
 from agents.core.controller import enclosing_control
 from agents.core.estimator import (
@@ -37,83 +36,20 @@ from agents.core.estimator import (
 )
 from agents.estimate_carry import REBASE_TAU_S, next_carry
 
+# The types live beside it; importers keep finding them here.
+from agents.follower_memory import ZERO2 as ZERO2
+from agents.follower_memory import FloatArray as FloatArray
+from agents.follower_memory import FollowerMemory as FollowerMemory
+from agents.follower_memory import PeerView as PeerView
+from agents.follower_memory import Sample as Sample
+from agents.follower_memory import TickOutput as TickOutput
+
 # Its weights and edge fractions are tuples: the follower process builds one too, without
 # numpy (agents.follower_fast); this module makes arrays of them where it computes.
 from agents.follower_setup import FollowerSetup as FollowerSetup
 
 if TYPE_CHECKING:
     from transport.messages import FollowerState
-
-FloatArray = NDArray[np.float64]
-ZERO2 = np.zeros(2)
-
-
-@dataclass(frozen=True)
-class Sample:
-    """A timestamped position (or estimate) with its rate, for first-order extrapolation."""
-
-    value: FloatArray  # (2,)
-    rate: FloatArray  # (2,)
-    stamp_s: float
-
-    def at(self, t_s: float) -> FloatArray:
-        return self.value + self.rate * (t_s - self.stamp_s)
-
-    def fresh(self, t_s: float, limit_s: float) -> bool:
-        return t_s - self.stamp_s <= limit_s
-
-    def held(self, t_s: float, limit_s: float) -> FloatArray:
-        """The value at t_s, extrapolated over at most `limit_s` past its stamp, then held."""
-        return self.at(min(t_s, self.stamp_s + limit_s))
-
-    def held_rate(self, t_s: float, limit_s: float) -> FloatArray:
-        return self.rate if self.fresh(t_s, limit_s) else ZERO2
-
-
-@dataclass(frozen=True)
-class PeerView:
-    """Latest state a neighbour or the successor published."""
-
-    r: Sample  # its estimate r_j and dr_j/dt
-    pos: Sample  # its position and velocity
-    flow: Sample | None = None  # robust: its running sum and rate on its link to us
-    rv: Sample | None = None  # order 2: its estimate of the targets' mean velocity (held)
-    vel_flow: Sample | None = None  # order 2: its velocity stage's sum and rate towards us
-
-
-@dataclass(frozen=True)
-class FollowerMemory:
-    """Estimator state carried from tick to tick."""
-
-    phi_m: FloatArray = field(default_factory=lambda: np.zeros(2))
-    phi_rate_m_s: FloatArray = field(default_factory=lambda: np.zeros(2))
-    last_tick_s: float | None = None
-    # Per peer, the age of its data at use, low-passed: the step limits follow the typical
-    # age, not each jittered sample (which would make the commands jump).
-    peer_age_s: dict[int, float] = field(default_factory=dict)
-    targets: dict[int, Sample] = field(default_factory=dict)
-    link_sums_m: FloatArray | None = None  # robust: (d, 2) own running sum per neighbour
-    link_rates_m_s: FloatArray | None = None  # robust: (d, 2) the flows of the last tick
-    # Continuity across membership changes (agents.estimate_carry): the last r_i we
-    # computed, the carry added to it, and whether the next tick starts a new carry.
-    last_r: Sample | None = None
-    carry_m: FloatArray = field(default_factory=lambda: np.zeros(2))
-    rebase_pending: bool = False
-    # Order 2 (agents.scenario.Gains.estimator_order): the velocity stage's own running
-    # sum and flow per neighbour (d, 2), and the estimate rv_i it published last.
-    vel_sums_m_s: FloatArray | None = None
-    vel_rates_m_s2: FloatArray | None = None
-    rv_m_s: FloatArray = field(default_factory=lambda: np.zeros(2))
-
-
-@dataclass(frozen=True)
-class TickOutput:
-    u_m_s: FloatArray
-    r_m: FloatArray
-    dr_m_s: FloatArray
-    z_m: float
-    delta: float
-    stale: tuple[str, ...]  # inputs older than stale_after_s (or missing)
 
 
 def peer_view(msg: FollowerState, receiver: int) -> PeerView:
