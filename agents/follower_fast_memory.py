@@ -98,7 +98,8 @@ class FastSetup:
         step = setup.est_period_s
         return FastSetup(
             setup, setup.index, setup.neighbours, setup.successor, setup.observed,
-            setup.angle_rad, step, setup.robust, setup.estimator.order == 2, setup.hold_after_s,
+            setup.angle_rad, step, setup.robust,
+            setup.robust and setup.estimator.order == 2, setup.hold_after_s,
             setup.stale_after_s, peers,
             tuple((j, float(setup.weights[j])) for j in setup.observed),
             tuple((j, float(f) * step)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LOSS_MODELS, Scenario
+from agents.errors import ScenarioError
+from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LOSS_MODELS, Gains, Scenario
 from agents.scenario_network import IMPAIRMENT_KEYS, impairment
 
 FLAGS = {key: "--" + key.replace("_", "-") for key in IMPAIRMENT_KEYS}
@@ -13,7 +14,11 @@ FLAGS = {key: "--" + key.replace("_", "-") for key in IMPAIRMENT_KEYS}
 
 def add_network_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("network (overrides the scenario's [network] table)")
-    g.add_argument("--estimator", choices=ESTIMATORS, default=None, help="robust (default) | paper")
+    g.add_argument("--estimator", choices=ESTIMATORS, default=None,
+                   help="robust (default) | paper (the paper's law: estimator order 1)")
+    g.add_argument("--estimator-order", type=int, choices=(1, 2), default=None,
+                   help="1: the paper's estimator; 2: with the velocity stage (robust only; "
+                        "the scenario's [gains] estimator_order by default)")
     g.add_argument("--link", choices=LINK_PROTOCOLS, default=None, help="Zenoh link protocol")
     g.add_argument("--delay-ms", type=float, default=None, help="added one-way delay per message")
     g.add_argument("--jitter-ms", type=float, default=None, help="std of the added delay")
@@ -33,7 +38,7 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
 def network_overrides(args: argparse.Namespace) -> list[str]:
     """The flags given, as argv for a child process."""
     argv: list[str] = []
-    for dest in ("estimator", "link", *IMPAIRMENT_KEYS, "impair_seed"):
+    for dest in ("estimator", "estimator_order", "link", *IMPAIRMENT_KEYS, "impair_seed"):
         value = getattr(args, dest, None)
         if value is not None:
             argv += ["--" + dest.replace("_", "-"), str(value)]
@@ -53,4 +58,14 @@ def apply_network_arguments(scenario: Scenario, args: argparse.Namespace) -> Sce
             net = dataclasses.replace(net, **{dest: getattr(args, dest)})
     if getattr(args, "impair_seed", None) is not None:
         net = dataclasses.replace(net, seed=args.impair_seed)
-    return dataclasses.replace(scenario, network=net)
+    return dataclasses.replace(scenario, network=net, gains=_gains(scenario, net.estimator, args))
+
+
+def _gains(scenario: Scenario, estimator: str, args: argparse.Namespace) -> Gains:
+    """The velocity stage is the robust estimator's: `--estimator paper` is order 1."""
+    order = getattr(args, "estimator_order", None)
+    if order is None:
+        order = 1 if estimator == "paper" else scenario.gains.estimator_order
+    if order == 2 and estimator != "robust":
+        raise ScenarioError("--estimator-order", "2 needs the robust estimator")
+    return dataclasses.replace(scenario.gains, estimator_order=order)

@@ -1,0 +1,35 @@
+"""Command-line overrides of the estimator: `--estimator paper` is the paper's law."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+
+from agents.errors import ScenarioError
+from agents.network_args import add_network_arguments, apply_network_arguments, network_overrides
+from agents.scenario_file import load_scenario
+
+
+def parse(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    add_network_arguments(parser)
+    return parser.parse_args(list(argv))
+
+
+def test_the_estimator_order_follows_the_scenario_unless_overridden() -> None:
+    ring = load_scenario("ring16")
+    assert apply_network_arguments(ring, parse()).gains.estimator_order == 2
+    assert apply_network_arguments(ring, parse("--estimator-order", "1")).gains.estimator_order == 1
+    paper = apply_network_arguments(ring, parse("--estimator", "paper"))
+    assert (paper.network.estimator, paper.gains.estimator_order) == ("paper", 1)
+    assert apply_network_arguments(load_scenario(), parse("--estimator-order", "2")) \
+        .gains.estimator_order == 2
+    with pytest.raises(ScenarioError, match="--estimator-order"):
+        apply_network_arguments(ring, parse("--estimator", "paper", "--estimator-order", "2"))
+
+
+def test_the_order_reaches_the_children() -> None:
+    assert network_overrides(parse("--estimator-order", "1")) == ["--estimator-order", "1"]
+    with pytest.raises(SystemExit):
+        parse("--estimator-order", "3")
