@@ -87,10 +87,9 @@ class FollowerState:
     # Robust estimator (codec v2): per neighbour j, (j, running sum of this follower's
     # flow on link j [m] x, y, its current rate [m/s] x, y).  Empty for the paper's.
     link_flows: tuple[LinkFlow, ...] = ()
-    # Second-order estimator (codec v3): the estimate rv_i = Psi_i + dp~_i/dt of the targets'
-    # mean velocity [m/s], and its velocity stage's link flows, shaped as link_flows but one
-    # derivative up: (j, running sum x, y [m/s], its current rate x, y [m/s^2]).  Zero and
-    # empty for the first-order estimators.
+    # Second-order robust estimator (codec v3): the follower's consensus estimate of the
+    # targets' mean velocity rv_i [m/s], and per neighbour j its velocity stage's link flow
+    # (j, running sum x, y [m/s], current rate x, y [m/s^2]).  Zero and empty at order 1.
     rv_m_s: Vec2 = (0.0, 0.0)
     rv_flows: tuple[LinkFlow, ...] = ()
 
