@@ -2,8 +2,9 @@
 
     python bench/bench_codec.py [--calls 20000] [--repeats 7]
 
-For FollowerState (a robust ring follower with 2 link flows), TargetObservation and
-TruthSnapshot (16 followers, 2 targets), prints the time per call of
+For FollowerState (a robust ring follower with 2 link flows; "FollowerState rv": the same
+with the second-order estimator's rv_m_s and 2 velocity-stage flows, codec v3),
+TargetObservation and TruthSnapshot (16 followers, 2 targets), prints the time per call of
 - `encode(msg)`;
 - `decode(payload)`;
 - the whole receive path: `encode(msg)` plus `LinkDecoder(limits=DEFAULT_LIMITS).decode()`
@@ -18,6 +19,7 @@ Single process, no network; runs in a few seconds.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import time
 from collections.abc import Callable
@@ -46,6 +48,12 @@ def follower_state(seq: int, now_s: float) -> FollowerState:
         ((2, 0.125, -0.25, 0.001, 0.002), (4, -0.5, 0.75, -0.003, 0.0)))
 
 
+def follower_state_rv(seq: int, now_s: float) -> FollowerState:
+    return dataclasses.replace(
+        follower_state(seq, now_s), rv_m_s=(0.25, -0.5),
+        rv_flows=((2, 0.0125, -0.025, 0.5, 0.25), (4, -0.05, 0.075, -0.125, 0.0)))
+
+
 def target_observation(seq: int, now_s: float) -> TargetObservation:
     return TargetObservation(Header("sim-0", seq, now_s - 0.002), 3, 1, (4.5, -1.25),
                              now_s - 0.003, 0.05)
@@ -60,6 +68,7 @@ def truth_snapshot(seq: int, now_s: float) -> TruthSnapshot:
 
 CASES: dict[str, tuple[Callable[[int, float], Message], str]] = {
     "FollowerState": (follower_state, KEYS.follower_state(3)),
+    "FollowerState rv": (follower_state_rv, KEYS.follower_state(3)),
     "TargetObservation": (target_observation, KEYS.sensor_targets(3)),
     "TruthSnapshot": (truth_snapshot, KEYS.truth()),
 }

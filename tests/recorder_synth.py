@@ -82,9 +82,12 @@ class SynthRun:
     def state(self, stamper: Stamper, i: int, t_s: float) -> FollowerState:
         pos = formation_m(self.scenario, t_s)[i]
         u = (0.1 * math.cos(t_s), 0.1 * math.sin(t_s))
+        # A second-order follower's state (codec v3): rv and one velocity-stage flow, so the
+        # recorder's paths (MCAP JSON, read-back) carry every field.
         return FollowerState(stamper.header(self.start_stamp_s + t_s), i, vec2(lap_m(t_s)),
                              LAP_VEL_M_S, (0.0, 0.0), vec2(pos), LAP_VEL_M_S, u,
-                             self.start_stamp_s + t_s)
+                             self.start_stamp_s + t_s, rv_m_s=LAP_VEL_M_S,
+                             rv_flows=(((i + 1) % self.scenario.n, 0.01, -0.01, 0.0, 0.5),))
 
     def control(self, stamper: Stamper, command: str) -> RunControl:
         return RunControl(stamper.header(), command, self.start_stamp_s, self.duration_s)

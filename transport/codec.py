@@ -43,7 +43,8 @@ from transport.messages import (
     TruthSnapshot,
 )
 
-CODEC_VERSION = 2  # 2: FollowerState.link_flows (robust estimator)
+# 2: FollowerState.link_flows (robust estimator); 3: its rv_m_s, rv_flows (second order)
+CODEC_VERSION = 3
 MIN_VERSION = 1
 MAX_PAYLOAD_BYTES = 1 << 16
 _MAX_ITEMS = 256  # longest list/map accepted (vehicles in a snapshot, counters)
@@ -63,6 +64,7 @@ SCHEMAS: dict[type, tuple[int, tuple[Field, ...]]] = {
         Field("phi_m", "vec2"), Field("pos_m", "vec2"), Field("vel_m_s", "vec2"),
         Field("u_m_s", "vec2"), Field("vehicle_stamp_s", "float"),
         Field("link_flows", "flows", since=2),
+        Field("rv_m_s", "vec2", since=3), Field("rv_flows", "flows", since=3),
     )),
     TargetObservation: (2, (
         Field("observer_index", "int"), Field("target_index", "int"), Field("pos_m", "vec2"),
@@ -124,7 +126,8 @@ def _vec(v: Any, name: str, dim: int) -> tuple[float, ...]:
 
 
 def _flow(v: Any, name: str) -> tuple[int, float, float, float, float]:
-    """(neighbour index, running sum x, y [m], current rate x, y [m/s])."""
+    """(neighbour index, running sum x, y, current rate x, y): [m], [m/s] for link_flows,
+    one derivative up for rv_flows."""
     j, fx, fy, rx, ry = _seq(v, name, 5)
     return (_int(j, name), _float(fx, name), _float(fy, name), _float(rx, name), _float(ry, name))
 

@@ -65,7 +65,8 @@ def _type_schema(tp: Any) -> dict[str, Any]:
         if all(i == items[0] for i in items):
             return {"type": "array", "items": items[0], "minItems": len(args),
                     "maxItems": len(args)}
-        return {"type": "array", "prefixItems": items}
+        return {"type": "array", "prefixItems": items, "minItems": len(args),
+                "maxItems": len(args)}
     if origin in (Mapping, dict) or tp is dict:
         value = _type_schema(args[1]) if args else {}
         return {"type": "object", "additionalProperties": value}

@@ -62,9 +62,11 @@ def check_reference(msg: Any, key: str, now_s: float, lim: Limits = DEFAULT_LIMI
         return reason
     if isinstance(msg, FollowerState):
         positions = [msg.r_m, msg.phi_m, msg.pos_m]
-        speeds = [msg.dr_m_s, msg.vel_m_s, msg.u_m_s]
+        speeds = [msg.dr_m_s, msg.vel_m_s, msg.u_m_s, msg.rv_m_s]
         flows = [f[1:] for f in msg.link_flows]
-        numbers = [*(x for v in positions + speeds + flows for x in v), msg.vehicle_stamp_s]
+        rv_flows = [f[1:] for f in msg.rv_flows]  # codec v3: sums in m/s, rates in m/s^2
+        numbers = [*(x for v in positions + speeds + flows + rv_flows for x in v),
+                   msg.vehicle_stamp_s]
         if not _finite(numbers):
             return "nonfinite"
         if msg.vehicle_stamp_s > now_s + lim.future_s:
@@ -73,6 +75,9 @@ def check_reference(msg: Any, key: str, now_s: float, lim: Limits = DEFAULT_LIMI
             return "impossible"
         if not _bounded([f[:2] for f in flows], lim.max_pos_m) or not _bounded(
                 [f[2:] for f in flows], lim.max_speed_m_s):
+            return "impossible"
+        if not _bounded([f[:2] for f in rv_flows], lim.max_speed_m_s) or not _bounded(
+                [f[2:] for f in rv_flows], lim.max_accel_m_s2):
             return "impossible"
         return None
     if isinstance(msg, TargetObservation):
@@ -100,8 +105,9 @@ class AgeHistogramReference:
 
 # ---- strategies ----------------------------------------------------------------------------
 num = st.one_of(
-    st.floats(-2e3, 2e3), st.floats(), st.sampled_from([math.nan, math.inf, -math.inf, 1e308,
-                                                        -1e308, 1e5, 1e3, 1e5 + 1e-9]),
+    st.floats(-2e4, 2e4), st.floats(), st.sampled_from([math.nan, math.inf, -math.inf, 1e308,
+                                                        -1e308, 1e5, 1e3, 1e5 + 1e-9, 1e4,
+                                                        1e4 + 1e-9]),
     st.integers(-10**6, 10**6), st.booleans())
 odd = num | st.sampled_from(["x", None, (1.0,), ()])  # what a message built in code may hold
 stamp = st.floats(NOW - 100.0, NOW + 2.0) | st.sampled_from([NOW, NOW + 0.5, math.nan, math.inf])
@@ -113,7 +119,7 @@ flow = st.tuples(st.integers(0, 3), num, num, num, num) | st.tuples(st.integers(
 
 MESSAGES = st.one_of(
     st.builds(FollowerState, header, st.integers(0, 3), v2, v2, v2, v2, v2, v2, stamp | num,
-              st.lists(flow, max_size=3).map(tuple)),
+              st.lists(flow, max_size=3).map(tuple), v2, st.lists(flow, max_size=3).map(tuple)),
     st.builds(TargetObservation, header, st.integers(0, 3), st.integers(0, 1), v2, stamp | odd),
     st.builds(TruthSnapshot, header, num, st.lists(v3, max_size=3).map(tuple),
               st.lists(v3, max_size=3).map(tuple), st.lists(v2, max_size=2).map(tuple),
@@ -136,7 +142,8 @@ def verdict(fn: Any, msg: Message, key: str, now_s: float, lim: Limits) -> Any:
 
 @settings(max_examples=300, deadline=None)
 @given(MESSAGES, KEY, st.sampled_from([NOW, NOW - 1.0, NOW + 100.0]),
-       st.sampled_from([DEFAULT_LIMITS, Limits(max_age_s=math.inf), Limits(future_s=0.0)]))
+       st.sampled_from([DEFAULT_LIMITS, Limits(max_age_s=math.inf), Limits(future_s=0.0),
+                        Limits(max_accel_m_s2=1.0)]))
 def test_check_same_verdict_as_reference(msg: Message, key: str, now_s: float,
                                          lim: Limits) -> None:
     assert verdict(check, msg, key, now_s, lim) == verdict(check_reference, msg, key, now_s, lim)
@@ -147,12 +154,20 @@ def test_follower_bounds_at_the_edge() -> None:
     base = dict(r_m=(0.0, 0.0), dr_m_s=(0.0, 0.0), phi_m=(0.0, 0.0), pos_m=(0.0, 0.0),
                 vel_m_s=(0.0, 0.0), u_m_s=(0.0, 0.0), vehicle_stamp_s=NOW)
     key = KEYS.follower_state(1)
-    for field, limit in (("pos_m", 1e5), ("u_m_s", 1e3)):
+    for field, limit in (("pos_m", 1e5), ("u_m_s", 1e3), ("rv_m_s", 1e3), ("rv_sum", 1e3),
+                         ("rv_rate", 1e4)):
+        verdicts = []
         for value in (limit, math.nextafter(limit, math.inf)):
             for vec in ((value, 0.0), (value / math.sqrt(2), value / math.sqrt(2))):
+                over: dict[str, object] = {field: vec}
+                if field.startswith("rv_") and field != "rv_m_s":
+                    sums, rates = (vec, (0.0, 0.0)) if field == "rv_sum" else ((0.0, 0.0), vec)
+                    over = {"rv_flows": ((2, *sums, *rates),)}
                 msg = FollowerState(Header("follower-1", 0, NOW), 1,
-                                    **{**base, field: vec})  # type: ignore[arg-type]
+                                    **{**base, **over})  # type: ignore[arg-type]
                 assert check(msg, key, NOW) == check_reference(msg, key, NOW)
+                verdicts.append(check(msg, key, NOW))
+        assert verdicts[0] is None and verdicts[2] == "impossible", field
 
 
 def test_key_caches_are_bounded() -> None:

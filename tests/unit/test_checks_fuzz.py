@@ -44,6 +44,25 @@ def test_plausible_state_passes_and_each_fault_is_named() -> None:
     assert check(obs, KEYS.sensor_targets(1), NOW) == "impossible"
 
 
+def test_second_order_fields_checked() -> None:
+    """rv_m_s is a speed, rv_flows' sums speeds and their rates accelerations: a NaN or a
+    forged value beyond the limits is refused, and named."""
+    key = KEYS.follower_state(1)
+    accel = DEFAULT_LIMITS.max_accel_m_s2
+    fine = state(rv_m_s=(0.5, -0.5), rv_flows=((0, 0.25, 0.0, accel, 0.0),))
+    assert check(fine, key, NOW) is None
+    assert check(state(rv_m_s=(math.nan, 0.0)), key, NOW) == "nonfinite"
+    assert check(state(rv_m_s=(0.0, 2e3)), key, NOW) == "impossible"
+    assert check(state(rv_flows=((0, 0.0, math.inf, 0.0, 0.0),)), key, NOW) == "nonfinite"
+    assert check(state(rv_flows=((0, 2e3, 0.0, 0.0, 0.0),)), key, NOW) == "impossible"
+    forged = state(rv_flows=((0, 0.25, 0.0, 0.0, 1.5 * accel),))
+    assert check(forged, key, NOW) == "impossible"
+    dec = Decoder(limits=DEFAULT_LIMITS)  # and off the wire: dropped and counted
+    for msg in (fine, forged):
+        dec.decode(Received(key, encode(msg), NOW))
+    assert dec.accepted == 1 and dec.dropped == {"rejected_impossible": 1}
+
+
 def test_one_future_stamped_state_cannot_freeze_the_view() -> None:
     kept = NOW + 0.4  # accepted (within the tolerance), then the next real one replaces it
     assert newer(NOW + 0.02, kept, now_s=NOW + 0.02)
@@ -65,17 +84,21 @@ vec = st.tuples(anyfloat, anyfloat)
 
 
 @settings(max_examples=300, deadline=None)
-@given(vec, vec, vec, vec, anyfloat, anyfloat)
+@given(vec, vec, vec, vec, vec, vec, anyfloat, anyfloat)
 def test_check_never_raises_and_refuses_every_nonfinite(r: tuple[float, float],
                                                         dr: tuple[float, float],
                                                         pos: tuple[float, float],
                                                         vel: tuple[float, float],
+                                                        rv: tuple[float, float],
+                                                        rv_rate: tuple[float, float],
                                                         stamp: float, vstamp: float) -> None:
-    msg = state(r_m=r, dr_m_s=dr, pos_m=pos, vel_m_s=vel, vehicle_stamp_s=vstamp)
+    msg = state(r_m=r, dr_m_s=dr, pos_m=pos, vel_m_s=vel, vehicle_stamp_s=vstamp, rv_m_s=rv,
+                rv_flows=((0, 0.0, 0.0, *rv_rate),))
     msg = FollowerState(Header("follower-1", 0, stamp), *[getattr(msg, f) for f in (
-        "index", "r_m", "dr_m_s", "phi_m", "pos_m", "vel_m_s", "u_m_s", "vehicle_stamp_s")])
+        "index", "r_m", "dr_m_s", "phi_m", "pos_m", "vel_m_s", "u_m_s", "vehicle_stamp_s",
+        "link_flows", "rv_m_s", "rv_flows")])
     verdict = check(msg, KEYS.follower_state(1), NOW)
-    numbers = [*r, *dr, *pos, *vel, stamp, vstamp]
+    numbers = [*r, *dr, *pos, *vel, *rv, *rv_rate, stamp, vstamp]
     if not all(math.isfinite(x) for x in numbers):
         assert verdict is not None
 
@@ -84,7 +107,7 @@ def test_check_never_raises_and_refuses_every_nonfinite(r: tuple[float, float],
 @given(finite, finite, st.integers(0, 2**31), finite)
 def test_codec_round_trips_any_finite_state(x: float, y: float, seq: int, stamp: float) -> None:
     msg = FollowerState(Header("follower-3", seq, stamp), 3, (x, y), (y, x), (x, x), (y, y),
-                        (0.0, x), (y, 0.0), stamp, ((1, x, y, x, y),))
+                        (0.0, x), (y, 0.0), stamp, ((1, x, y, x, y),), (y, x), ((2, y, x, y, x),))
     assert decode(encode(msg)) == msg
 
 

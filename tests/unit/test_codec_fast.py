@@ -46,7 +46,7 @@ flow = st.tuples(nat, fl, fl, fl, fl)
 
 MESSAGES = st.one_of(
     st.builds(FollowerState, header, nat, v2, v2, v2, v2, v2, v2, fl,
-              st.lists(flow, max_size=4).map(tuple)),
+              st.lists(flow, max_size=4).map(tuple), v2, st.lists(flow, max_size=4).map(tuple)),
     st.builds(TargetObservation, header, nat, nat, v2, fl, st.none() | fl),
     st.builds(TruthSnapshot, header, fl, st.lists(v3, max_size=5).map(tuple),
               st.lists(v3, max_size=5).map(tuple), st.lists(v2, max_size=3).map(tuple),
@@ -74,7 +74,8 @@ JUNK = st.one_of(
 H = Header("follower-1", 3, 1.5)
 SAMPLES: list[Message] = [
     FollowerState(H, 1, (1.0, 2.0), (0.0, 0.5), (0.25, 0.0), (1.0, 1.0), (0.0, 0.0),
-                  (0.0, -0.5), 1.0, ((0, 1.0, 2.0, 0.0, 0.5), (2, -1.0, 0.0, 0.25, 0.0))),
+                  (0.0, -0.5), 1.0, ((0, 1.0, 2.0, 0.0, 0.5), (2, -1.0, 0.0, 0.25, 0.0)),
+                  (0.5, -0.25), ((0, 0.125, 0.0, -3.0, 0.5), (2, -0.5, 0.25, 0.0, 2.0))),
     TargetObservation(H, 1, 0, (1.0, 2.0), 1.0, 0.1),
     TargetObservation(H, 1, 0, (1.0, 2.0), 1.0, None),
     TruthSnapshot(H, 1.0, ((1.0, 2.0, 3.0), (0.0, 0.5, 1.0)), ((0.0, 0.0, 0.0),) * 2,
@@ -165,10 +166,13 @@ def test_mutated_wire_arrays_same_outcome(msg: Message, data: st.DataObject) -> 
 @given(MESSAGES)
 def test_older_and_newer_versions_same_outcome(msg: Message) -> None:
     wire = msgpack.unpackb(encode_reference(msg))
-    for version in (1, 3, 2.0, True):
+    for version in (1, 2, 4, 3.0, True):
         same_decode(bytes(msgpack.packb([version, *wire[1:]])))
-    if isinstance(msg, FollowerState):  # a version-1 state has no link flows
-        assert same_decode(bytes(msgpack.packb([1, *wire[1:-1]])))[0] == "ok"
+    if isinstance(msg, FollowerState):  # a version-2 state has no rv, version 1 no flows
+        older = dataclasses.replace(msg, rv_m_s=(0.0, 0.0), rv_flows=())
+        assert same_decode(bytes(msgpack.packb([2, *wire[1:-2]]))) == ("ok", typed(older))
+        older = dataclasses.replace(older, link_flows=())
+        assert same_decode(bytes(msgpack.packb([1, *wire[1:-3]]))) == ("ok", typed(older))
 
 
 @settings(max_examples=150, deadline=None)

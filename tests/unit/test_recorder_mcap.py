@@ -45,6 +45,8 @@ def conforms(value: Any, schema: dict[str, Any]) -> bool:
     if isinstance(value, list):
         if not schema.get("minItems", 0) <= len(value) <= schema.get("maxItems", len(value)):
             return False
+        if "prefixItems" in schema:  # a tuple of mixed types, e.g. a LinkFlow
+            return all(conforms(v, s) for v, s in zip(value, schema["prefixItems"], strict=True))
         return all(conforms(v, schema["items"]) for v in value)
     return True
 
@@ -108,6 +110,12 @@ def test_schema_rejects_what_the_type_forbids() -> None:
     assert not conforms({"header": {}, "r_m": [1.0]}, schema)
     assert dataclass_schema(TargetObservation)["properties"]["noise_std_m"]["type"] == [
         "number", "null"]
+    flow = [2, 0.5, 0.5, 0.0, 1.0]  # a LinkFlow: (j, sums x, y, rates x, y)
+    for name in ("link_flows", "rv_flows"):
+        assert conforms([flow], schema["properties"][name])
+        assert not conforms([flow[:4]], schema["properties"][name])
+        assert not conforms([[0.5, *flow[1:]]], schema["properties"][name])
+    assert not conforms([1.0], schema["properties"]["rv_m_s"])
 
 
 @pytest.mark.timeout(30)

@@ -47,6 +47,8 @@ def follower_state(**over: object) -> FollowerState:
 ALL_MESSAGES: list[Message] = [
     follower_state(),
     follower_state(link_flows=((0, 0.5, -0.25, 0.01, 0.0), (2, -1.0, 2.0, 0.0, -0.02))),
+    follower_state(link_flows=((0, 0.5, -0.25, 0.01, 0.0),), rv_m_s=(0.25, -0.125),
+                   rv_flows=((0, 0.05, -0.02, 1.5, 0.0),)),
     TargetObservation(H, 1, 0, (3.0, 4.0), 1700000000.1, 0.05),
     TargetObservation(H, 2, 1, (3.0, 4.0), 1700000000.1),
     TruthSnapshot(
@@ -165,19 +167,49 @@ def test_unknown_process_state_rejected() -> None:
 
 
 def test_version_1_follower_state_decodes_without_link_flows() -> None:
-    v1 = msgpack.unpackb(encode(follower_state()))[:-1]
+    v1 = msgpack.unpackb(encode(follower_state()))[:-3]
     v1[0] = 1
     assert decode(bytes(msgpack.packb(v1))) == follower_state()
 
 
+def test_version_2_follower_state_decodes_with_first_order_defaults() -> None:
+    """An older peer (codec v2, before the second-order estimator) still reads: rv is zero."""
+    flows = [[0, 0.5, -0.25, 0.01, 0.0]]
+    v2 = [2, 1, H.sender_id, H.seq, H.stamp_s, 1, [1.0, 2.0], [0.1, -0.2], [0.0, 0.5],
+          [10.0, -20.0], [0.3, 0.4], [0.5, 0.6], 1699999999.9, flows]
+    out = decode(bytes(msgpack.packb(v2)))
+    assert isinstance(out, FollowerState)
+    assert out.rv_m_s == (0.0, 0.0) and out.rv_flows == ()
+    assert out == follower_state(link_flows=((0, 0.5, -0.25, 0.01, 0.0),))
+    second_order = encode(ALL_MESSAGES[2])  # what a v3 sender's rv fields look like, cut off
+    assert decode(bytes(msgpack.packb([2, *msgpack.unpackb(second_order)[1:-2]]))) == out
+    with pytest.raises(CodecError) as err:  # v2 with the v3 fields is not a v2 message
+        decode(bytes(msgpack.packb([2, *msgpack.unpackb(second_order)[1:]])))
+    assert err.value.reason == "schema"
+
+
+@pytest.mark.parametrize("position", [-3, -1], ids=["link_flows", "rv_flows"])
 @pytest.mark.parametrize(
-    "flow", [(0, 1.0, 2.0), (-1, 0.0, 0.0, 0.0, 0.0), (0, 1.0, float("nan"), 0, 0)]
+    "flow", [(0, 1.0, 2.0), (-1, 0.0, 0.0, 0.0, 0.0), (0, 1.0, float("nan"), 0, 0),
+             (True, 0.0, 0.0, 0.0, 0.0), (0, 1.0, 2.0, 3.0, "x")]
 )
-def test_malformed_link_flows_rejected(flow: tuple[float, ...]) -> None:
+def test_malformed_flows_rejected(position: int, flow: tuple[float, ...]) -> None:
     payload = msgpack.unpackb(encode(follower_state()))
-    payload[-1] = [list(flow)]
+    payload[position] = [list(flow)]
     with pytest.raises(CodecError):
         decode(bytes(msgpack.packb(payload)))
+
+
+@pytest.mark.parametrize(("rv", "reason"), [([0.0], "schema"), ([0.0, float("inf")], "non_finite"),
+                                            ([0.0, None], "type"), (0.0, "type")])
+def test_malformed_rv_rejected(rv: object, reason: str) -> None:
+    payload = msgpack.unpackb(encode(follower_state()))
+    payload[-2] = rv
+    with pytest.raises(CodecError) as err:
+        decode(bytes(msgpack.packb(payload)))
+    assert err.value.reason == reason
+    with pytest.raises(CodecError):
+        encode(follower_state(rv_m_s=(math.nan, 0.0)))
 
 
 def test_unknown_run_command_rejected() -> None:
@@ -232,14 +264,15 @@ def test_stamper_increments_seq_and_uses_clock() -> None:
 
 
 def test_newer_field_defaults_when_decoding_older_version(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A version bump appends a field with a default; version-1 payloads still decode."""
+    """A version bump appends a field with a default; older payloads still decode."""
     tag, fields = codec.SCHEMAS[TargetObservation]
-    bumped = (*fields[:-1], codec.Field("noise_std_m", "opt_float", since=2))
+    bumped_version = CODEC_VERSION + 1
+    bumped = (*fields[:-1], codec.Field("noise_std_m", "opt_float", since=bumped_version))
     monkeypatch.setitem(codec.SCHEMAS, TargetObservation, (tag, bumped))
     monkeypatch.setitem(codec._BY_TAG, tag, (TargetObservation, bumped))
-    monkeypatch.setattr(codec, "CODEC_VERSION", 2)
-    v1 = raw(1, tag, "sim-0", 3, 1.0, 0, 1, [1.0, 2.0], 0.5)
-    out = decode(v1)
+    monkeypatch.setattr(codec, "CODEC_VERSION", bumped_version)
+    old = raw(CODEC_VERSION, tag, "sim-0", 3, 1.0, 0, 1, [1.0, 2.0], 0.5)
+    out = decode(old)
     assert isinstance(out, TargetObservation) and out.noise_std_m is None
     assert decode(encode(ALL_MESSAGES[1])) == ALL_MESSAGES[1]
 
