@@ -75,9 +75,8 @@ def test_a_faster_estimator_brings_ring16_inside_the_bounds_at_a_50_hz_loop() ->
     assert fast[0] < 0.5 * EPS_M and fast[1] < 0.5 * EPS_M and fast[2] < 0.5 * EPS_DELTA
     # In lock-step a bigger share of each link's gap per step shortens the lag as a faster
     # step does (0.089 m at 0.9); between processes, one tick late, it oscillates instead.
-    wide = _errors(dataclasses.replace(ring16, gains=dataclasses.replace(ring16.gains,
-                                                                         step_fraction=0.9)),
-                   0.02)
+    wide_gains = dataclasses.replace(ring16.gains, estimator_step_fraction=0.9)
+    wide = _errors(dataclasses.replace(ring16, gains=wide_gains), 0.02)
     assert wide[0] < 0.6 * slow[0] and wide[0] < EPS_M and wide[1] < EPS_M
     # The velocity stage needs no faster step: the shipped ring at the control rate.
     second = _errors(shipped, 0.02)
