@@ -58,7 +58,9 @@ def enclosing_control(
     z = rho - gains.rho_d_m
     # Bearing of the successor relative to our own, both seen from r_i.
     turn = as_complex(succ_pos_m - r_m) * rel.conj()
-    delta = np.mod(np.arctan2(turn.imag, turn.real), TWO_PI) / angles_rad - 1.0
+    # The gap wraps to within half a turn of a_i (controller_one says why).
+    offset = np.mod(np.arctan2(turn.imag, turn.real) - angles_rad + np.pi, TWO_PI) - np.pi
+    delta = offset / angles_rad
     cap = rate_cap(gains.step_fraction, dt_s)
     w_z = limited_sig(z, 1.0 / gains.alpha2, gains.k_z, cap)
     # Half the cap for the angle: the successor's own correction moves delta_i too.

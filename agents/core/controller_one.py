@@ -45,7 +45,12 @@ def enclosing_control_one(
     radial = rel / rho
     z = rho - gains.rho_d_m
     turn = (succ_pos_m - r_m) * rel.conjugate()
-    delta = math.atan2(turn.imag, turn.real) % TWO_PI / angle_rad - 1.0
+    # The gap wraps to within half a turn of the desired angle, not to [0, 2 pi): a
+    # successor fallen just behind (the order inverted: a vehicle held still while the
+    # ring turned) reads as a negative gap and is waited for, instead of chased round
+    # the whole ring into a wound formation.  Orders that never invert see the paper's.
+    delta = ((math.atan2(turn.imag, turn.real) - angle_rad + math.pi) % TWO_PI - math.pi) \
+        / angle_rad
     cap = rate_cap(gains.step_fraction, dt_s)
     w_z = limited_sig_one(z, 1.0 / gains.alpha2, gains.k_z, cap)
     delta_cap = (0.5 * rate_cap(gains.step_fraction, max(dt_s, succ_age_s))) * rho * angle_rad

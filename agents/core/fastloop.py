@@ -75,7 +75,8 @@ def _steps(
             rho = max(math.hypot(rel_x, rel_y), MIN_RANGE_M)
             ux, uy = rel_x / rho, rel_y / rho
             sx, sy = pos[k, s, 0] - r[i, 0], pos[k, s, 1] - r[i, 1]
-            gap = math.atan2(rel_x * sy - rel_y * sx, rel_x * sx + rel_y * sy) % TWO_PI
+            raw = math.atan2(rel_x * sy - rel_y * sx, rel_x * sx + rel_y * sy)
+            gap = (raw - angles[i] + math.pi) % TWO_PI - math.pi + angles[i]
             w_z = _limited(rho - rho_d, inv_a2, k_z, cap_u)
             delta = gap / angles[i] - 1.0
             w_t = _limited(delta, inv_a3, k_d, 0.5 * cap_u * rho * angles[i]) + w_d * rho
