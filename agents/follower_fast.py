@@ -43,19 +43,20 @@ _new = tuple.__new__
 def peer_view(msg: FollowerState, receiver: int) -> PeerView:
     """What `receiver` keeps of a neighbour's state (its robust link sum towards `receiver`)."""
     stamp = msg.header.stamp_s
-    flow = vel_flow = None
-    for f in msg.link_flows:
-        if f[0] == receiver:
-            flow = _new(Sample, (complex(f[1], f[2]), complex(f[3], f[4]), stamp))
-            break
-    for f in msg.rv_flows:
-        if f[0] == receiver:
-            vel_flow = _new(Sample, (complex(f[1], f[2]), complex(f[3], f[4]), stamp))
-            break
     return _new(PeerView, (_new(Sample, (complex(*msg.r_m), complex(*msg.dr_m_s), stamp)),
                            _new(Sample, (complex(*msg.pos_m), complex(*msg.vel_m_s),
-                                         msg.vehicle_stamp_s)), flow, complex(*msg.rv_m_s),
-                           vel_flow))
+                                         msg.vehicle_stamp_s)),
+                           _towards(msg.link_flows, receiver, stamp), complex(*msg.rv_m_s),
+                           _towards(msg.rv_flows, receiver, stamp)))
+
+
+def _towards(flows: tuple[tuple[int, float, float, float, float], ...], receiver: int,
+             stamp_s: float) -> Sample | None:
+    """The published link flow on the link to `receiver`, as a Sample (None: not there)."""
+    for f in flows:
+        if f[0] == receiver:
+            return _new(Sample, (complex(f[1], f[2]), complex(f[3], f[4]), stamp_s))
+    return None
 
 
 def observe_target(

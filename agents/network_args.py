@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from agents.errors import ScenarioError
-from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LOSS_MODELS, Gains, Scenario
+from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LOSS_MODELS, Scenario
+from agents.scenario_checks import check_estimator_order
 from agents.scenario_network import IMPAIRMENT_KEYS, impairment
 
 FLAGS = {key: "--" + key.replace("_", "-") for key in IMPAIRMENT_KEYS}
@@ -58,14 +58,11 @@ def apply_network_arguments(scenario: Scenario, args: argparse.Namespace) -> Sce
             net = dataclasses.replace(net, **{dest: getattr(args, dest)})
     if getattr(args, "impair_seed", None) is not None:
         net = dataclasses.replace(net, seed=args.impair_seed)
-    return dataclasses.replace(scenario, network=net, gains=_gains(scenario, net.estimator, args))
-
-
-def _gains(scenario: Scenario, estimator: str, args: argparse.Namespace) -> Gains:
-    """The velocity stage is the robust estimator's: `--estimator paper` is order 1."""
+    # The velocity stage is the robust estimator's: `--estimator paper` is order 1.
     order = getattr(args, "estimator_order", None)
     if order is None:
-        order = 1 if estimator == "paper" else scenario.gains.estimator_order
-    if order == 2 and estimator != "robust":
-        raise ScenarioError("--estimator-order", "2 needs the robust estimator")
-    return dataclasses.replace(scenario.gains, estimator_order=order)
+        order = 1 if net.estimator == "paper" else scenario.gains.estimator_order
+    gains = dataclasses.replace(scenario.gains, estimator_order=order)
+    scenario = dataclasses.replace(scenario, network=net, gains=gains)
+    check_estimator_order(scenario, "--estimator-order")
+    return scenario

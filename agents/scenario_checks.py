@@ -21,14 +21,19 @@ def check_admissible(scenario: Scenario, whole_run: bool = True) -> None:
         _check_speed(spec, j, scenario.beta_m_s)
     if whole_run:
         _check_spread(scenario)
-    if scenario.gains.estimator_order == 2 and scenario.network.estimator != "robust":
-        raise ScenarioError("gains.estimator_order",
-                            "2 needs the robust estimator (network.estimator = \"robust\")")
+    check_estimator_order(scenario, "gains.estimator_order")
     run = scenario.run
     if run.dt_s >= run.duration_s:
         raise ScenarioError("run.dt_s", f"must be shorter than run.duration_s ({run.duration_s})")
     if not 0.0 <= scenario.steady_from_s() < run.duration_s:
         raise ScenarioError("run.steady_from_s", "must lie within [0, run.duration_s)")
+
+
+def check_estimator_order(scenario: Scenario, field: str) -> None:
+    """The velocity stage lives in the robust estimator's link sums; `field` names the
+    setting to blame (the scenario's, or a command-line override)."""
+    if scenario.gains.estimator_order == 2 and scenario.network.estimator != "robust":
+        raise ScenarioError(field, "2 needs the robust estimator (network.estimator = \"robust\")")
 
 
 def _check_connected(scenario: Scenario) -> None:

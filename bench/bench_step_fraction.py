@@ -4,7 +4,10 @@ Prints, for each step_fraction, the errors over the second half of
   - the lock-step loop at 50 Hz with the estimator at each of --rates (agents.core.lockstep);
   - the networked follower logic in lock-step with every message --delays ticks late
     (tests/swarm_harness.run_swarm, robust estimator), as between processes.
-The command jump column is what tells a stable step from an oscillating one.
+The command jump column is what tells a stable step from an oscillating one.  It studies
+the paper's first-order estimator (`robust`, order 1, whatever the scenario ships); ring16
+now sets its estimator's share apart (`estimator_step_fraction`), so use --estimator-only
+to move the estimator's share there.
 
 Run: python bench/bench_step_fraction.py [--case ring16] [--fractions 0.5 0.7 0.8 0.9]
      [--rates 50 100] [--delays 1 3] [--duration 120]      (a few minutes)

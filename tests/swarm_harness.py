@@ -31,7 +31,12 @@ Published = tuple[Sample, Sample, dict[int, Sample], Sample, dict[int, Sample]]
 
 
 def with_estimator(scenario: Scenario, estimator: str) -> Scenario:
-    return dataclasses.replace(scenario, network=NetworkConfig(estimator=estimator))
+    """`paper` or `robust` (the paper's first-order law), or `robust2`: the robust estimator
+    with its velocity stage (estimator order 2)."""
+    order = 2 if estimator == "robust2" else 1
+    gains = dataclasses.replace(scenario.gains, estimator_order=order)
+    return dataclasses.replace(scenario, gains=gains,
+                               network=NetworkConfig(estimator=estimator.removesuffix("2")))
 
 
 def _publish(

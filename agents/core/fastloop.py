@@ -65,10 +65,8 @@ def _steps(
     dt_e, cap_u, second = dt / substeps, gains[8], gains[9] > 1.5
     for k in range(k0, k1):
         r = phi + p_tilde[k]
-        _consensus(r, tails, heads, fractions, inv_a1, k_e, cap, rate)
-        if second:
-            _consensus(psi + p_tilde_rate[k], tails, heads, fractions, inv_a1, k_e, cap, vrate)
-            rate += psi
+        _rates(r, psi, p_tilde_rate[k], second, tails, heads, fractions, inv_a1, k_e, cap,
+               rate, vrate)
         for i in range(n):
             s = succ[i]
             rel_x, rel_y = pos[k, i, 0] - r[i, 0], pos[k, i, 1] - r[i, 1]
@@ -90,11 +88,8 @@ def _steps(
             # Between control steps p~ moves linearly to its next sample.
             for j in range(1, substeps):
                 r = phi + p_tilde[k] + (j * dt_e) * p_tilde_rate[k + 1]
-                _consensus(r, tails, heads, fractions, inv_a1, k_e, cap, rate)
-                if second:
-                    rv = psi + p_tilde_rate[k + 1]
-                    _consensus(rv, tails, heads, fractions, inv_a1, k_e, cap, vrate)
-                    rate += psi
+                _rates(r, psi, p_tilde_rate[k + 1], second, tails, heads, fractions, inv_a1,
+                       k_e, cap, rate, vrate)
                 phi += dt_e * rate
                 psi += dt_e * vrate
 
@@ -117,6 +112,28 @@ def _consensus(
             rate[i, d] += _limited(r[j, d] - r[i, d], inv_a1, k_e, cap * fractions[e])
 
 
+def _rates(
+    r: FloatArray,
+    psi: FloatArray,
+    p_tilde_rate: FloatArray,
+    second: bool,
+    tails: IntArray,
+    heads: IntArray,
+    fractions: FloatArray,
+    inv_a1: float,
+    k_e: float,
+    cap: float,
+    rate: FloatArray,
+    vrate: FloatArray,
+) -> None:
+    """dPhi/dt into `rate` and, at order 2, dPsi/dt into `vrate` (lockstep._Loop._rates):
+    the velocity stage agrees on psi + dp~/dt and feeds psi into dPhi/dt."""
+    _consensus(r, tails, heads, fractions, inv_a1, k_e, cap, rate)
+    if second:
+        _consensus(psi + p_tilde_rate, tails, heads, fractions, inv_a1, k_e, cap, vrate)
+        rate += psi
+
+
 StepsFn = Callable[..., None]
 
 
@@ -127,9 +144,10 @@ def compiled_steps() -> StepsFn:
         raise RuntimeError("numba is not installed")
     from numba import njit
 
-    global _limited, _consensus  # _steps resolves them as globals: compiled first
+    global _limited, _consensus, _rates  # _steps resolves them as globals: compiled first
     _limited = njit(cache=True)(_limited)
     _consensus = njit(cache=True)(_consensus)
+    _rates = njit(cache=True)(_rates)
     return cast(StepsFn, njit(cache=True)(_steps))
 
 

@@ -24,8 +24,8 @@ from agents import follower_fast as fast
 from agents import follower_fast_membership as fast_m
 from agents import follower_logic as ref
 from agents import follower_membership as ref_m
-from agents.scenario import NetworkConfig, Scenario
 from agents.scenario_file import load_scenario
+from tests.swarm_harness import with_estimator
 from transport.messages import FollowerState, Header
 
 TOL = {"rtol": 1e-9, "atol": 1e-9}
@@ -39,14 +39,6 @@ AGES_S = (0.0, 0.0, 2**-8, 2**-7, 2**-6, 0.0625, 0.25, 0.49, 0.5, 0.5, 0.75, 0.9
 STEPS_S = (2**-8, 2**-8, 2**-7, 2**-6, 2**-6, 0.005, 0.02, 0.0, -(2**-7), 0.25, 0.5, 2.0)
 OPS = ("observe", "observe_all", "hear", "hear_all", "hear_all", "est", "est", "est", "tick",
        "tick", "tick", "regroup", "drop")
-
-
-def with_estimator(scenario: Scenario, estimator: str) -> Scenario:
-    """`robust2`: the robust estimator with its velocity stage (estimator order 2)."""
-    order = 2 if estimator == "robust2" else 1
-    gains = dataclasses.replace(scenario.gains, estimator_order=order)
-    return dataclasses.replace(scenario, gains=gains,
-                               network=NetworkConfig(estimator.removesuffix("2")))
 
 
 def arr(c: complex) -> np.ndarray:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -39,9 +37,7 @@ def drift_and_metrics(
     scenario: str = "paper", duration_s: float = 30.0,
 ) -> tuple[float, float, float]:
     """`robust2`: the robust estimator with its velocity stage (estimator order 2)."""
-    s = with_estimator(load_scenario(scenario), estimator.removesuffix("2"))
-    order = 2 if estimator == "robust2" else 1
-    s = dataclasses.replace(s, gains=dataclasses.replace(s.gains, estimator_order=order))
+    s = with_estimator(load_scenario(scenario), estimator)
     series = run_swarm(s, duration_s, 50.0, delay_ticks, loss, seed=3, jitter_ticks=jitter_ticks)
     drift = np.linalg.norm(series.estimate_m.mean(axis=1) - series.lap_m, axis=1)
     err = np.linalg.norm(series.estimate_m - series.lap_m[:, None], axis=2)
