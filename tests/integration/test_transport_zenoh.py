@@ -117,3 +117,32 @@ def test_peer_exits_cleanly_on_sigterm() -> None:
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=10) == 0
         wait_for(lambda: not alive.poll(), 5, "token withdrawn on clean exit")
+
+
+@pytest.mark.timeout(60)
+def test_arrival_stamps_come_from_the_receiving_thread_before_the_drain() -> None:
+    """--latency-stamps: each sample is stamped as it reaches the process (a callback on
+    Zenoh's own thread), so the stamp lies between the sender's put and our drain."""
+    swarm, port = f"arr{os.getpid()}", free_port()
+    keys = SwarmKeys(swarm)
+    cfg = ZenohConfig(connect=(loopback_endpoint(port),), arrival_stamps=True)
+    with echo_peer(swarm, loopback_endpoint(port)), ZenohBus(cfg) as bus:
+        alive = bus.watch_alive(keys.all_alive())
+        wait_until_alive(alive, {keys.alive("echo", 0)}, timeout_s=20)
+        echoes = bus.subscribe(keys.follower_state(1))
+        pub = bus.declare_publisher(keys.follower_state(0))
+        wait_for(pub.matched, 10, "echo subscriber to match")
+        stamper, got = Stamper("follower-0"), []
+
+        def echoed() -> bool:
+            pub.put(encode(state(stamper)))
+            time.sleep(0.01)  # the drain comes well after the arrival, as a tick's does
+            got.extend(echoes.drain())
+            return len(got) >= 5
+
+        wait_for(echoed, 20, "five echoes")
+        for rx in got:
+            assert rx.arrival_s is not None and rx.hlc_stamp_s is not None
+            assert rx.hlc_stamp_s - 0.001 <= rx.arrival_s <= rx.recv_stamp_s
+        # Stamped on arrival, not at the drain: echoes land during the 10-ms waits.
+        assert max(rx.recv_stamp_s - rx.arrival_s for rx in got) > 0.001
