@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LOSS_MODELS, Scenario
+from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LOSS_MODELS, ZENOH_RUNTIMES, Scenario
 from agents.scenario_checks import check_estimator_order
 from agents.scenario_network import IMPAIRMENT_KEYS, impairment
 
@@ -20,6 +20,9 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
                    help="1: the paper's estimator; 2: with the velocity stage (robust only; "
                         "the scenario's [gains] estimator_order by default)")
     g.add_argument("--link", choices=LINK_PROTOCOLS, default=None, help="Zenoh link protocol")
+    g.add_argument("--zenoh-runtime", choices=ZENOH_RUNTIMES, default=None,
+                   help="split (default): Zenoh's own threads per process; one_thread: all on "
+                        "one (less CPU per message, a little more latency: large swarms)")
     g.add_argument("--delay-ms", type=float, default=None, help="added one-way delay per message")
     g.add_argument("--jitter-ms", type=float, default=None, help="std of the added delay")
     g.add_argument("--loss", type=float, default=None, help="fraction of messages lost")
@@ -38,7 +41,8 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
 def network_overrides(args: argparse.Namespace) -> list[str]:
     """The flags given, as argv for a child process."""
     argv: list[str] = []
-    for dest in ("estimator", "estimator_order", "link", *IMPAIRMENT_KEYS, "impair_seed"):
+    for dest in ("estimator", "estimator_order", "link", "zenoh_runtime", *IMPAIRMENT_KEYS,
+                 "impair_seed"):
         value = getattr(args, dest, None)
         if value is not None:
             argv += ["--" + dest.replace("_", "-"), str(value)]
@@ -53,7 +57,7 @@ def apply_network_arguments(scenario: Scenario, args: argparse.Namespace) -> Sce
         default = impairment(given, "command line", net.default)
         links = tuple((s, d, impairment(given, "command line", spec)) for s, d, spec in net.links)
         net = dataclasses.replace(net, default=default, links=links)
-    for dest in ("estimator", "link"):
+    for dest in ("estimator", "link", "zenoh_runtime"):
         if getattr(args, dest, None) is not None:
             net = dataclasses.replace(net, **{dest: getattr(args, dest)})
     if getattr(args, "impair_seed", None) is not None:

@@ -85,11 +85,13 @@ def open_bus(args: argparse.Namespace, arrival_stamps: bool = False) -> Bus:
     """The process's bus; with no --listen it listens on an OS-chosen port of the run's
     link protocol (`[network] link`, or --link), so that every link of the mesh uses it.
     `arrival_stamps`: stamp each sample's arrival (one-way latency, transport.link_stats)."""
+    network = load_run_scenario(args).network
     cfg = ZenohConfig(
         listen=tuple(args.listen),
         connect=tuple(args.connect),
         user_config_path=args.zenoh_config,
-        link=load_run_scenario(args).network.link,
+        link=network.link,
+        runtime=network.zenoh_runtime,
         identity=None if args.credentials is None else Identity.load(args.credentials),
         mode=getattr(args, "mode", "peer"),
         arrival_stamps=arrival_stamps,

@@ -26,6 +26,9 @@ if TYPE_CHECKING:
 PROFILE_KINDS = ("paper_v1", "paper_v2", "constant", "circle", "random_walk")
 ESTIMATORS = ("paper", "robust")
 LINK_PROTOCOLS = ("tcp", "udp")
+# How each process runs Zenoh (transport.zenoh_config.ZENOH_RUNTIMES): "split", its own
+# threads for receiving, sending and the rest; "one_thread", all of it on one.
+ZENOH_RUNTIMES = ("split", "one_thread")
 LOSS_MODELS = ("independent", "gilbert_elliott")
 REBALANCE = ("scale", "keep")
 
@@ -146,7 +149,7 @@ class LinkImpairment:
 
 @dataclass(frozen=True)
 class NetworkConfig:
-    """Estimator variant, Zenoh link protocol and impairment of the follower links."""
+    """Estimator variant, Zenoh link protocol and runtime, impairment of the follower links."""
 
     # The link-sum estimator survives pauses, loss and delay with no lasting offset;
     # "paper" (the paper's integrated Phi) stays selectable to reproduce the paper.
@@ -155,6 +158,7 @@ class NetworkConfig:
     default: LinkImpairment = field(default_factory=LinkImpairment)
     links: tuple[tuple[int, int, LinkImpairment], ...] = ()  # (from, to) 0-based overrides
     seed: int = 0
+    zenoh_runtime: str = "split"
 
     def impairment(self, sender: int, receiver: int) -> LinkImpairment:
         for src, dst, spec in self.links:

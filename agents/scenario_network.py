@@ -1,4 +1,5 @@
-"""The `[network]` table of a scenario: estimator, link protocol, impairment (seeded)."""
+"""The `[network]` table of a scenario: estimator, link protocol, Zenoh runtime,
+impairment (seeded)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,14 @@ from dataclasses import fields, replace
 from typing import Any
 
 from agents.errors import ScenarioError
-from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LOSS_MODELS, LinkImpairment, NetworkConfig
+from agents.scenario import (
+    ESTIMATORS,
+    LINK_PROTOCOLS,
+    LOSS_MODELS,
+    ZENOH_RUNTIMES,
+    LinkImpairment,
+    NetworkConfig,
+)
 
 Table = dict[str, Any]
 IMPAIRMENT_KEYS = tuple(f.name for f in fields(LinkImpairment))
@@ -45,7 +53,8 @@ def impairment(table: Table, where: str, base: LinkImpairment) -> LinkImpairment
 
 
 def network(table: Table, n: int) -> NetworkConfig:
-    unknown = set(table) - set(IMPAIRMENT_KEYS) - {"estimator", "link", "seed", "links"}
+    known = {"estimator", "link", "seed", "links", "zenoh_runtime"}
+    unknown = set(table) - set(IMPAIRMENT_KEYS) - known
     if unknown:
         raise ScenarioError(f"network.{sorted(unknown)[0]}", "is not a known network setting")
     seed = table.get("seed", 0)
@@ -75,4 +84,6 @@ def network(table: Table, n: int) -> NetworkConfig:
         default=default,
         links=tuple(links),
         seed=seed,
+        zenoh_runtime=choice(table.get("zenoh_runtime", "split"), ZENOH_RUNTIMES,
+                             "network.zenoh_runtime"),
     )

@@ -43,9 +43,15 @@ RECOVER_AFTER_S = 0.5  # not flying our setpoints this long: start the vehicle u
 @dataclass
 class VehicleWatch:
     """Says when the vehicle stopped flying our setpoints: disarmed or rebooted (a restarted
-    simulator), in a mode other than offboard/guided or the failsafe's hold, or silent
-    (heartbeat loss).  Real autopilots never return to offboard by themselves, so the
-    agent must start it up again."""
+    simulator), or in a mode other than offboard/guided or the failsafe's hold.  Real
+    autopilots never return to offboard by themselves, so the agent must start it up again.
+
+    Silence is not such a sign: a start-up needs the vehicle's answers, and while it
+    waits for them the loop stops, and with it the estimator the neighbours read.  So a
+    silent vehicle is waited for (the loop ticks on and commands a hover) and judged by
+    what it says when it is heard again: a rebooted one reports itself disarmed.  On a
+    loaded machine, where a simulator can miss its telemetry for a second, starting up
+    again on every silence kept 32 followers from ever forming their ring."""
 
     recover_after_s: float = RECOVER_AFTER_S
     since_s: float | None = None
@@ -53,9 +59,9 @@ class VehicleWatch:
     def lost(self, state: VehicleState, flavour: str | None, now_s: float) -> bool:
         # The failsafe's Hold of an armed, linked vehicle is OffboardKeeper's: it asks for
         # offboard again without blocking the loop; a full start-up is for the rest.
-        ok = state.link_ok and state.armed and flavour is not None and \
+        ok = state.armed and flavour is not None and \
             state.mode in (OFFBOARD_MODE[flavour], HOLD_MODE[flavour])
-        if ok:
+        if ok or not state.link_ok:
             self.since_s = None
             return False
         if self.since_s is None:

@@ -108,7 +108,8 @@ class HostLaunch(Launch):
         k = self.dep.host_of("launcher")
         bus = ZenohBus(ZenohConfig(  # our clock: the environment's (transport.clock)
             mode="client", connect=(self.router(k),), user_config_path=self.args.zenoh_config,
-            identity=self.secrets.identity("launcher")))
+            identity=self.secrets.identity("launcher"),
+            runtime=self.scenario.network.zenoh_runtime))
         bus.start_clock_sync(self.keys, "launcher-0")
         return bus
 

@@ -235,7 +235,8 @@ class Launch:
         """The launcher's own session (deploy.host_launch: a client of its host's router)."""
         return ZenohBus(ZenohConfig(
             connect=(self.endpoint,), user_config_path=self.args.zenoh_config,
-            link=self.scenario.network.link, identity=self.secrets.identity("launcher")))
+            link=self.scenario.network.link, identity=self.secrets.identity("launcher"),
+            runtime=self.scenario.network.zenoh_runtime))
 
     def fly(self, bus: Bus) -> None:
         start = bus.now_s() + START_DELAY_S

@@ -21,7 +21,7 @@ from transport.clock import process_clock
 from transport.clock_sync import ClockSync
 from transport.fastbuild import build
 from transport.keys import SwarmKeys, validate_concrete
-from transport.zenoh_config import ZenohConfig, build_zenoh_config
+from transport.zenoh_config import ZENOH_RUNTIMES, ZenohConfig, build_zenoh_config
 
 log = logging.getLogger(__name__)
 
@@ -162,13 +162,6 @@ class ZenohAliveWatch:
         self._sub.undeclare()
 
 
-# One receiving worker thread instead of Zenoh's two: an enclose process receives a few
-# hundred small messages a second, and a second worker woken for each of them is CPU spent
-# on wake-ups (ring16 on 2 cores, paired runs: followers 7.8-8.0 % of a core instead of
-# 8.2-8.3 %, 0.4-0.7 % of ticks late instead of 0.9-1.0 %; BENCHMARKS.md, issue 15).
-RUNTIME_DEFAULT = "(rx: (worker_threads: 1))"
-
-
 class ZenohBus(BusBase):
     """A Zenoh session configured by `ZenohConfig`."""
 
@@ -181,7 +174,7 @@ class ZenohBus(BusBase):
         self.clock_sync: ClockSync | None = None
         self._owned: list[_Owned] = []
         # Read by Zenoh once per process, when its first session opens; yours wins if set.
-        os.environ.setdefault("ZENOH_RUNTIME", RUNTIME_DEFAULT)
+        os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIMES[cfg.runtime])
         try:
             self.session = zenoh.open(build_zenoh_config(cfg))
         except zenoh.ZError as exc:

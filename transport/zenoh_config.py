@@ -26,6 +26,19 @@ from agents.errors import ConfigError
 from transport.credentials import Identity
 
 LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
+# Zenoh's runtime, as ZENOH_RUNTIME (read once per process, when its first session opens).
+# An enclose process receives a few hundred small messages a second, and every thread
+# woken for one of them is CPU spent on the wake-up (BENCHMARKS.md, issue 15):
+ZENOH_RUNTIMES = {
+    # One receiving worker instead of Zenoh's two (ring16, paired runs: followers 7.8-8.0 %
+    # of a core instead of 8.2-8.3 %, 0.4-0.7 % of ticks late instead of 0.9-1.0 %).
+    "split": "(rx: (worker_threads: 1))",
+    # All of Zenoh's work on one thread: ring16 followers 5.2-5.4 % instead of 5.7 %, and
+    # ring32 on 2 cores 0.00-0.02 % late ticks instead of 0.73 %; one-way latency at n = 8
+    # p50 250 instead of 222 us (its tasks wait for each other).
+    "one_thread": "(rx: (handover: app), net: (handover: app), tx: (handover: app), "
+                  "acc: (handover: app), app: (worker_threads: 1))",
+}
 LINK_PROTOCOLS = ("tcp", "udp")
 ENDPOINT_PROTOCOLS = (*LINK_PROTOCOLS, "tls")
 _MODES = ("peer", "client", "router")
@@ -45,10 +58,13 @@ class ZenohConfig:
     # Stamp each sample as it arrives (transport.zenoh_bus): a Python thread per
     # subscription wakes for every sample, so off unless latency is being measured.
     arrival_stamps: bool = False
+    runtime: str = "split"  # a key of ZENOH_RUNTIMES (scenario `[network] zenoh_runtime`)
 
     def __post_init__(self) -> None:
         if self.mode not in _MODES:
             raise ConfigError("zenoh.mode", f"{self.mode!r} not in {_MODES}")
+        if self.runtime not in ZENOH_RUNTIMES:
+            raise ConfigError("zenoh.runtime", f"{self.runtime!r} not in {tuple(ZENOH_RUNTIMES)}")
         if self.link not in LINK_PROTOCOLS:
             raise ConfigError("zenoh.link", f"{self.link!r} not in {LINK_PROTOCOLS}")
         for field, endpoints in (("zenoh.listen", self.listen), ("zenoh.connect", self.connect)):

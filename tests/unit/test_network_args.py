@@ -33,3 +33,15 @@ def test_the_order_reaches_the_children() -> None:
     assert network_overrides(parse("--estimator-order", "1")) == ["--estimator-order", "1"]
     with pytest.raises(SystemExit):
         parse("--estimator-order", "3")
+
+
+def test_the_zenoh_runtime_follows_the_scenario_unless_overridden() -> None:
+    ring32, paper = load_scenario("ring32"), load_scenario()
+    assert (ring32.network.zenoh_runtime, paper.network.zenoh_runtime) == ("one_thread", "split")
+    assert apply_network_arguments(ring32, parse()).network.zenoh_runtime == "one_thread"
+    split = apply_network_arguments(ring32, parse("--zenoh-runtime", "split"))
+    assert split.network.zenoh_runtime == "split"
+    assert network_overrides(parse("--zenoh-runtime", "one_thread")) == \
+        ["--zenoh-runtime", "one_thread"]
+    with pytest.raises(SystemExit):
+        parse("--zenoh-runtime", "two_threads")

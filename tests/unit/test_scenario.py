@@ -188,3 +188,13 @@ def test_estimator_order_is_one_or_two_and_two_needs_the_robust_estimator() -> N
             parse_scenario(with_order(bad))
     with pytest.raises(ScenarioError, match=r"gains\.estimator_order.*robust"):
         parse_scenario(with_order("2", '\n[network]\nestimator = "paper"\n'))
+
+
+def test_zenoh_runtime_is_split_or_one_thread() -> None:
+    base = load_scenario_text()
+    assert parse_scenario(base).network.zenoh_runtime == "split"
+    one = parse_scenario(base + '\n[network]\nzenoh_runtime = "one_thread"\n')
+    assert one.network.zenoh_runtime == "one_thread"
+    for bad in ('"threads"', "1", "true"):
+        with pytest.raises(ScenarioError, match=r"network\.zenoh_runtime"):
+            parse_scenario(base + f"\n[network]\nzenoh_runtime = {bad}\n")

@@ -12,8 +12,12 @@ from pathlib import Path
 import pytest
 
 from agents.errors import ConfigError
-from transport.zenoh_bus import RUNTIME_DEFAULT
-from transport.zenoh_config import ZenohConfig, build_zenoh_config, loopback_endpoint
+from transport.zenoh_config import (
+    ZENOH_RUNTIMES,
+    ZenohConfig,
+    build_zenoh_config,
+    loopback_endpoint,
+)
 
 
 def get(cfg: ZenohConfig, key: str) -> object:
@@ -85,10 +89,15 @@ def test_unparsable_user_file_rejected(tmp_path: Path) -> None:
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("preset", [None, "(rx: (worker_threads: 2))"])
-def test_one_receiving_thread_unless_the_user_says_otherwise(preset: str | None) -> None:
-    """ZenohBus asks Zenoh for one rx worker (a second one only costs wake-ups), unless
-    ZENOH_RUNTIME is already set: then the user's choice stands."""
+@pytest.mark.parametrize(("preset", "runtime", "rx_threads"),
+                         [(None, "split", 1), ("(rx: (worker_threads: 2))", "split", 2),
+                          (None, "one_thread", 0),
+                          ("(rx: (worker_threads: 2))", "one_thread", 2)])
+def test_zenoh_threads_follow_the_runtime_unless_the_user_says_otherwise(
+        preset: str | None, runtime: str, rx_threads: int) -> None:
+    """ZenohBus asks Zenoh for one rx worker (a second one only costs wake-ups), or for
+    one thread in all (`one_thread`), unless ZENOH_RUNTIME is already set: then the user's
+    choice stands."""
     env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
     if preset is not None:
         env["ZENOH_RUNTIME"] = preset
@@ -99,19 +108,26 @@ def test_one_receiving_thread_unless_the_user_says_otherwise(preset: str | None)
         "import os, time\n"
         "from transport.zenoh_bus import ZenohBus\n"
         "from transport.zenoh_config import ZenohConfig\n"
-        f"a = ZenohBus(ZenohConfig(listen=({endpoint!r},)))\n"
+        f"a = ZenohBus(ZenohConfig(listen=({endpoint!r},), runtime={runtime!r}))\n"
         "sub = a.subscribe('t/x')\n"
-        f"b = ZenohBus(ZenohConfig(connect=({endpoint!r},)))\n"
+        f"b = ZenohBus(ZenohConfig(connect=({endpoint!r},), runtime={runtime!r}))\n"
         "pub = b.declare_publisher('t/x')\n"
         "end = time.monotonic() + 20\n"
         "while not sub.drain() and time.monotonic() < end:\n"
         "    pub.put(b'x'); time.sleep(0.05)\n"
         "names = [open(f'/proc/self/task/{t}/comm').read().strip()\n"
         "         for t in os.listdir('/proc/self/task')]\n"
-        "print(os.environ['ZENOH_RUNTIME'], sum(n.startswith('rx-') for n in names))\n"
+        "print(os.environ['ZENOH_RUNTIME'], sum(n.startswith('rx-') for n in names),\n"
+        "      sum(n[:3] in ('rx-', 'tx-', 'net', 'acc') for n in names))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, timeout=50, check=True).stdout.split()
-    expected = preset or RUNTIME_DEFAULT
-    assert " ".join(out[:-1]) == expected
-    assert int(out[-1]) == (2 if preset else 1)
+    assert " ".join(out[:-2]) == (preset or ZENOH_RUNTIMES[runtime])
+    assert int(out[-2]) == rx_threads
+    if preset is None and runtime == "one_thread":
+        assert int(out[-1]) == 0  # only the app runtime's threads: no rx, tx, net or acc
+
+
+def test_an_unknown_runtime_is_refused() -> None:
+    with pytest.raises(ConfigError, match=r"zenoh\.runtime"):
+        ZenohConfig(runtime="two_threads")
