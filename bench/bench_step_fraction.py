@@ -4,13 +4,15 @@ Prints, for each step_fraction, the errors over the second half of
   - the lock-step loop at 50 Hz with the estimator at each of --rates (agents.core.lockstep);
   - the networked follower logic in lock-step with every message --delays ticks late
     (tests/swarm_harness.run_swarm, robust estimator), as between processes.
-The command jump column is what tells a stable step from an oscillating one.  It studies
-the paper's first-order estimator (`robust`, order 1, whatever the scenario ships); ring16
-now sets its estimator's share apart (`estimator_step_fraction`), so use --estimator-only
-to move the estimator's share there.
+The command jump column is what tells a stable step from an oscillating one.  By default
+it studies the paper's first-order estimator (`robust`, order 1, whatever the scenario
+ships); --order 2 adds the velocity stage, as ring16 and ring32 ship.  The rings set
+their estimator's share apart (`estimator_step_fraction`), so use --estimator-only to
+move the estimator's share there.
 
 Run: python bench/bench_step_fraction.py [--case ring16] [--fractions 0.5 0.7 0.8 0.9]
-     [--rates 50 100] [--delays 1 3] [--duration 120]      (a few minutes)
+     [--rates 50 100] [--delays 1 3] [--duration 120] [--order 1|2]   (a few minutes;
+     ring32 with --delays: ~2 min per fraction and delay)
 """
 
 from __future__ import annotations
@@ -53,12 +55,15 @@ def main() -> None:
     parser.add_argument("--rates", type=float, nargs="+", default=[50.0, 100.0])
     parser.add_argument("--delays", type=int, nargs="+", default=[1, 3])
     parser.add_argument("--duration", type=float, default=120.0)
+    parser.add_argument("--order", type=int, choices=(1, 2), default=1,
+                        help="estimator order: 1, the paper's first-order law (default); 2, "
+                             "with the velocity stage (as ring16 and ring32 ship)")
     parser.add_argument("--estimator-only", action="store_true",
                         help="vary [gains] estimator_step_fraction, the controller's share "
                              "staying at the scenario's step_fraction")
     args = parser.parse_args()
     field = "estimator_step_fraction" if args.estimator_only else "step_fraction"
-    base = with_estimator(load_scenario(args.case), "robust")
+    base = with_estimator(load_scenario(args.case), "robust2" if args.order == 2 else "robust")
     print("| run | estimator_error_m | radius_error_m | angle_error | command_jump_m_s |")
     print("|---|---|---|---|---|")
     for fraction in args.fractions:
