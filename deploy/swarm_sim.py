@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
 
         def loop_counters() -> dict[str, int]:
             st = sim.stats
-            return {"overruns": st.overruns, "catch_ups": st.catch_ups,
+            return {"ticks": st.ticks, "overruns": st.overruns, "catch_ups": st.catch_ups,
                     "caught_up_ticks": st.caught_up_ticks, "resyncs": st.resyncs,
                     **dict(sim.counters)}
 

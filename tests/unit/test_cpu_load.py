@@ -66,9 +66,15 @@ def test_late_ticks_from_status_counters() -> None:
     }
     summary = overrun_summary(status)
     assert summary == {"overruns": 32, "ticks": 2000, "overrun_pct": 1.6,
-                       "worst": "follower-1", "worst_pct": 3.0}
+                       "worst": "follower-1", "worst_pct": 3.0,
+                       "sim_overruns": 500, "sim_ticks": 1000, "sim_overrun_pct": 50.0}
     line = overrun_line(summary)
     assert line is not None and "1.60 %" in line and "follower-1" in line
+    assert "simulator 50.00 % (500 of 1000)" in line
+    # A simulator without a tick count (an older one, or none): the followers' line alone.
+    del status["sim-0"]["ticks"]  # type: ignore[attr-defined]
+    line = overrun_line(overrun_summary(status))
+    assert line is not None and "simulator" not in line
     assert overrun_summary({}) == {} and overrun_line({}) is None
 
 
@@ -79,8 +85,11 @@ def test_load_line_names_followers_and_the_machine() -> None:
     assert line is not None
     assert "followers 5.0 % of a core each (max 6.0 follower-1)" in line
     assert "sim 12 %" in line and "targets 4 % each" in line
-    assert "machine 71 % busy (2 cores, load 3.2)" in line
+    assert "machine 71 % busy (2 cores, load 3.2)" in line and "saturated" not in line
     assert load_line({}) is None
+    full = load_line({"process_cpu_pct": {"follower-0": 4.0}, "machine_busy_pct": 99.5,
+                      "cores": 2})
+    assert full is not None and "machine 100 % busy (2 cores): saturated" in full
 
 
 def test_enclose_profile_dir_leaves_a_cpu_profile_per_process(
