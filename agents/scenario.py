@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 PROFILE_KINDS = ("paper_v1", "paper_v2", "constant", "circle", "random_walk")
 ESTIMATORS = ("paper", "robust")
 LINK_PROTOCOLS = ("tcp", "udp")
-# How each process runs Zenoh (transport.zenoh_config.ZENOH_RUNTIMES): "split", its own
+# How each process runs Zenoh (transport.zenoh_config.RUNTIME_SETTINGS): "split", its own
 # threads for receiving, sending and the rest; "one_thread", all of it on one.
 ZENOH_RUNTIMES = ("split", "one_thread")
 LOSS_MODELS = ("independent", "gilbert_elliott")

@@ -57,8 +57,9 @@ class VehicleWatch:
     since_s: float | None = None
 
     def lost(self, state: VehicleState, flavour: str | None, now_s: float) -> bool:
-        # The failsafe's Hold of an armed, linked vehicle is OffboardKeeper's: it asks for
-        # offboard again without blocking the loop; a full start-up is for the rest.
+        # The failsafe's Hold of an armed vehicle is OffboardKeeper's: it asks for offboard
+        # again without blocking the loop; a full start-up is for the rest (never a silent
+        # one, whose state is from before the silence: see the class docstring).
         ok = state.armed and flavour is not None and \
             state.mode in (OFFBOARD_MODE[flavour], HOLD_MODE[flavour])
         if ok or not state.link_ok:

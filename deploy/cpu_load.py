@@ -131,17 +131,26 @@ def load_line(cpu: dict[str, object]) -> str | None:
     return "; ".join(parts)
 
 
+def _late_ticks(counters: object) -> tuple[int, int] | None:
+    """(late, ticks) from a process's status counters; None when it counts no ticks."""
+    if not isinstance(counters, dict):
+        return None
+    late, ticks = counters.get("overruns"), counters.get("ticks")
+    if not isinstance(late, int) or not isinstance(ticks, int) or ticks <= 0:
+        return None
+    return late, ticks
+
+
 def overrun_summary(status: dict[str, object]) -> dict[str, object]:
     """Followers' late control ticks from their last status counters (launch.json "status"):
     {"overruns", "ticks", "overrun_pct", "worst", "worst_pct"}; empty when none reported."""
     total_late = total_ticks = 0
     worst, worst_pct = None, -1.0
     for name, counters in sorted(status.items()):
-        if not name.startswith("follower-") or not isinstance(counters, dict):
+        counted = _late_ticks(counters) if name.startswith("follower-") else None
+        if counted is None:
             continue
-        late, ticks = counters.get("overruns"), counters.get("ticks")
-        if not isinstance(late, int) or not isinstance(ticks, int) or ticks <= 0:
-            continue
+        late, ticks = counted
         total_late, total_ticks = total_late + late, total_ticks + ticks
         if 100.0 * late / ticks > worst_pct:
             worst, worst_pct = name, 100.0 * late / ticks
@@ -155,12 +164,10 @@ def overrun_summary(status: dict[str, object]) -> dict[str, object]:
 def _sim_overruns(status: dict[str, object]) -> dict[str, object]:
     """The simulator's late ticks: when it falls behind, the vehicles fly behind real time
     and the ring's errors are the machine's (ring32 on 2 cores: a third of them late)."""
-    sim = status.get("sim-0")
-    if not isinstance(sim, dict):
+    counted = _late_ticks(status.get("sim-0"))
+    if counted is None:
         return {}
-    late, ticks = sim.get("overruns"), sim.get("ticks")
-    if not isinstance(late, int) or not isinstance(ticks, int) or ticks <= 0:
-        return {}
+    late, ticks = counted
     return {"sim_overruns": late, "sim_ticks": ticks,
             "sim_overrun_pct": round(100.0 * late / ticks, 2)}
 

@@ -21,7 +21,7 @@ from transport.clock import process_clock
 from transport.clock_sync import ClockSync
 from transport.fastbuild import build
 from transport.keys import SwarmKeys, validate_concrete
-from transport.zenoh_config import ZENOH_RUNTIMES, ZenohConfig, build_zenoh_config
+from transport.zenoh_config import RUNTIME_SETTINGS, ZenohConfig, build_zenoh_config
 
 log = logging.getLogger(__name__)
 
@@ -174,7 +174,7 @@ class ZenohBus(BusBase):
         self.clock_sync: ClockSync | None = None
         self._owned: list[_Owned] = []
         # Read by Zenoh once per process, when its first session opens; yours wins if set.
-        os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIMES[cfg.runtime])
+        os.environ.setdefault("ZENOH_RUNTIME", RUNTIME_SETTINGS[cfg.runtime])
         try:
             self.session = zenoh.open(build_zenoh_config(cfg))
         except zenoh.ZError as exc:

@@ -23,13 +23,15 @@ from pathlib import Path
 import zenoh
 
 from agents.errors import ConfigError
+from agents.scenario import LINK_PROTOCOLS, ZENOH_RUNTIMES
 from transport.credentials import Identity
 
 LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
 # Zenoh's runtime, as ZENOH_RUNTIME (read once per process, when its first session opens).
 # An enclose process receives a few hundred small messages a second, and every thread
-# woken for one of them is CPU spent on the wake-up (BENCHMARKS.md, issue 15):
-ZENOH_RUNTIMES = {
+# woken for one of them is CPU spent on the wake-up (BENCHMARKS.md, issue 15).  One
+# setting per name of the scenario schema's ZENOH_RUNTIMES (`[network] zenoh_runtime`):
+RUNTIME_SETTINGS = {
     # One receiving worker instead of Zenoh's two (ring16, paired runs: followers 7.8-8.0 %
     # of a core instead of 8.2-8.3 %, 0.4-0.7 % of ticks late instead of 0.9-1.0 %).
     "split": "(rx: (worker_threads: 1))",
@@ -39,7 +41,6 @@ ZENOH_RUNTIMES = {
     "one_thread": "(rx: (handover: app), net: (handover: app), tx: (handover: app), "
                   "acc: (handover: app), app: (worker_threads: 1))",
 }
-LINK_PROTOCOLS = ("tcp", "udp")
 ENDPOINT_PROTOCOLS = (*LINK_PROTOCOLS, "tls")
 _MODES = ("peer", "client", "router")
 
@@ -55,16 +56,16 @@ class ZenohConfig:
     lowlatency: bool = False  # `transport/unicast/lowlatency`; also turns QoS off
     link: str = "tcp"  # protocol of the default listen endpoint (scenario `[network] link`)
     identity: Identity | None = None  # None: unauthenticated (`--insecure`)
-    # Stamp each sample as it arrives (transport.zenoh_bus): a Python thread per
-    # subscription wakes for every sample, so off unless latency is being measured.
+    # Stamp each sample as it arrives (transport.zenoh_bus): a Python callback, with the
+    # GIL, on Zenoh's receiving thread for every sample, so off unless latency is measured.
     arrival_stamps: bool = False
-    runtime: str = "split"  # a key of ZENOH_RUNTIMES (scenario `[network] zenoh_runtime`)
+    runtime: str = "split"  # one of ZENOH_RUNTIMES (scenario `[network] zenoh_runtime`)
 
     def __post_init__(self) -> None:
         if self.mode not in _MODES:
             raise ConfigError("zenoh.mode", f"{self.mode!r} not in {_MODES}")
         if self.runtime not in ZENOH_RUNTIMES:
-            raise ConfigError("zenoh.runtime", f"{self.runtime!r} not in {tuple(ZENOH_RUNTIMES)}")
+            raise ConfigError("zenoh.runtime", f"{self.runtime!r} not in {ZENOH_RUNTIMES}")
         if self.link not in LINK_PROTOCOLS:
             raise ConfigError("zenoh.link", f"{self.link!r} not in {LINK_PROTOCOLS}")
         for field, endpoints in (("zenoh.listen", self.listen), ("zenoh.connect", self.connect)):

@@ -12,8 +12,9 @@ from pathlib import Path
 import pytest
 
 from agents.errors import ConfigError
+from agents.scenario import ZENOH_RUNTIMES
 from transport.zenoh_config import (
-    ZENOH_RUNTIMES,
+    RUNTIME_SETTINGS,
     ZenohConfig,
     build_zenoh_config,
     loopback_endpoint,
@@ -122,10 +123,14 @@ def test_zenoh_threads_follow_the_runtime_unless_the_user_says_otherwise(
     )
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, timeout=50, check=True).stdout.split()
-    assert " ".join(out[:-2]) == (preset or ZENOH_RUNTIMES[runtime])
+    assert " ".join(out[:-2]) == (preset or RUNTIME_SETTINGS[runtime])
     assert int(out[-2]) == rx_threads
     if preset is None and runtime == "one_thread":
         assert int(out[-1]) == 0  # only the app runtime's threads: no rx, tx, net or acc
+
+
+def test_every_runtime_of_the_schema_has_a_setting() -> None:
+    assert set(RUNTIME_SETTINGS) == set(ZENOH_RUNTIMES)
 
 
 def test_an_unknown_runtime_is_refused() -> None:
