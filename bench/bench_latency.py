@@ -10,10 +10,12 @@ reads each follower's final counters from launch.json:
 Per run it prints the median over followers of p50 and of p99, and the worst follower.
 
 Scenarios: a ring of n followers (ring<n>, generated into the output directory like
-ring16: the paper's gains, two targets each observed by half the ring).
+ring16: the paper's gains, two targets each observed by half the ring), or with
+`--shipped` the shipped scenarios as they are (ring32 with its one-thread Zenoh runtime and
+velocity stage: what `enclose run ring32` runs).
 
-Run: python bench/bench_latency.py [--sizes 8 32] [--repeats 3] [--duration 20]
-     [--out runs/bench-latency]
+Run: python bench/bench_latency.py [--sizes 8 32] [--shipped ring32] [--repeats 3]
+     [--duration 20] [--out runs/bench-latency]
 """
 
 from __future__ import annotations
@@ -52,7 +54,7 @@ def ring_scenario(n: int, duration_s: float) -> str:
     return "\n".join(lines)
 
 
-def run_once(scenario: Path, duration_s: float, out: Path) -> dict[str, Any]:
+def run_once(scenario: Path | str, duration_s: float, out: Path) -> dict[str, Any]:
     argv = [sys.executable, "-m", "deploy.cli", "run", str(scenario), "--duration",
             str(duration_s), "--out", str(out), "--latency-stamps"]
     code = subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -78,26 +80,33 @@ def run_once(scenario: Path, duration_s: float, out: Path) -> dict[str, Any]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sizes", nargs="+", type=int, default=[8, 32])
+    parser.add_argument("--sizes", nargs="*", type=int, default=[8, 32])
+    parser.add_argument("--shipped", nargs="*", default=[], metavar="NAME",
+                        help="shipped scenarios to measure as they are (e.g. ring32)")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--duration", type=float, default=20.0)
     parser.add_argument("--out", type=Path, default=Path("runs/bench-latency"))
     args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    cases: list[tuple[str, Path | str]] = []
     for n in args.sizes:
-        args.out.mkdir(parents=True, exist_ok=True)
         scenario = (args.out / f"ring{n}.toml").resolve()
         scenario.write_text(ring_scenario(n, args.duration))
+        cases.append((f"ring{n}", scenario))
+    cases += [(f"{name} (shipped)", name) for name in args.shipped]
+    for label, scenario in cases:
         runs = []
         for k in range(args.repeats):
-            out = (args.out / f"ring{n}-{k}").resolve()
-            res = run_once(scenario, args.duration, out)
-            print(f"== ring{n} run {k + 1} ({args.duration:g} s): {json.dumps(res)}", flush=True)
+            out = (args.out / f"{label.split()[0]}-{'s' if label.endswith(')') else ''}{k}")
+            res = run_once(scenario, args.duration, out.resolve())
+            print(f"== {label} run {k + 1} ({args.duration:g} s): {json.dumps(res)}", flush=True)
             runs.append(res)
         ok = [r for r in runs if r.get("followers_reporting")]
-        for key in ("p50_us_median_follower", "p99_us_median_follower", "p99_us_worst_follower"):
+        for key in ("p50_us_median_follower", "p99_us_median_follower", "p99_us_worst_follower",
+                    "tick_overruns"):
             vals = sorted(r[key] for r in ok)
             if vals:
-                print(f"ring{n}: {key}: median {statistics.median(vals):g} us, runs {vals}")
+                print(f"{label}: {key}: median {statistics.median(vals):g}, runs {vals}")
 
 
 if __name__ == "__main__":

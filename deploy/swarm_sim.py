@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 from collections.abc import Callable, Sequence
 
@@ -114,11 +115,22 @@ class SensorPublisher:
             pub.close()
 
 
+def sensor_every_ticks(tick_hz: float, sensor_hz: float) -> int:
+    """Ticks between observations: the most that still gives at least `sensor_hz` (a 20-Hz
+    swarm on the 50-Hz simulator: every 2nd tick, 25 Hz), and never below one tick.  Each
+    observation is a message to a follower and the recorder, so one faster than the
+    followers' loop is read by nobody (ring64 at 20 Hz: 3 200 of them a second)."""
+    return max(1, math.floor(tick_hz / sensor_hz + 1e-9))
+
+
 def run(args: argparse.Namespace) -> int:
     scenario = load_run_scenario(args)
+    # The vehicles stream their position as fast as the followers' loop reads it, as a
+    # companion computer sets a real autopilot's streams (SET_MESSAGE_INTERVAL).
+    loop_hz = args.rate_hz / sensor_every_ticks(args.rate_hz, scenario.run.rate_hz)
     cfg = SimConfig(
         rate_hz=args.rate_hz,
-        telemetry_hz=args.telemetry_hz,
+        telemetry_hz=args.telemetry_hz or loop_hz,
         flavour=scenario.vehicle.flavour,
         host=args.mav_host,
         listen_base_port=args.base_port,
@@ -132,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
             scenario,
             bus,
             keys,
-            round(args.rate_hz / args.sensor_hz),
+            sensor_every_ticks(args.rate_hz, args.sensor_hz or scenario.run.rate_hz),
             args.noise_std_m,
             args.seed,
             late_s=lambda t: sim.boot_time_s() - t,
@@ -178,12 +190,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="enclose-swarm-sim", description=__doc__)
     add_bus_arguments(parser)
     parser.add_argument("--rate-hz", type=float, default=50.0, help="simulation tick rate")
-    parser.add_argument("--telemetry-hz", type=float, default=50.0)
+    parser.add_argument("--telemetry-hz", type=float, default=None,
+                        help="rate of the vehicles' position and attitude streams (default: "
+                        "the scenario's control rate, at most the tick rate)")
     parser.add_argument(
         "--sensor-hz",
         type=float,
-        default=50.0,
-        help="rate of truth snapshots and target observations",
+        default=None,
+        help="rate of truth snapshots and target observations (default: the scenario's "
+        "control rate, [run] rate_hz)",
     )
     parser.add_argument(
         "--noise-std-m",

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import pytest
+
 from agents.scenario_file import load_scenario
-from deploy.swarm_sim import SensorPublisher
+from deploy.swarm_sim import SensorPublisher, sensor_every_ticks
 from sim_backend.model import FleetState
 from sim_backend.runtime import spawn_points_ned
 from transport.codec import decode
@@ -26,3 +28,12 @@ def test_a_late_tick_is_stamped_with_its_state_time_not_its_publish_time() -> No
     assert truth and seen
     assert truth[0].header.stamp_s == 1000.0 - 0.015
     assert {m.observed_stamp_s for m in seen} == {1000.0 - 0.015}
+
+
+@pytest.mark.parametrize(("sensor_hz", "every", "effective_hz"),
+                         [(50.0, 1, 50.0), (20.0, 2, 25.0), (30.0, 1, 50.0), (25.0, 2, 25.0),
+                          (10.0, 5, 10.0), (100.0, 1, 50.0)])
+def test_observations_come_at_least_as_often_as_asked_and_at_most_once_a_tick(
+        sensor_hz: float, every: int, effective_hz: float) -> None:
+    assert sensor_every_ticks(50.0, sensor_hz) == every
+    assert 50.0 / every == effective_hz >= min(sensor_hz, 50.0)
