@@ -14,8 +14,8 @@ from agents.network_args import add_network_arguments, apply_network_arguments
 from agents.scenario_file import load_scenario
 from deploy.launch import Launch
 from deploy.live_args import add_live_arguments
-from deploy.netns import add_netns_arguments, netns_requested, run_in_namespace
 from deploy.netns_hosts import add_hosts_arguments, run_on_hosts
+from deploy.netns_run import add_netns_arguments, netns_requested, run_in_namespace
 from deploy.restarts import add_supervision_arguments
 from deploy.verdict import add_json_argument
 

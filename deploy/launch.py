@@ -1,6 +1,8 @@
 """One `enclose run` on this machine: start the swarm's processes, link, fly, stop, report.
 
-`deploy.cmd_run` parses the command line and hands over to `Launch.execute`.
+`deploy.cmd_run` parses the command line and hands over to `Launch.execute`; how the run
+ends (the processes stopped in order, launch.json, the exit code) is `deploy.launch_end`,
+and its ports are chosen by `deploy.ports.run_ports`.
 """
 
 from __future__ import annotations
@@ -13,20 +15,20 @@ from typing import Any
 
 from agents.errors import DeployError
 from agents.network_args import network_overrides
-from agents.phases import mark, stamps
+from agents.phases import mark
 from agents.scenario import Scenario
 from agents.scenario_faults import parse_fault_flag
-from deploy.cpu_load import CpuSampler, overrun_summary
+from deploy.cpu_load import CpuSampler
 from deploy.faults import FaultRunner
 from deploy.json_files import write_json_atomic
+from deploy.launch_end import exit_code, launch_report, stop_in_order
 from deploy.live_args import announce_live_url, pin_live_port, recorder_live_argv
-from deploy.ports import mavlink_bases, parse_port_range, ports_in_range, rendezvous_endpoint
-from deploy.restarts import EXIT_SOMETHING_DIED, RestartPolicy, Watchdog
+from deploy.ports import run_ports
+from deploy.restarts import RestartPolicy, Watchdog
 from deploy.run_board import BoardView, LiveBoard
 from deploy.run_monitor import StatusBoard, launch_view
 from deploy.run_secrets import RunSecrets
 from deploy.supervisor import Child, Supervisor
-from deploy.verdict import announce
 from transport.bus import Bus
 from transport.codec import encode
 from transport.keys import SwarmKeys
@@ -52,7 +54,9 @@ class Launch:
         self.scenario, self.args, self.out, self.duration_s = scenario, args, out, duration_s
         self.keys = SwarmKeys(swarm)
         self.sup = Supervisor(out / "logs")
-        self.vehicle_base, self.adapter_base, self.endpoint = self._ports()
+        self.vehicle_base, self.adapter_base, self.endpoint = run_ports(
+            scenario.n + scenario.m, scenario.network.link, not args.insecure,
+            getattr(args, "port_range", None))
         self.secrets = RunSecrets(None)
         self.timings: dict[str, float] = {}
         self.board = StatusBoard()
@@ -66,18 +70,6 @@ class Launch:
         self.started_s = time.monotonic()
         self.t0_s = float("inf")  # monotonic time of the experiment's start, once known
         self.cpu = CpuSampler()  # what each process cost, sampled while flying
-
-    def _ports(self) -> tuple[int, int, str]:
-        """MAVLink blocks and the Zenoh rendezvous: inside `--port-range` when given (a
-        parallel sweep's cell), else the first free ones."""
-        count, link = self.scenario.n + self.scenario.m, self.scenario.network.link
-        secure = not self.args.insecure
-        given = getattr(self.args, "port_range", None)
-        if given:
-            return ports_in_range(parse_port_range(given), count, link, secure)
-        vehicle_base, adapter_base = mavlink_bases(count)
-        blocks = [range(b, b + count) for b in (vehicle_base, adapter_base)]
-        return vehicle_base, adapter_base, rendezvous_endpoint(link, blocks, secure)
 
     def common(self) -> list[str]:
         scen = self.args.scenario
@@ -215,7 +207,7 @@ class Launch:
                         RunControl(self._stamper(bus).header(), "stop", bus.now_s(), 0.0)
                     ),
                 )
-                self.finish()
+                stop_in_order(self)
         except KeyboardInterrupt:
             interrupted = True
             log.warning("interrupted before the start")
@@ -224,7 +216,7 @@ class Launch:
                 self.injector.resume_all()
             self.sup.stop_all()
             self.write_launch()
-        return self.exit_code(interrupted)
+        return exit_code(self, interrupted)
 
     def make_secrets(self) -> RunSecrets:
         s = self.scenario
@@ -268,13 +260,6 @@ class Launch:
     def _sample_cpu(self) -> None:
         self.cpu.sample(time.monotonic(), {c.name: c.pid for c in self.sup.children})
 
-    def load_report(self) -> dict[str, Any]:
-        """CPU per process and machine busy over the steady half (deploy.cpu_load), and the
-        followers' late ticks: the load an accuracy figure was measured under."""
-        steady_from = self.t0_s + 0.5 * self.duration_s
-        cpu = self.cpu.summary(steady_from if steady_from < time.monotonic() else self.t0_s)
-        return {**cpu, "ticks": overrun_summary(self.board.as_dict())}
-
     def view(self) -> BoardView:
         """What the live board shows now (deploy.run_board)."""
         return launch_view(self)
@@ -296,60 +281,8 @@ class Launch:
         if child.name.startswith("follower-") and "--join" not in child.argv:
             child.argv.append("--join")
 
-    def finish(self) -> None:
-        """Movers end on the stop word; the recorder then writes its outputs; the sim last."""
-        movers = [c for c in self.sup.children if c.name.startswith(("follower", "target"))]
-        if not self.sup.wait(movers, 10.0):
-            self.sup.terminate(movers)
-        deadline = time.monotonic() + 1.0  # their final status may still be on the wire
-        while time.monotonic() < deadline and not all(
-            self.board.state_of(c.name) == "done" for c in movers
-        ):
-            self.board.collect()
-            time.sleep(0.02)
-        recorder = [c for c in self.sup.children if c.name == "recorder"]
-        if not self.sup.wait(recorder, 120.0):
-            log.error("recorder did not finish writing in 120 s; stopping it")
-            self.sup.terminate(recorder)
-        self.sup.terminate([c for c in self.sup.children if c.name == "sim"])
-
     def write_launch(self) -> None:
         write_json_atomic(self.out / "launch.json", self.report())
 
     def report(self) -> dict[str, Any]:
-        return {
-            "swarm": self.keys.swarm,
-            "zenoh_endpoint": self.endpoint,
-            "vehicle_base_port": self.vehicle_base,
-            "adapter_base_port": self.adapter_base,
-            "duration_s": self.duration_s,
-            "live_url": self.live_url,
-            **self.timings,
-            "start_phases": stamps(),  # CLOCK_MONOTONIC s (agents.phases; bench/bench_start.py)
-            "processes": {
-                c.name: {"pid": c.pid, "exit_code": c.poll(), "restarts": c.restarts,
-                         "spawned_s": c.spawned_s}
-                for c in self.sup.children
-            },
-            "restart_policy": self.policy.as_dict(),
-            "faults": [f.__dict__ for f in self.faults],
-            "events": [] if self.watchdog is None else self.watchdog.events,
-            "status": self.board.as_dict(),
-            "load": self.load_report(),
-        }
-
-    def exit_code(self, interrupted: bool) -> int:
-        """130 interrupted; 1 a process failed at the end; EXIT_SOMETHING_DIED (3) a process
-        died during the run (launch.json "events") but the run went to its end; else 0."""
-        dog = self.watchdog
-        failed = [c for c in self.sup.dead() if dog is None or not dog.handled(c)]
-        for c in failed:
-            log.error("%s exited with code %s (log: %s)", c.name, c.exit_code, c.log_path)
-        title = f"enclose run {self.scenario.name}"
-        announce(self.out, title, getattr(self.args, "json", False),
-                 "interrupted" if interrupted else "")
-        if interrupted:
-            return 130
-        if failed:
-            return 1
-        return EXIT_SOMETHING_DIED if dog is not None and dog.deaths else 0
+        return launch_report(self)

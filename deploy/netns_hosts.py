@@ -24,8 +24,9 @@ from pathlib import Path
 from agents.errors import DeployError
 from agents.scenario_file import load_scenario
 from deploy.deployment import Deployment, HostSpec, dump_deployment, split_over_hosts
-from deploy.netns import _tool, clean_stale, destroy, install_tools, run_forwarding_signals
+from deploy.netns import _tool, clean_stale, destroy, install_tools
 from deploy.netns import unavailable as netns_unavailable
+from deploy.netns_run import run_forwarding_signals
 from transport.clock import clock_env
 
 log = logging.getLogger("enclose.hosts")

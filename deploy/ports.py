@@ -102,3 +102,15 @@ def ports_in_range(ports: range, count: int, link: str, secure: bool) -> tuple[i
         except OSError as exc:
             raise DeployError(f"--port-range: {link} port {rendezvous} is in use") from exc
     return vehicle, adapter, loopback_endpoint(rendezvous, _protocol(link, secure))
+
+
+def run_ports(count: int, link: str, secure: bool,
+              port_range: str | None = None) -> tuple[int, int, str]:
+    """A run's (vehicle base, adapter base, rendezvous endpoint) for `count` vehicles:
+    inside `port_range` (`--port-range`) when given (a parallel sweep's cell), else the
+    first free ones."""
+    if port_range:
+        return ports_in_range(parse_port_range(port_range), count, link, secure)
+    vehicle_base, adapter_base = mavlink_bases(count)
+    blocks = [range(b, b + count) for b in (vehicle_base, adapter_base)]
+    return vehicle_base, adapter_base, rendezvous_endpoint(link, blocks, secure)

@@ -21,18 +21,19 @@ import socket
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
 from agents.errors import SimulatorError
-from agents.frames import enu_to_ned
 from agents.mavlink.modes import FLAVOURS
-from agents.scenario import HomeConfig, Scenario, VehicleConfig
+from agents.scenario import HomeConfig, VehicleConfig
 from sim_backend import model
 from sim_backend.autopilot import Autopilot, ControlRow
 from sim_backend.endpoint import VehicleEndpoint
 from sim_backend.params import ParamStore, default_params
+from sim_backend.sim_values import LoopStats, SimConfig, Snapshot
+from sim_backend.sim_values import grid_spawn_ned as grid_spawn_ned  # re-exported (importers)
+from sim_backend.sim_values import spawn_points_ned as spawn_points_ned  # re-exported
 from sim_backend.telemetry import Row
 from sim_backend.timesync import ClockService
 
@@ -42,52 +43,6 @@ MAX_CATCHUP_S = 30.0  # a longer stall (a debugger, a laptop lid) is dropped, co
 MAX_VEHICLES = 255
 CATCH_UP_DRAIN = 1024  # datagrams per vehicle taken before a catch-up (a socket buffer's worth)
 QUEUED_ROUNDS = 16  # rounds over the ready sockets when taking what is queued
-
-
-@dataclass(frozen=True)
-class SimConfig:
-    """Loop rate and PX4 SITL ports: vehicle i listens on listen_base+i, sends to send_base+i."""
-
-    rate_hz: float = 50.0
-    telemetry_hz: float = 50.0
-    flavour: str = "px4"
-    host: str = "127.0.0.1"
-    listen_base_port: int = 14580
-    send_base_port: int = 14540
-    signing_key: bytes | None = None  # vehicles enforce MAVLink 2 signing with this key
-
-
-@dataclass(frozen=True)
-class Snapshot:
-    """A copy of every vehicle's state at one tick, safe to keep."""
-
-    sim_time_s: float
-    pos_ned_m: np.ndarray
-    vel_ned_m_s: np.ndarray
-    yaw_rad: np.ndarray
-    armed: tuple[bool, ...]
-    modes: tuple[str, ...]
-
-
-@dataclass
-class LoopStats:
-    ticks: int = 0
-    overruns: int = 0  # ticks that ended after the next tick was due
-    catch_ups: int = 0  # times the loop woke up more than a tick late and caught up
-    caught_up_ticks: int = 0  # physics sub-steps run without telemetry while catching up
-    resyncs: int = 0  # stalls longer than MAX_CATCHUP_S: the rest of the time was dropped
-    max_late_s: float = 0.0
-
-
-def spawn_points_ned(scenario: Scenario) -> np.ndarray:
-    """Followers then targets, on the ground at their scenario (x, y), in NED."""
-    xy = list(scenario.follower_pos_m) + [t.initial_pos_m for t in scenario.targets]
-    return enu_to_ned(np.array([[x, y, 0.0] for x, y in xy]))
-
-
-def grid_spawn_ned(n: int, spacing_m: float = 5.0) -> np.ndarray:
-    side = max(1, int(np.ceil(np.sqrt(n))))
-    return np.array([[(k // side) * spacing_m, (k % side) * spacing_m, 0.0] for k in range(n)])
 
 
 class Simulator:

@@ -291,7 +291,7 @@ class ImpairedBus(ClosingContext):
 
     def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY) -> ImpairedSubscription:
         # What the impairment holds back is in flight, not queued at the receiver: a small
-        # receive queue (agents.follower.PEER_QUEUE) must not cap the emulated delay.
+        # receive queue (agents.follower_node.PEER_QUEUE) must not cap the emulated delay.
         held = max(capacity, DEFAULT_CAPACITY)
         return ImpairedSubscription(self, self.inner.subscribe(key_expr, capacity), held)
 
