@@ -15,7 +15,7 @@ from matplotlib.axes import Axes
 
 from agents.core.metrics import ErrorSeries
 from agents.core.timeseries import RunSeries
-from deploy.marks import STYLE, Mark, draw_marks, legend_handles
+from deploy.marks import MAX_LEGEND, STYLE, Mark, draw_marks, legend_handles
 
 PANELS = (
     ("z_m", "z_i = rho'_i - rho_d [m]", "estimated radius error"),
@@ -27,8 +27,26 @@ PANELS = (
 
 
 def _plot_followers(ax: Axes, t: np.ndarray, values: np.ndarray, label: str) -> None:
-    for i in range(values.shape[1]):
-        ax.plot(t, values[:, i], lw=1.0, label=f"{label}{i + 1}")
+    n = values.shape[1]
+    for i in range(n):
+        if n <= MAX_LEGEND:
+            ax.plot(t, values[:, i], lw=1.0, label=f"{label}{i + 1}")
+        else:  # a large swarm: one colour scale over the ring instead of a legend entry each
+            ax.plot(t, values[:, i], lw=0.7, color=_ring_colour(i, n))
+
+
+def _ring_colour(i: int, n: int) -> tuple[float, float, float, float]:
+    return tuple(plt.get_cmap("viridis")(i / max(1, n - 1)))  # type: ignore[return-value]
+
+
+def _follower_key(ax: Axes, n: int) -> None:
+    """The legend of the followers' lines: names up to MAX_LEGEND, else a colour bar."""
+    if n <= MAX_LEGEND:
+        ax.legend(loc="upper right", fontsize=8)
+        return
+    scale = plt.cm.ScalarMappable(cmap="viridis", norm=plt.Normalize(1, n))
+    bar = ax.figure.colorbar(scale, ax=ax, pad=0.01, fraction=0.04)
+    bar.set_label("follower", fontsize=8)
 
 
 def performance_figure(
@@ -62,7 +80,7 @@ def performance_figure(
         drawn = draw_marks(ax, marks)
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
-    axes.flat[0].legend(loc="upper right", fontsize=8)
+    _follower_key(axes.flat[0], errors.e_rho_m.shape[1])
     if drawn:
         axes.flat[5].legend(handles=legend_handles(drawn), loc="upper right", fontsize=8)
     fig.tight_layout()
@@ -82,9 +100,13 @@ def trajectory_figure(
     span = np.ptp(xy_all, axis=0) + 1.0
     # Size the canvas to the data's aspect so long tracks are not a thin strip.
     fig, ax = plt.subplots(figsize=(12, float(np.clip(12 * span[1] / span[0] + 1.5, 4, 11))))
-    for i in range(series.follower_pos_m.shape[1]):
+    n = series.follower_pos_m.shape[1]
+    for i in range(n):
         xy = series.follower_pos_m[:, i]
-        ax.plot(xy[:, 0], xy[:, 1], lw=0.9, label=f"follower {i + 1}")
+        if n <= MAX_LEGEND:
+            ax.plot(xy[:, 0], xy[:, 1], lw=0.9, label=f"follower {i + 1}")
+        else:
+            ax.plot(xy[:, 0], xy[:, 1], lw=0.6, color=_ring_colour(i, n))
         ax.plot(*xy[0], "o", ms=4, color=ax.lines[-1].get_color())
     for j in range(series.target_pos_m.shape[1]):
         xy = series.target_pos_m[:, j]
@@ -100,7 +122,11 @@ def trajectory_figure(
     ax.set_ylabel("y north [m]")
     ax.set_title(f"trajectories over {series.t_s[-1] - series.t_s[0]:.0f} s (dashed: targets)")
     ax.grid(alpha=0.3)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    if n <= MAX_LEGEND:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    else:  # the colour bar takes the right-hand side
+        ax.legend(loc="upper left", fontsize=8)
+        _follower_key(ax, n)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -13,10 +13,9 @@ matplotlib.use("Agg")  # files only: runs on headless machines and in CI
 import matplotlib.pyplot as plt
 import numpy as np
 
-from deploy.marks import Mark, draw_marks, legend_handles
+from deploy.marks import MAX_LEGEND, Mark, draw_marks, legend_handles
 
 LINKS_PNG = "links.png"
-MAX_LEGEND = 12  # more links than this: no per-link legend (it would hide the plot)
 
 
 def link_health_figure(

@@ -20,6 +20,9 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 LAUNCH_FILE = "launch.json"
+# More lines than this get no legend entry each: a legend of 32 or 64 names is taller than
+# its panel, and tight_layout then squeezes every panel of the figure to a strip.
+MAX_LEGEND = 12
 # kind -> (colour, line style, legend text)
 STYLE: dict[str, tuple[str, str, str]] = {
     "membership": ("tab:red", ":", "membership change"),

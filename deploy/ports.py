@@ -61,6 +61,10 @@ def mavlink_bases(count: int, preferred: tuple[int, int] = PX4_SITL_BASES) -> tu
     """(vehicle listen base, adapter base): PX4 SITL's when free, else the first free pair."""
     candidates = [preferred] + [(b, b + 500) for b in range(20000, 60000, 1000)]
     for vehicle_base, adapter_base in candidates:
+        # PX4 SITL's blocks are 40 apart: more vehicles than that (ring64) would give a
+        # vehicle and an agent the same port.
+        if abs(vehicle_base - adapter_base) < count:
+            continue
         if udp_block_free(vehicle_base, count) and udp_block_free(adapter_base, count):
             return vehicle_base, adapter_base
     raise DeployError(f"no free UDP port blocks for {count} vehicles on {HOST}")

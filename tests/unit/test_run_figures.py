@@ -116,3 +116,26 @@ def test_report_redraws_the_link_health_figure(short_run: Path) -> None:
     paths = regenerate_figures(short_run)
     assert short_run / "links.png" in paths
     assert (short_run / "links.png").stat().st_size > 10_000
+
+
+@pytest.mark.timeout(120)
+def test_a_large_swarm_gets_a_colour_bar_not_a_legend_that_squeezes_the_panels(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import deploy.figures as figures
+
+    ring32 = load_scenario("ring32")
+    series = simulate_lockstep(ring32, 0.02, 2.0, engine="numpy")
+    errors = error_series(series, ring32.successor, np.asarray(ring32.pattern.angles_rad),
+                          ring32.pattern.rho_d_m)
+    kept: list[object] = []
+    monkeypatch.setattr(figures.plt, "close", kept.append)
+    performance_figure(series, errors, (0.0999, 0.0199), tmp_path / "p.png")
+    trajectory_figure(series, 8.0, tmp_path / "t.png")
+    perf, traj = kept
+    panels = [ax for ax in perf.axes if ax.get_title()]  # type: ignore[attr-defined]
+    assert len(panels) == 6
+    # A 32-name legend made tight_layout shrink the panels to slivers (issue 15's ring32).
+    assert min(ax.get_position().height for ax in panels) > 0.2
+    legends = [ax.get_legend() for ax in [*perf.axes, *traj.axes]]  # type: ignore[attr-defined]
+    assert all(len(leg.get_texts()) <= 12 for leg in legends if leg is not None)
+    assert any(ax.get_ylabel() == "follower" for ax in perf.axes)  # type: ignore[attr-defined]
