@@ -17,6 +17,7 @@ status stream, so they agree on the set up to one status delivery.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from transport.bus import Bus
@@ -33,8 +34,14 @@ class LivenessTracker:
     tokens: set[int] = field(default_factory=set)
     heard_s: dict[int, float] = field(default_factory=dict)
     last_eval_s: float | None = None
+    # Every follower asks every tick, and the set changes a few times a run: the last
+    # answer stands until a token comes or goes, a silent follower is heard again, or the
+    # first member could have fallen silent (ring64: 64 checks a tick, each of 64).
+    _last: frozenset[int] | None = None
+    _last_until_s: float = -math.inf
 
     def token(self, index: int, alive: bool, now_s: float) -> None:
+        self._last = None
         if alive:
             self.tokens.add(index)
             self.heard_s[index] = max(self.heard_s.get(index, now_s), now_s)
@@ -45,6 +52,8 @@ class LivenessTracker:
     def heard(self, index: int, now_s: float) -> None:
         if index in self.tokens:
             self.heard_s[index] = max(self.heard_s.get(index, now_s), now_s)
+            if self._last is not None and index not in self._last:
+                self._last = None
 
     def members(self, now_s: float) -> frozenset[int]:
         """Followers with a live token heard within `silence_s` of `now_s`.
@@ -56,10 +65,19 @@ class LivenessTracker:
         if self.last_eval_s is not None and now_s - self.last_eval_s > 0.5 * self.silence_s:
             for i in self.heard_s:
                 self.heard_s[i] = max(self.heard_s[i], now_s)
+            self._last = None
+        elif self.last_eval_s is not None and now_s < self.last_eval_s:
+            self._last = None  # a clock that steps back: judge afresh
         self.last_eval_s = now_s
-        return frozenset(
+        if self._last is not None and now_s <= self._last_until_s:
+            return self._last
+        self._last = frozenset(
             i for i in self.tokens if now_s - self.heard_s.get(i, now_s) <= self.silence_s
         )
+        # Heard times only move later while the set stands, so this bound is safe.
+        self._last_until_s = min((self.heard_s.get(i, now_s) for i in self._last),
+                                 default=math.inf) + self.silence_s
+        return self._last
 
 
 class MembershipWatch:

@@ -14,7 +14,7 @@ from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter, VehicleState
 from agents.mavlink.modes import HOLD_MODE, OFFBOARD_MODE
 from agents.mavlink.offboard import OffboardKeeper
 from agents.mavlink.signing import load_key
-from agents.mavlink.startup import start_offboard
+from agents.mavlink.startup import StartupTimeouts, start_offboard
 from agents.phases import log_phases, mark
 from agents.process import StatusReporter, StopFlag, Ticker, open_bus, stop_on_signals
 from agents.scenario import Scenario
@@ -71,14 +71,14 @@ class VehicleWatch:
 
 
 def _start_again(mav: MavlinkAdapter, altitude_m: float, stop: StopFlag, role: str,
-                 index: int) -> bool:
+                 index: int, timeouts: StartupTimeouts) -> bool:
     """The start-up sequence again (it skips what is already done); False if stopped."""
     log.warning("%s %d: vehicle not flying our setpoints (armed=%s mode=%s link=%s): "
                 "starting it up again", role, index, mav.state.armed, mav.state.mode,
                 mav.state.link_ok)
     stop.interrupt = True
     try:
-        start_offboard(mav, altitude_m)
+        start_offboard(mav, altitude_m, timeouts)
     except KeyboardInterrupt:
         return False
     except MavlinkError as exc:  # e.g. no heartbeat yet: try again after RECOVER_AFTER_S
@@ -109,6 +109,9 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
     if args.signing_key is not None:  # link id: the vehicle's number, one stream per agent
         cfg = replace(cfg, signing_key=load_key(args.signing_key), signing_link_id=vehicle & 0xFF)
     keys = SwarmKeys(args.swarm)
+    # Position as often as the loop reads it, no more: each frame is a datagram to verify
+    # and decode (a 20-Hz ring64 follower took 2.5 a tick at the 50 Hz default).
+    timeouts = StartupTimeouts(telemetry_hz=scenario.run.rate_hz)
     stamps = role == "follower" and bool(getattr(args, "latency_stamps", False))
     with stop_on_signals() as stop, open_bus(args, stamps) as bus, \
             MavlinkAdapter(cfg, bus.now_s) as mav:
@@ -117,7 +120,7 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         mark("node")  # subscriptions, publishers and first status declared
         stop.interrupt = True
         try:
-            start_offboard(mav, scenario.vehicle.altitude_m, mark=mark)
+            start_offboard(mav, scenario.vehicle.altitude_m, timeouts, mark=mark)
         except KeyboardInterrupt:
             log.info("%s %d stopped during start-up", role, index)
             node.close()
@@ -154,7 +157,7 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
                     mav.on_wait = heartbeat
                     try:
                         again = _start_again(mav, scenario.vehicle.altitude_m, stop, role,
-                                             index)
+                                             index, timeouts)
                     finally:
                         mav.on_wait = None
                     if not again:

@@ -5,6 +5,8 @@ from __future__ import annotations
 from typing import Any, cast
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agents.follower import FollowerNode
 from agents.liveness import SILENCE_S, LivenessTracker, MembershipWatch
@@ -150,3 +152,43 @@ def test_before_the_start_word_the_planned_ring_stands_and_alone_means_no_self_l
     node.tick(bus.now_s())
     assert node.members == {0, 1, 2, 3} and set(node.peer_subs) == {1, 3}
     node.close()
+
+
+def _fresh_members(t: LivenessTracker, now_s: float) -> frozenset[int]:
+    return frozenset(i for i in t.tokens if now_s - t.heard_s.get(i, now_s) <= t.silence_s)
+
+
+_EVENT = st.tuples(st.sampled_from(["up", "down", "heard", "ask"]), st.integers(0, 5),
+                   st.floats(0.0, 3.0, allow_nan=False))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(_EVENT, max_size=150))
+def test_the_kept_member_set_is_always_the_one_worked_out_afresh(
+        events: list[tuple[str, int, float]]) -> None:
+    """members() keeps its last answer between changes (a follower asks every tick); at
+    every step it must equal the set worked out from scratch, pauses and all."""
+    t = LivenessTracker(silence_s=5.0)
+    now = 0.0
+    for kind, index, dt in events:
+        now += dt
+        if kind == "up":
+            t.token(index, True, now)
+        elif kind == "down":
+            t.token(index, False, now)
+        elif kind == "heard":
+            t.heard(index, now)
+        if kind == "ask" or index % 2:  # asked at irregular times, pauses included
+            assert t.members(now) == _fresh_members(t, now)
+
+
+def test_a_silent_member_heard_again_is_back_at_once_not_when_the_kept_set_expires() -> None:
+    t = LivenessTracker(silence_s=5.0)
+    t.token(1, True, 0.0)
+    t.token(2, True, 0.0)
+    for k in range(1, 7):  # 2 speaks every second, 1 says nothing
+        t.heard(2, float(k))
+        t.members(float(k))
+    assert t.members(6.0) == {2}
+    t.heard(1, 6.5)
+    assert t.members(6.5) == {1, 2}

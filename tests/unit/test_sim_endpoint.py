@@ -148,3 +148,29 @@ def test_message_intervals_are_per_vehicle_and_slow_streams_keep_flowing(sim: Si
     assert 7 <= slow["ATTITUDE"] <= 9 and 7 <= slow["GLOBAL_POSITION_INT"] <= 9
     assert slow["LOCAL_POSITION_NED"] >= 99 and default["ATTITUDE"] >= 99
     assert default["GLOBAL_POSITION_INT"] >= 99
+
+
+def test_a_slower_loop_gets_its_position_at_its_own_rate(sim: Simulator) -> None:
+    """A 20-Hz follower asks LOCAL_POSITION_NED down to its loop rate (agents.vehicle_loop):
+    on 50-Hz ticks the vehicle keeps the average rate (every 2.5 ticks), not 25 or 50 Hz."""
+    gcs = new_codec(255, 190)
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client.bind(("127.0.0.1", 0))
+    client.setblocking(False)
+    try:
+        sim.endpoints[0].on_datagram(
+            gcs.command_long_encode(1, 1, 511, 0, 32, 50_000, 0, 0, 0, 0, 0).pack(gcs),
+            client.getsockname(), sim.sim_time_s, sim._rows[0])
+        for _ in range(round(2.0 / sim.dt_s)):  # 2 s of ticks
+            sim.step_once()
+        seen = 0
+        while True:
+            try:
+                data = client.recv(65535)
+            except BlockingIOError:
+                break
+            seen += sum(m.get_type() == "LOCAL_POSITION_NED"
+                        for m in decode_datagram(new_codec(250, 0), data).messages)
+    finally:
+        client.close()
+    assert 39 <= seen <= 41
