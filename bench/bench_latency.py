@@ -88,17 +88,16 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("runs/bench-latency"))
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    cases: list[tuple[str, Path | str]] = []
+    cases: list[tuple[str, Path | str, str]] = []  # label, scenario, run folder stem
     for n in args.sizes:
         scenario = (args.out / f"ring{n}.toml").resolve()
         scenario.write_text(ring_scenario(n, args.duration))
-        cases.append((f"ring{n}", scenario))
-    cases += [(f"{name} (shipped)", name) for name in args.shipped]
-    for label, scenario in cases:
+        cases.append((f"ring{n}", scenario, f"ring{n}"))
+    cases += [(f"{name} (shipped)", name, f"{name}-shipped") for name in args.shipped]
+    for label, scenario, stem in cases:
         runs = []
         for k in range(args.repeats):
-            out = (args.out / f"{label.split()[0]}-{'s' if label.endswith(')') else ''}{k}")
-            res = run_once(scenario, args.duration, out.resolve())
+            res = run_once(scenario, args.duration, (args.out / f"{stem}-{k}").resolve())
             print(f"== {label} run {k + 1} ({args.duration:g} s): {json.dumps(res)}", flush=True)
             runs.append(res)
         ok = [r for r in runs if r.get("followers_reporting")]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -29,14 +30,15 @@ PANELS = (
 def _plot_followers(ax: Axes, t: np.ndarray, values: np.ndarray, label: str) -> None:
     n = values.shape[1]
     for i in range(n):
-        if n <= MAX_LEGEND:
-            ax.plot(t, values[:, i], lw=1.0, label=f"{label}{i + 1}")
-        else:  # a large swarm: one colour scale over the ring instead of a legend entry each
-            ax.plot(t, values[:, i], lw=0.7, color=_ring_colour(i, n))
+        ax.plot(t, values[:, i], **_follower_style(i, n, f"{label}{i + 1}", 1.0))
 
 
-def _ring_colour(i: int, n: int) -> tuple[float, float, float, float]:
-    return tuple(plt.get_cmap("viridis")(i / max(1, n - 1)))  # type: ignore[return-value]
+def _follower_style(i: int, n: int, label: str, lw: float) -> dict[str, Any]:
+    """Follower i's line: named in the legend, or in a large swarm one colour scale over
+    the ring (and thinner lines) instead of a legend entry each."""
+    if n <= MAX_LEGEND:
+        return {"lw": lw, "label": label}
+    return {"lw": 0.7 * lw, "color": plt.get_cmap("viridis")(i / max(1, n - 1))}
 
 
 def _follower_key(ax: Axes, n: int) -> None:
@@ -103,10 +105,7 @@ def trajectory_figure(
     n = series.follower_pos_m.shape[1]
     for i in range(n):
         xy = series.follower_pos_m[:, i]
-        if n <= MAX_LEGEND:
-            ax.plot(xy[:, 0], xy[:, 1], lw=0.9, label=f"follower {i + 1}")
-        else:
-            ax.plot(xy[:, 0], xy[:, 1], lw=0.6, color=_ring_colour(i, n))
+        ax.plot(xy[:, 0], xy[:, 1], **_follower_style(i, n, f"follower {i + 1}", 0.9))
         ax.plot(*xy[0], "o", ms=4, color=ax.lines[-1].get_color())
     for j in range(series.target_pos_m.shape[1]):
         xy = series.target_pos_m[:, j]

@@ -125,12 +125,9 @@ def sensor_every_ticks(tick_hz: float, sensor_hz: float) -> int:
 
 def run(args: argparse.Namespace) -> int:
     scenario = load_run_scenario(args)
-    # The vehicles stream their position as fast as the followers' loop reads it, as a
-    # companion computer sets a real autopilot's streams (SET_MESSAGE_INTERVAL).
-    loop_hz = args.rate_hz / sensor_every_ticks(args.rate_hz, scenario.run.rate_hz)
     cfg = SimConfig(
         rate_hz=args.rate_hz,
-        telemetry_hz=args.telemetry_hz or loop_hz,
+        telemetry_hz=args.telemetry_hz,
         flavour=scenario.vehicle.flavour,
         host=args.mav_host,
         listen_base_port=args.base_port,
@@ -190,9 +187,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="enclose-swarm-sim", description=__doc__)
     add_bus_arguments(parser)
     parser.add_argument("--rate-hz", type=float, default=50.0, help="simulation tick rate")
-    parser.add_argument("--telemetry-hz", type=float, default=None,
-                        help="rate of the vehicles' position and attitude streams (default: "
-                        "the scenario's control rate, at most the tick rate)")
+    # Each agent asks its vehicle down to its own loop rate (agents.vehicle_loop).
+    parser.add_argument("--telemetry-hz", type=float, default=50.0)
     parser.add_argument(
         "--sensor-hz",
         type=float,
