@@ -7,7 +7,8 @@ sets wins over our safe value -- except `timestamping/enabled`, which the
 message stamps need, and non-empty `listen`/`connect` lists given here, which
 are explicit choices of the caller.  Keys the file leaves unset get the safe
 values, so a file that only tunes, say, buffers never opens multicast scouting
-or a listener on every interface.
+or a listener on every interface.  (A key the file sets to Zenoh's own default
+reads as unset: ask for a 65535-byte batch as 65534.)
 
 With an `identity` (transport.credentials) the session is authenticated: every link
 is mutual TLS with the swarm's CA (a peer without a swarm certificate cannot link),
@@ -42,6 +43,12 @@ RUNTIME_SETTINGS = {
                   "acc: (handover: app), app: (worker_threads: 1))",
 }
 ENDPOINT_PROTOCOLS = (*LINK_PROTOCOLS, "tls")
+# Zenoh's batch and per-link receive buffer, bytes (Zenoh's default 65535).  Every link of
+# the peer mesh holds them, and a follower of n peers has about n + 4 links: in ring32
+# 8 KB instead of 64 KB took 3.4 MB off each follower's RSS (BENCHMARKS.md, issue 15).  Our
+# samples are under 1 KB, so a batch still holds a tick's worth; a larger message is
+# fragmented, not lost.  Both sides of a link agree on the smaller batch size.
+LINK_BUFFER_BYTES = 8192
 _MODES = ("peer", "client", "router")
 
 
@@ -121,6 +128,9 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
         _put(config, "connect/timeout_ms", -1)
     if not (user and _is_set(config, default, "scouting/multicast/enabled")):
         _put(config, "scouting/multicast/enabled", False)
+    for key in ("transport/link/tx/batch_size", "transport/link/rx/buffer_size"):
+        if not (user and _is_set(config, default, key)):
+            _put(config, key, LINK_BUFFER_BYTES)
     _put(config, "timestamping/enabled", True)
     if cfg.lowlatency:
         _put(config, "transport/unicast/lowlatency", True)

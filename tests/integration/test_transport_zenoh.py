@@ -24,7 +24,7 @@ from transport.decoder import Decoder
 from transport.keys import SwarmKeys
 from transport.messages import FollowerState, ProcessStatus, Stamper
 from transport.zenoh_bus import ZenohBus
-from transport.zenoh_config import ZenohConfig, loopback_endpoint
+from transport.zenoh_config import LINK_BUFFER_BYTES, ZenohConfig, loopback_endpoint
 
 pytestmark = pytest.mark.integration
 REPO = Path(__file__).resolve().parents[2]
@@ -74,6 +74,8 @@ def test_two_processes_exchange_stamped_states_and_survive_garbage() -> None:
         nan_state = msgpack.unpackb(encode(state(Stamper("x"))))
         nan_state[6] = [math.nan, 0.0]
         pub.put(b"\xc1 not msgpack")
+        # Five times Zenoh's batch (LINK_BUFFER_BYTES): fragmented on the way, whole on arrival.
+        pub.put(b"\xc1" + bytes(5 * LINK_BUFFER_BYTES))
         pub.put(bytes(msgpack.packb(nan_state)))
         stamper, decoder = Stamper("follower-0"), Decoder()
         sent = state(stamper, x=42.0)
@@ -96,7 +98,7 @@ def test_two_processes_exchange_stamped_states_and_survive_garbage() -> None:
         wait_for(echo_and_counts_seen, 10, "echo of the valid state")
         assert got[0].index == 1 and got[0].r_m == (42.0, 2.0)
         assert got[0].header.sender_id == "echo-0"
-        assert counters["drop_msgpack"] == 1 and counters["drop_non_finite"] == 1
+        assert counters["drop_msgpack"] == 2 and counters["drop_non_finite"] == 1
         assert proc.poll() is None, "the receiver crashed on bad input"
         assert decoder.dropped_total == 0 and decoder.gaps["echo-0"] == 0
 

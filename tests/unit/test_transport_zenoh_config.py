@@ -14,6 +14,7 @@ import pytest
 from agents.errors import ConfigError
 from agents.scenario import ZENOH_RUNTIMES
 from transport.zenoh_config import (
+    LINK_BUFFER_BYTES,
     RUNTIME_SETTINGS,
     ZenohConfig,
     build_zenoh_config,
@@ -33,6 +34,8 @@ def test_defaults_are_safe_peer_on_loopback() -> None:
     assert get(cfg, "connect/endpoints") == []
     assert get(cfg, "timestamping/enabled") is True
     assert get(cfg, "transport/unicast/lowlatency") is False
+    assert get(cfg, "transport/link/tx/batch_size") == LINK_BUFFER_BYTES
+    assert get(cfg, "transport/link/rx/buffer_size") == LINK_BUFFER_BYTES
 
 
 def test_explicit_endpoints_and_lowlatency() -> None:
@@ -63,9 +66,12 @@ def test_user_file_settings_win_and_unset_keys_stay_safe(tmp_path: Path) -> None
 
 def test_user_file_silent_on_scouting_gets_multicast_off(tmp_path: Path) -> None:
     path = tmp_path / "zenoh.json5"
-    path.write_text('{ transport: { unicast: { max_links: 2 } } }')
+    path.write_text('{ transport: { unicast: { max_links: 2 },'
+                    ' link: { tx: { batch_size: 32768 } } } }')
     cfg = ZenohConfig(user_config_path=str(path), listen=(loopback_endpoint(17004),))
     assert get(cfg, "scouting/multicast/enabled") is False
+    assert get(cfg, "transport/link/tx/batch_size") == 32768  # the user's
+    assert get(cfg, "transport/link/rx/buffer_size") == LINK_BUFFER_BYTES  # ours
     assert get(cfg, "listen/endpoints") == ["tcp/127.0.0.1:17004"]
     assert get(cfg, "transport/unicast/max_links") == 2
 
