@@ -59,7 +59,10 @@ def run_once(scenario: Path | str, duration_s: float, out: Path) -> dict[str, An
             str(duration_s), "--out", str(out), "--latency-stamps"]
     code = subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                           check=False).returncode
-    status = json.loads((out / "launch.json").read_text())["status"]
+    try:
+        status = json.loads((out / "launch.json").read_text())["status"]
+    except (OSError, ValueError, KeyError) as exc:  # the run did not get far: say so, go on
+        return {"exit_code": code, "followers_reporting": 0, "error": f"{exc} (see {out}/logs)"}
     fol = {k: v for k, v in status.items() if k.startswith("follower") and "nbr_lat_p50_us" in v}
     p50 = [v["nbr_lat_p50_us"] for v in fol.values()]
     p99 = [v["nbr_lat_p99_us"] for v in fol.values()]
