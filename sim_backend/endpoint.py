@@ -5,7 +5,10 @@ message dispatch (commands live in `sim_backend.commands`, the ground-station pr
 in `sim_backend.protocols`).  Every message is handled inside its own error boundary:
 a handler that raises is counted and answered (FAILED + STATUSTEXT), never propagated,
 so no packet can stop the simulator.  Each message is counted by type and outcome in
-`messages` ("answered", "handled", "ignored", "refused", "failed", "unhandled").
+`messages` ("answered", "handled", "ignored", "refused", "failed", "unhandled").  A
+well-framed frame of a type the common dialect lacks (a bigger dialect's, as MAVProxy's
+ardupilotmega, or garbage that happens to frame) cannot be CRC-checked: it is counted as
+`unknown_types`, apart from `bad_packets`, and has no outcome.
 
 Replies (COMMAND_ACK, PARAM_VALUE, requested messages) go to the sender; streamed
 telemetry goes to the PX4-SITL-style default destination and to every address
@@ -19,6 +22,8 @@ import socket
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import common as mavlink2
 
 from agents.mavlink.signing import SignatureVerifier
 from agents.mavlink.wire import MAVLinkMessage as Msg
@@ -65,10 +70,11 @@ class VehicleEndpoint:
         self.home = home
         self.counters = counters
         self.messages: Counter[str] = Counter() if messages is None else messages
-        self.mav = new_codec(sysid, 1)  # packs what we send (signs it when keyed)
+        # The full common dialect: ground stations and SDKs speak all of it.
+        self.mav = new_codec(sysid, 1, mavlink2)  # packs what we send (signs it when keyed)
         # Parses what we receive: never keyed, because pymavlink's own check moves a
         # stream's timestamp before it verifies (agents.mavlink.signing).
-        self.rx_codec = new_codec(sysid, 1)
+        self.rx_codec = new_codec(sysid, 1, mavlink2)
         self.peers: dict[Addr, float] = {}
         self.missions = protocols.MissionStore()
         # Services that own a message type (sim_backend.timesync: TIMESYNC, SYSTEM_TIME).
@@ -105,6 +111,8 @@ class VehicleEndpoint:
         decoded = decode_datagram(self.rx_codec, data)
         if decoded.bad:
             self.counters["bad_packets"] += decoded.bad
+        if decoded.unknown:  # a bigger dialect's types (ardupilotmega...): not garbage
+            self.counters["unknown_types"] += decoded.unknown
         messages = [m for m in decoded.messages
                     if signature_ok(self.verifier, m, self.counters)]
         if messages:

@@ -272,3 +272,25 @@ def test_a_blocking_wait_calls_the_on_wait_hook() -> None:
         ad.on_wait = None
         ad.wait_readable(0.0)
     assert len(calls) == 2
+
+
+@pytest.mark.timeout(30)
+def test_a_type_the_lean_dialect_lacks_is_counted_apart_from_bad_bytes() -> None:
+    """A real PX4 streams BATTERY_STATUS and more: framed, not ours, not garbage."""
+    ad, _clock, vehicle = open_pair()
+    try:
+        assert ad.sock is not None and type(ad.mav).__module__ == "agents.mavlink.lean_common"
+        px4 = new_codec(1, 1)  # the full common dialect
+        battery = px4.battery_status_encode(0, 0, 0, 2500, [3700] * 10, -1, -1, -1, 80)
+        datagram = battery.pack(px4) + local_pos(10)(px4).pack(px4) + b"\x00junk"
+        vehicle.sendto(datagram, ad.sock.getsockname())
+        for _ in range(100):
+            ad.poll()
+            if ad.counters["unknown_types"]:
+                break
+            ad.wait_readable(0.01)
+        assert ad.counters["unknown_types"] == 1 and ad.counters["bad_packets"] == 1
+        assert ad.state.pos_enu_m == (2.0, 1.0, 3.0)  # the position beside it was read
+    finally:
+        ad.close()
+        vehicle.close()
