@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agents.errors import DeployError
-from deploy.forked import ForkedProcess, fork_is_safe, fork_main
+from deploy.forked import ForkedProcess, fork_is_safe, fork_main, trim_heap
 from deploy.zygote import Zygote
 
 log = logging.getLogger(__name__)
@@ -78,6 +78,7 @@ class Supervisor:
         """Import the modules of the processes the launcher forks, before it forks them."""
         for module in FORKED_MODULES:
             importlib.import_module(module)
+        trim_heap()
 
     def end_forks(self) -> None:
         """Every child is started: stop the fork server (restarts start interpreters)."""

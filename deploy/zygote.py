@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from agents.errors import DeployError
-from deploy.forked import ForkedProcess, fork_pid
+from deploy.forked import ForkedProcess, fork_pid, trim_heap
 
 PR_SET_PDEATHSIG, PR_SET_CHILD_SUBREAPER = 1, 36  # linux/prctl.h
 
@@ -129,6 +129,7 @@ def main(argv: Sequence[str]) -> int:
         return 1  # the launcher died before we asked
     for module in argv[1:]:
         importlib.import_module(module)
+    trim_heap()
     print("ready", flush=True)
     for line in sys.stdin:
         if line.strip() == "exit":
