@@ -7,8 +7,9 @@ paper's bounds, worst estimator error <= 1.5x the lock-step one, command jump < 
 Simulator overruns and catch-ups come from launch.json (the simulator's last status).
 
 Each run also reports its cost (launch.json "load"): the share of follower ticks that ran
-late, the simulator's late ticks, the followers' mean CPU and how busy the machine was: a
-run on a saturated machine measures the machine, not the design.
+late, the simulator's late ticks, the followers' mean CPU, the largest follower's peak RSS
+over the run and how busy the machine was: a run on a saturated machine measures the
+machine, not the design.
 
 Run (idle machine, about 24 min with the defaults):
     python bench/bench_repeat.py [--scenario ring32] [--runs 10] [--duration 120]
@@ -54,12 +55,16 @@ def swarm_run(out: Path, scenario: str, duration_s: float, extra: list[str]) -> 
 
 
 def load_figures(load: dict[str, Any]) -> dict[str, Any]:
-    """Late ticks and CPU of one run, from launch.json "load" (deploy.cpu_load)."""
+    """Late ticks, CPU and the largest follower's peak RSS over the whole run, from
+    launch.json "load" (deploy.cpu_load)."""
     ticks = load.get("ticks") or {}
     cpu = load.get("process_cpu_pct") or {}
     followers = [v for k, v in cpu.items() if k.startswith("follower-")]
+    rss = [v for k, v in (load.get("process_peak_rss_mb") or {}).items()
+           if k.startswith("follower-")]
     return {"late_pct": ticks.get("overrun_pct"), "sim_late_pct": ticks.get("sim_overrun_pct"),
             "follower_cpu_pct": float(np.mean(followers)) if followers else None,
+            "follower_rss_mb": float(max(rss)) if rss else None,
             "busy_pct": load.get("machine_busy_pct")}
 
 
@@ -87,7 +92,8 @@ def main() -> None:
     parser.add_argument("extra", nargs="*", help="more `enclose run` arguments (after --)")
     args = parser.parse_args()
     ref = lockstep((args.out / "lockstep-50hz").resolve(), args.scenario, args.duration)
-    cols = [*KEYS, "late_pct", "sim_late_pct", "follower_cpu_pct", "busy_pct", "overruns",
+    cols = [*KEYS, "late_pct", "sim_late_pct", "follower_cpu_pct", "follower_rss_mb", "busy_pct",
+            "overruns",
             "catch_ups", "failsafes"]
     print("| run | exit | " + " | ".join(cols) + " |")
     print("|---|---|" + "---|" * len(cols), flush=True)
@@ -102,7 +108,8 @@ def main() -> None:
     print("| lock-step 50 Hz | | " + " | ".join(f"{ref[c]:.4g}" if isinstance(ref.get(c), float)
                                                else str(ref.get(c)) for c in KEYS) + " |")
     print("\n| metric | min | median | max |\n|---|---|---|---|")
-    for c in (*KEYS, "late_pct", "sim_late_pct", "follower_cpu_pct", "busy_pct"):
+    for c in (*KEYS, "late_pct", "sim_late_pct", "follower_cpu_pct", "follower_rss_mb",
+              "busy_pct"):
         vals = np.array([r[c] for r in runs if isinstance(r.get(c), float)])
         if vals.size:
             print(f"| {c} | {vals.min():.4g} | {np.median(vals):.4g} | {vals.max():.4g} |")

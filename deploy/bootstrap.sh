@@ -14,6 +14,11 @@ if [ ! -x "$venv/bin/python" ]; then
   echo "bootstrap: creating $venv" >&2
   "$python" -m venv "$venv"
 fi
+# The project's own bytecode, once: where PYTHONDONTWRITEBYTECODE is set every process
+# would compile them from source again, which costs each interpreter ~50 ms and leaves a
+# forked follower ~2 MB larger (BENCHMARKS.md, issue 15).  Up to date, this takes ~30 ms.
+"$venv/bin/python" -m compileall -q "$repo/agents" "$repo/transport" "$repo/deploy" \
+  "$repo/sim_backend" >/dev/null 2>&1 || true
 # Reinstall only when the dependency list changed since the last install of that kind;
 # a dev install covers a plain one.
 stamp="$venv/.enclose-installed-dev"

@@ -1,4 +1,4 @@
-"""What the run cost the machine: CPU per process and how busy the machine was.
+"""What the run cost the machine: CPU and peak memory per process, how busy the machine was.
 
 Issue 15's figures (and any accuracy figure) depend on machine load: a swarm that fills
 both cores overruns its ticks and its errors are no longer the design's.  The launcher
@@ -34,6 +34,17 @@ def process_cpu_s(pid: int, proc: Path = PROC) -> float | None:
         return None
 
 
+def process_peak_rss_mb(pid: int, proc: Path = PROC) -> float | None:
+    """The most resident memory process `pid` has held so far (VmHWM), MB; None if gone."""
+    try:
+        for line in (proc / str(pid) / "status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
 def machine_ticks(proc: Path = PROC) -> tuple[int, int] | None:
     """(busy, total) clock ticks of all CPUs since boot; None when unreadable."""
     try:
@@ -60,24 +71,32 @@ class CpuSampler:
     # name -> [(t_s, pid, cpu_s)]; a restart shows as a new pid (its CPU starts from 0)
     processes: dict[str, list[tuple[float, int, float]]] = field(default_factory=dict)
     machine: list[tuple[float, int, int, float | None]] = field(default_factory=list)
+    peak_rss_mb: dict[str, float] = field(default_factory=dict)  # name -> max over its pids
 
     def sample(self, t_s: float, pids: dict[str, int | None]) -> None:
         for name, pid in pids.items():
             cpu = None if pid is None else process_cpu_s(pid, self.proc)
             if pid is not None and cpu is not None:
                 self.processes.setdefault(name, []).append((t_s, pid, cpu))
+            peak = None if pid is None else process_peak_rss_mb(pid, self.proc)
+            if peak is not None:
+                self.peak_rss_mb[name] = max(peak, self.peak_rss_mb.get(name, 0.0))
         ticks = machine_ticks(self.proc)
         if ticks is not None:
             self.machine.append((t_s, ticks[0], ticks[1], load_1min(self.proc)))
 
     def summary(self, from_s: float, cores: int | None = None) -> dict[str, object]:
         """{"process_cpu_pct": {name: % of a core}, "machine_busy_pct", "load_1min", "cores"}
-        over the samples at or after `from_s` (only what was sampled twice or more)."""
+        over the samples at or after `from_s` (only what was sampled twice or more), and
+        "process_peak_rss_mb" {name: MB} over the whole run."""
         out: dict[str, object] = {}
         per = {name: pct for name, rows in sorted(self.processes.items())
                if (pct := _mean_pct(rows, from_s)) is not None}
         if per:
             out["process_cpu_pct"] = per
+        if self.peak_rss_mb:
+            out["process_peak_rss_mb"] = {k: round(v, 1)
+                                          for k, v in sorted(self.peak_rss_mb.items())}
         rows = [m for m in self.machine if m[0] >= from_s]
         if len(rows) >= 2 and rows[-1][2] > rows[0][2]:
             busy = rows[-1][1] - rows[0][1]
@@ -128,6 +147,27 @@ def load_line(cpu: dict[str, object]) -> str | None:
         parts.append(f"machine {busy:.0f} % busy ({cpu.get('cores')} cores{tail})")
         if busy >= SATURATED_PCT:
             parts[-1] += ": saturated, so the errors measure the machine as well as the run"
+    return "; ".join(parts)
+
+
+def memory_line(load: dict[str, object]) -> str | None:
+    """One line for the verdict: the followers' peak resident memory, mean and max, and the
+    other processes' (targets as one figure)."""
+    per = load.get("process_peak_rss_mb")
+    if not isinstance(per, dict) or not per:
+        return None
+    followers = {k: v for k, v in per.items() if k.startswith("follower-")}
+    parts = []
+    if followers:
+        worst = max(followers, key=followers.__getitem__)
+        mean = sum(followers.values()) / len(followers)
+        parts.append(f"followers {mean:.1f} MB each at peak (max {followers[worst]:.1f} "
+                     f"{worst})")
+    parts += [f"{k} {v:.0f} MB" for k, v in sorted(per.items())
+              if k not in followers and not k.startswith("target-")]
+    targets = [v for k, v in per.items() if k.startswith("target-")]
+    if targets:
+        parts.append(f"targets {max(targets):.0f} MB at most")
     return "; ".join(parts)
 
 

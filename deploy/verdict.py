@@ -17,7 +17,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from deploy.cpu_load import load_line, overrun_line
+from deploy.cpu_load import load_line, memory_line, overrun_line
 from deploy.json_files import read_json
 
 # metrics.json key -> (label, unit, run.json key of its bound)
@@ -63,6 +63,7 @@ class Verdict:
     networked: bool = False  # a launch.json exists: processes to report on
     load: str | None = None  # CPU per process and machine busy (deploy.cpu_load)
     ticks: str | None = None  # the followers' late control ticks
+    memory: str | None = None  # peak resident memory per process (deploy.cpu_load)
 
     @property
     def inside(self) -> bool:
@@ -132,7 +133,7 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
         process_lines(launch), link_summary(metrics),
         live if isinstance(live, str) and live else None,
         tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
-        bool(launch), load_line(load), overrun_line(ticks),
+        bool(launch), load_line(load), overrun_line(ticks), memory_line(load),
     )
 
 
@@ -146,6 +147,7 @@ def verdict_json(v: Verdict) -> dict[str, Any]:
         "processes": list(v.processes),
         "live_url": v.live_url,
         "load": v.load,
+        "memory": v.memory,
         "late_ticks": v.ticks,
         "run_dir": str(v.run_dir),
     }}
@@ -180,6 +182,7 @@ def print_verdict(console: Console, v: Verdict) -> None:
     rows += [("links", v.links)] if v.links else []
     rows += [("late ticks", v.ticks)] if v.ticks else []
     rows += [("CPU", v.load)] if v.load else []
+    rows += [("memory", v.memory)] if v.memory else []
     rows += [("live view", v.live_url)] if v.live_url else []
     rows.append(("files", f"{v.run_dir}/ ({', '.join(v.files) or 'none'})"))
     for label, value in rows:

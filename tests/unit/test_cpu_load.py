@@ -11,6 +11,7 @@ from deploy.cpu_load import (
     CpuSampler,
     load_line,
     machine_ticks,
+    memory_line,
     overrun_line,
     overrun_summary,
     process_cpu_s,
@@ -114,3 +115,28 @@ def test_enclose_profile_dir_leaves_a_cpu_profile_per_process(
     stats = pstats.Stats(str(folder / "follower-7.prof"))
     assert any(name == "work" for (_, _, name) in stats.stats)  # type: ignore[attr-defined]
     assert stats.total_tt >= 0.04  # type: ignore[attr-defined]  # CPU of the busy loop
+
+
+def test_peak_memory_is_the_kernels_high_water_mark_kept_over_restarts() -> None:
+    sampler = CpuSampler()
+    pid = os.getpid()
+    ballast = bytearray(64 * 1024 * 1024)  # touched: resident
+    ballast[::4096] = b"\x01" * len(ballast[::4096])
+    sampler.sample(time.monotonic(), {"follower-0": pid, "gone": 2**22 + 12345})
+    del ballast
+    sampler.sample(time.monotonic(), {"follower-0": pid})
+    peak = sampler.summary(0.0)["process_peak_rss_mb"]
+    assert isinstance(peak, dict) and set(peak) == {"follower-0"}
+    assert peak["follower-0"] >= 64.0  # the peak stays after the ballast is freed
+    sampler.peak_rss_mb["follower-0"] = 500.0  # an earlier pid of the same name held more
+    sampler.sample(time.monotonic(), {"follower-0": pid})
+    assert sampler.peak_rss_mb["follower-0"] == 500.0
+
+
+def test_memory_line_names_the_largest_follower() -> None:
+    line = memory_line({"process_peak_rss_mb": {"follower-0": 44.0, "follower-1": 48.5,
+                                                "sim": 60.2, "target-0": 54.0,
+                                                "target-1": 55.4}})
+    assert line == ("followers 46.2 MB each at peak (max 48.5 follower-1); sim 60 MB; "
+                    "targets 55 MB at most")
+    assert memory_line({}) is None
