@@ -123,23 +123,31 @@ def _mean_pct(rows: list[tuple[float, int, float]], from_s: float) -> float | No
 SATURATED_PCT = 95.0
 
 
-def load_line(cpu: dict[str, object]) -> str | None:
-    """One line for the verdict: followers' mean and max, the others, the machine."""
-    per = cpu.get("process_cpu_pct")
-    if not isinstance(per, dict) or not per:
-        return None
+def _by_role(per: dict[str, float], each: str, unit: str, targets_at_most: bool) -> list[str]:
+    """Followers as mean and max (`each` after the mean), the other processes one by one,
+    the targets as one figure (their mean, or their max when `targets_at_most`)."""
     followers = {k: v for k, v in per.items() if k.startswith("follower-")}
     parts = []
     if followers:
         worst = max(followers, key=followers.__getitem__)
         mean = sum(followers.values()) / len(followers)
-        parts.append(f"followers {mean:.1f} % of a core each (max {followers[worst]:.1f} "
-                     f"{worst})")
-    others = sorted((k, v) for k, v in per.items() if k not in followers)
-    parts += [f"{k} {v:.0f} %" for k, v in others if not k.startswith("target-")]
+        parts.append(f"followers {mean:.1f} {each} (max {followers[worst]:.1f} {worst})")
+    parts += [f"{k} {v:.0f} {unit}" for k, v in sorted(per.items())
+              if k not in followers and not k.startswith("target-")]
     targets = [v for k, v in per.items() if k.startswith("target-")]
-    if targets:
-        parts.append(f"targets {sum(targets) / len(targets):.0f} % each")
+    if targets and targets_at_most:
+        parts.append(f"targets {max(targets):.0f} {unit} at most")
+    elif targets:
+        parts.append(f"targets {sum(targets) / len(targets):.0f} {unit} each")
+    return parts
+
+
+def load_line(cpu: dict[str, object]) -> str | None:
+    """One line for the verdict: followers' mean and max, the others, the machine."""
+    per = cpu.get("process_cpu_pct")
+    if not isinstance(per, dict) or not per:
+        return None
+    parts = _by_role(per, "% of a core each", "%", targets_at_most=False)
     busy = cpu.get("machine_busy_pct")
     if isinstance(busy, int | float):
         load = cpu.get("load_1min")
@@ -152,23 +160,11 @@ def load_line(cpu: dict[str, object]) -> str | None:
 
 def memory_line(load: dict[str, object]) -> str | None:
     """One line for the verdict: the followers' peak resident memory, mean and max, and the
-    other processes' (targets as one figure)."""
+    other processes' (the targets' largest)."""
     per = load.get("process_peak_rss_mb")
     if not isinstance(per, dict) or not per:
         return None
-    followers = {k: v for k, v in per.items() if k.startswith("follower-")}
-    parts = []
-    if followers:
-        worst = max(followers, key=followers.__getitem__)
-        mean = sum(followers.values()) / len(followers)
-        parts.append(f"followers {mean:.1f} MB each at peak (max {followers[worst]:.1f} "
-                     f"{worst})")
-    parts += [f"{k} {v:.0f} MB" for k, v in sorted(per.items())
-              if k not in followers and not k.startswith("target-")]
-    targets = [v for k, v in per.items() if k.startswith("target-")]
-    if targets:
-        parts.append(f"targets {max(targets):.0f} MB at most")
-    return "; ".join(parts)
+    return "; ".join(_by_role(per, "MB each at peak", "MB", targets_at_most=True))
 
 
 def _late_ticks(counters: object) -> tuple[int, int] | None:
