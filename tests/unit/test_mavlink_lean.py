@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import struct
+from importlib.metadata import version
 from typing import Any
 
 import pytest
@@ -56,7 +57,14 @@ def test_the_lean_messages_are_the_full_dialects_and_cover_what_the_agents_use()
 
 @pytest.mark.timeout(60)
 def test_regenerating_gives_the_committed_module() -> None:
-    assert lean_gen.generate() == lean_gen.OUTPUT.read_text(encoding="utf-8"), (
+    committed = lean_gen.OUTPUT.read_text(encoding="utf-8")
+    if not committed.startswith(lean_gen.header().split("\n", 1)[0]):
+        # Another pymavlink than the one it was made with (pyproject asks >= 2.4.40): its
+        # generator may write other text for the same messages.  The test above still pins
+        # every message to this pymavlink's full dialect.
+        pytest.skip(f"lean_common.py was generated with another pymavlink than "
+                    f"{version('pymavlink')}: python -m agents.mavlink.lean_gen")
+    assert lean_gen.generate() == committed, (
         "agents/mavlink/lean_common.py is stale: python -m agents.mavlink.lean_gen")
 
 
