@@ -123,9 +123,13 @@ def process_main(
 def profiled(run: Callable[[argparse.Namespace], int], args: argparse.Namespace,
               name: str) -> int:
     """`run`, under cProfile when ENCLOSE_PROFILE_DIR names a folder: the profile of each
-    process lands in <folder>/<name>.prof (read it with `python -m pstats`)."""
+    process lands in <folder>/<name>.prof (read it with `python -m pstats`).
+
+    ENCLOSE_PROFILE_ONLY (names, comma-separated: `follower-3,sim`) profiles those alone:
+    cProfile doubles a process's CPU, and 64 profiled followers starve 2 cores."""
     folder = os.environ.get("ENCLOSE_PROFILE_DIR")
-    if not folder:
+    only = os.environ.get("ENCLOSE_PROFILE_ONLY", "")
+    if not folder or (only and name not in {n.strip() for n in only.split(",")}):
         return run(args)
     import cProfile
 

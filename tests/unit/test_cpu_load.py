@@ -115,6 +115,10 @@ def test_enclose_profile_dir_leaves_a_cpu_profile_per_process(
     stats = pstats.Stats(str(folder / "follower-7.prof"))
     assert any(name == "work" for (_, _, name) in stats.stats)  # type: ignore[attr-defined]
     assert stats.total_tt >= 0.04  # type: ignore[attr-defined]  # CPU of the busy loop
+    monkeypatch.setenv("ENCLOSE_PROFILE_ONLY", "sim, follower-2")
+    assert profiled(work, argparse.Namespace(code=0), "follower-1") == 0
+    assert profiled(work, argparse.Namespace(code=0), "follower-2") == 0
+    assert sorted(p.name for p in folder.iterdir()) == ["follower-2.prof", "follower-7.prof"]
 
 
 def test_peak_memory_is_the_kernels_high_water_mark_kept_over_restarts() -> None:
