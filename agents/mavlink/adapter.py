@@ -23,7 +23,7 @@ from agents.errors import LinkLostError, MavlinkError
 
 if TYPE_CHECKING:  # the follower's process runs without numpy (issue 15)
     import numpy as np
-from agents.frames import enu_to_ned_xyz, ned_to_enu_xyz, yaw_enu_to_ned
+from agents.frames import ned_to_enu_xyz
 from agents.mavlink import lean_common
 from agents.mavlink.modes import (
     MAV_MODE_FLAG_SAFETY_ARMED,
@@ -31,8 +31,10 @@ from agents.mavlink.modes import (
     flavour_of_autopilot,
 )
 from agents.mavlink.signing import SignatureVerifier, signing_timestamp
-from agents.mavlink.timemap import SO_TIMESTAMPNS, VehicleClock, kernel_arrival_s
+from agents.mavlink.timemap import VehicleClock, kernel_arrival_s
+from agents.mavlink.udp import bind_udp
 from agents.mavlink.vehicle_types import NO_STATE, AdapterConfig, VehicleState
+from agents.mavlink.velocity_setpoint import velocity_fields
 from agents.mavlink.wire import (
     MAVLinkMessage,
     decode_datagram,
@@ -45,9 +47,6 @@ from agents.mavlink.wire import (
 
 log = logging.getLogger(__name__)
 Addr = tuple[str, int]
-MAV_FRAME_LOCAL_NED = 1
-MASK_VELOCITY = 3527
-MASK_VELOCITY_YAW = 2503
 MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID = 18, 8
 HEARTBEAT_PERIOD_S = 1.0
 MAV_SEVERITY_WARNING = 4
@@ -89,7 +88,6 @@ class MavlinkAdapter:
         self.vclock = VehicleClock(f"vehicle {cfg.target_sysid or '?'}")
         self._last_ts_tx_s = -math.inf
         self._poll_s = -math.inf
-        self._kernel_stamps = False
         self._t0 = clock()
         self.sock: socket.socket | None = None
         self._selector: selectors.BaseSelector | None = None
@@ -99,22 +97,9 @@ class MavlinkAdapter:
 
     # ---- lifecycle ----------------------------------------------------------------------
     def open(self) -> MavlinkAdapter:
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            sock.bind((self.cfg.local_host, self.cfg.local_port))
-        except OSError as exc:
-            sock.close()
-            raise MavlinkError(f"cannot bind {self.cfg.local_host}:{self.cfg.local_port}: "
-                               f"{exc.strerror}") from exc
-        sock.setblocking(False)
-        try:  # kernel receive stamps: what waited in the buffer is stamped with its arrival
-            sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
-            self._kernel_stamps = True
-        except OSError:
-            self._kernel_stamps = False
-        self.sock = sock
+        self.sock = bind_udp(self.cfg.local_host, self.cfg.local_port)
         self._selector = selectors.DefaultSelector()
-        self._selector.register(sock, selectors.EVENT_READ)
+        self._selector.register(self.sock, selectors.EVENT_READ)
         return self
 
     def close(self) -> None:
@@ -283,20 +268,14 @@ class MavlinkAdapter:
     def send_velocity_enu(self, vel_m_s: tuple[float, float, float] | np.ndarray,
                           yaw_enu_rad: float | None = None) -> bool:
         """Stream one velocity setpoint; False (and counted) when refused."""
-        vel = _three_floats(vel_m_s)
-        if vel is None or not math.isfinite(vel[0] + vel[1] + vel[2]) or \
-                (yaw_enu_rad is not None and not math.isfinite(yaw_enu_rad)):
+        fields = velocity_fields(vel_m_s, yaw_enu_rad, self._boot_ms(), self.sysid or 0)
+        if fields is None:
             self.counters["refused_nonfinite"] += 1
             return False
         if self.sysid is None or self.remote is None:
             self.counters["refused_not_connected"] += 1
             return False
-        vn, ve, vd = enu_to_ned_xyz(*vel)
-        mask = MASK_VELOCITY if yaw_enu_rad is None else MASK_VELOCITY_YAW
-        yaw = 0.0 if yaw_enu_rad is None else yaw_enu_to_ned(yaw_enu_rad)
-        self._send_bytes(encode_fields(  # fields in wire order
-            self.tx, SETPOINT, self._boot_ms(), 0.0, 0.0, 0.0, vn, ve, vd, 0.0, 0.0, 0.0, yaw,
-            0.0, mask, self.sysid, 1, MAV_FRAME_LOCAL_NED))
+        self._send_bytes(encode_fields(self.tx, SETPOINT, *fields))
         self.counters["setpoints_sent"] += 1
         return True
 
@@ -326,12 +305,3 @@ class MavlinkAdapter:
         except OSError:
             self.counters["tx_errors"] += 1
 
-
-def _three_floats(vec: tuple[float, float, float] | np.ndarray,
-                  ) -> tuple[float, float, float] | None:
-    """A 3-vector as floats, or None when it is not one."""
-    try:
-        x, y, z = vec
-        return float(x), float(y), float(z)
-    except (TypeError, ValueError):
-        return None

@@ -205,12 +205,8 @@ def test_adapter_setpoints_decode_and_verify_in_stock_pymavlink() -> None:
 
     from pymavlink.dialects.v20 import common as mavlink2
 
-    from agents.mavlink.adapter import (
-        MASK_VELOCITY,
-        MASK_VELOCITY_YAW,
-        AdapterConfig,
-        MavlinkAdapter,
-    )
+    from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
+    from agents.mavlink.velocity_setpoint import MASK_VELOCITY, MASK_VELOCITY_YAW
 
     vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     vehicle.bind(("127.0.0.1", 0))
