@@ -31,20 +31,11 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from agents.phases import parse_phases
+from deploy.cpu_load import process_status_kb
 
 FOLLOWER_PHASES = ("spawn", "exec", "main", "bus_open", "node", "heartbeat", "position", "armed",
                    "takeoff_accepted", "at_altitude", "offboard", "linked")
 LAUNCHER_PHASES = ("exec", "credentials", "spawned", "bus_open", "linked")
-
-
-def proc_kb(pid: int, field: str) -> int | None:
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith(field + ":"):
-                return int(line.split()[1])
-    except OSError:
-        return None
-    return None
 
 
 def rollup_kb(pid: int) -> dict[str, int]:
@@ -76,7 +67,7 @@ def sample_memory(proc: subprocess.Popen[bytes], out: Path) -> dict[str, dict[st
         except ValueError:
             pids = {}
         for name, pid in pids.items():
-            rss, hwm = proc_kb(pid, "VmRSS"), proc_kb(pid, "VmHWM")
+            rss, hwm = process_status_kb(pid, "VmRSS"), process_status_kb(pid, "VmHWM")
             if rss is not None and hwm is not None:
                 m = mem.setdefault(name, {"rss_kb": 0, "hwm_kb": 0, "pss_kb": 0, "uss_kb": 0})
                 now = {"rss_kb": rss, "hwm_kb": hwm, **rollup_kb(pid)}

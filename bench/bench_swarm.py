@@ -20,17 +20,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-from deploy.cpu_load import process_cpu_s
+from deploy.cpu_load import process_cpu_s, process_status_kb
 
 
 def rss_mb(pid: int) -> float | None:
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    except OSError:
-        return None
-    return None
+    kb = process_status_kb(pid, "VmRSS")
+    return None if kb is None else kb / 1024.0
 
 
 def run_case(scenario: str, duration_s: float, out: Path, estimator: str) -> dict[str, Any]:

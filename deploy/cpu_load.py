@@ -34,15 +34,21 @@ def process_cpu_s(pid: int, proc: Path = PROC) -> float | None:
         return None
 
 
-def process_peak_rss_mb(pid: int, proc: Path = PROC) -> float | None:
-    """The most resident memory process `pid` has held so far (VmHWM), MB; None if gone."""
+def process_status_kb(pid: int, field: str, proc: Path = PROC) -> int | None:
+    """A kB figure of /proc/<pid>/status (`VmRSS`, `VmHWM`...); None if gone or absent."""
     try:
         for line in (proc / str(pid) / "status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024.0
+            if line.startswith(field + ":"):
+                return int(line.split()[1])
     except (OSError, ValueError, IndexError):
         return None
     return None
+
+
+def process_peak_rss_mb(pid: int, proc: Path = PROC) -> float | None:
+    """The most resident memory process `pid` has held so far (VmHWM), MB; None if gone."""
+    kb = process_status_kb(pid, "VmHWM", proc)
+    return None if kb is None else kb / 1024.0
 
 
 def machine_ticks(proc: Path = PROC) -> tuple[int, int] | None:

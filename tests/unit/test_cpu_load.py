@@ -15,6 +15,7 @@ from deploy.cpu_load import (
     overrun_line,
     overrun_summary,
     process_cpu_s,
+    process_status_kb,
 )
 
 pytestmark = [pytest.mark.timeout(30),
@@ -55,6 +56,11 @@ def test_readers_of_proc() -> None:
     assert cpu is not None and cpu > 0.0
     ticks = machine_ticks()
     assert ticks is not None and 0 <= ticks[0] <= ticks[1]
+    rss = process_status_kb(os.getpid(), "VmRSS")
+    hwm = process_status_kb(os.getpid(), "VmHWM")
+    assert rss is not None and hwm is not None and 0 < rss <= hwm
+    assert process_status_kb(os.getpid(), "NoSuchField") is None
+    assert process_status_kb(2**22 + 12345, "VmRSS") is None
 
 
 def test_late_ticks_from_status_counters() -> None:
