@@ -127,16 +127,14 @@ def test_a_follower_and_a_target_hold_the_lean_mavlink_dialect_not_the_full_one(
 # Compiles a large module from source, as an interpreter without cached bytecode does at
 # import, then trims: the compiler's freed memory must leave the resident set.
 TRIMMED = """
-from pathlib import Path
+import os
 import agents.mavlink.lean_gen as gen
+from deploy.cpu_load import process_status_kb
 from deploy.forked import trim_heap
-def rss_kb():
-    status = Path("/proc/self/status").read_text()
-    return int(next(line for line in status.splitlines() if line.startswith("VmRSS")).split()[1])
 code = compile(gen.OUTPUT.read_text(), "lean_common.py", "exec")
-before = rss_kb()
+before = process_status_kb(os.getpid(), "VmRSS")
 trim_heap()
-print(before - rss_kb())
+print(before - process_status_kb(os.getpid(), "VmRSS"))
 """
 
 
