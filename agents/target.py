@@ -2,7 +2,7 @@
 
     python -m agents.target --index J --scenario paper --swarm S --connect tcp/127.0.0.1:P
 
-Before the launcher's start it holds its start point; afterwards it tracks the
+Until the start stamp it holds its start point at rest; afterwards it tracks the
 profile with feed-forward velocity and a proportional position correction.
 """
 
@@ -41,6 +41,21 @@ def tracking_command(
     return u if speed <= speed_max_m_s else u * (speed_max_m_s / speed)
 
 
+def reference(
+    motion: TargetMotion, start_s: float | None, now_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The profile's (m, 2) positions and velocities at `now_s`; before the start (no start
+    word yet, or the word heard ahead of its start stamp), its start points at rest.
+
+    The profile's velocity at t = 0 is not zero.  Fed forward while waiting, it held the
+    target v / POSITION_GAIN_PER_S (1 m at 1 m/s) ahead of its start point, and set it
+    off at the word, a start delay early: the run began with the targets displaced."""
+    if start_s is None or now_s < start_s:
+        pos, vel = motion.state(0.0)
+        return pos, np.zeros_like(vel)
+    return motion.state(now_s - start_s)
+
+
 class TargetNode:
     def __init__(
         self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter, swarm: str
@@ -64,8 +79,7 @@ class TargetNode:
             elif isinstance(msg, RunControl):
                 self.stop_s = min(self.stop_s, now_s)
         state = self.vehicle.poll()
-        t = 0.0 if self.start_s is None else max(0.0, now_s - self.start_s)
-        ref_pos, ref_vel = self.motion.state(t)
+        ref_pos, ref_vel = reference(self.motion, self.start_s, now_s)
         pos = np.asarray(state.pos_enu_m)
         if not state.link_ok or not np.all(np.isfinite(pos)):
             self.status.counters["ticks_without_vehicle"] += 1
