@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 from agents.core.controller_one import enclosing_control_one
 from agents.core.estimator_one import (
     consensus_flows_c,
-    finite_difference_velocity,
+    lag_free_velocity,
     link_balance_c,
 )
 from agents.estimate_carry import REBASE_TAU_S, next_carry_c
@@ -30,6 +30,7 @@ from agents.follower_fast_memory import FastSetup as FastSetup
 from agents.follower_fast_memory import FollowerMemory as FollowerMemory
 from agents.follower_fast_memory import PeerView as PeerView
 from agents.follower_fast_memory import Sample as Sample
+from agents.follower_fast_memory import TargetTrack as TargetTrack
 from agents.follower_fast_memory import TickOutput as TickOutput
 
 if TYPE_CHECKING:
@@ -62,18 +63,24 @@ def _towards(flows: tuple[tuple[int, float, float, float, float], ...], receiver
 def observe_target(
     memory: FollowerMemory, setup: FastSetup, target: int, pos_m: complex, stamp_s: float
 ) -> FollowerMemory:
-    """Fold one observation in: position, and velocity by filtered finite difference."""
+    """Fold one observation in (follower_logic.observe_target)."""
     if target not in setup.observed:
         return memory
     prev = memory.targets.get(target)
     if prev is None:
-        track = _new(Sample, (pos_m, 0j, stamp_s))
+        track = _new(TargetTrack, (pos_m, 0j, stamp_s, 0j, 0j, False))
     elif stamp_s <= prev.stamp_s:
         return memory  # duplicate or reordered: the newer sample stands
     else:
-        vel = finite_difference_velocity(prev.value, prev.stamp_s, pos_m, stamp_s, prev.rate,
-                                         setup.ref.target_vel_tau_s)
-        track = _new(Sample, (pos_m, vel, stamp_s))
+        dt = stamp_s - prev.stamp_s
+        raw = (pos_m - prev.value) / dt
+        if not prev.primed:
+            track = _new(TargetTrack, (pos_m, raw, stamp_s, raw, 0j, True))
+        else:
+            ref = setup.ref
+            vel, smooth, accel = lag_free_velocity(raw, dt, prev.smooth, prev.accel,
+                                                   ref.target_vel_tau_s, ref.target_accel_tau_s)
+            track = _new(TargetTrack, (pos_m, vel, stamp_s, smooth, accel, True))
     m = memory
     return _new(FollowerMemory, (m.phi_m, m.phi_rate_m_s, m.last_tick_s, m.peer_age_s,
                                  {**m.targets, target: track}, m.link_sums_m, m.link_rates_m_s,
@@ -94,7 +101,7 @@ def reference(memory: FollowerMemory, setup: FastSetup, now_s: float) -> tuple[c
     for j, w in setup.weights:
         track = targets.get(j)
         if track is not None:
-            value, track_rate, stamp = track
+            value, track_rate, stamp = track.value, track.rate, track.stamp_s
             p += w * (value + track_rate * (min(now_s, stamp + hold) - stamp))
             if now_s - stamp <= hold:
                 rate += w * track_rate

@@ -31,8 +31,22 @@ class Sample(NamedTuple):
         return self.rate if t_s - self.stamp_s <= limit_s else 0j
 
 
+class TargetTrack(NamedTuple):
+    """follower_memory.TargetTrack, vectors as complex: a Sample and its velocity filter."""
+
+    value: complex
+    rate: complex
+    stamp_s: float
+    smooth: complex = 0j
+    accel: complex = 0j
+    primed: bool = False
+
+    def held(self, t_s: float, limit_s: float) -> complex:
+        return self.value + self.rate * (min(t_s, self.stamp_s + limit_s) - self.stamp_s)
+
+
 _NO_AGES: Mapping[int, float] = MappingProxyType({})
-_NO_TRACKS: Mapping[int, Sample] = MappingProxyType({})
+_NO_TRACKS: Mapping[int, TargetTrack] = MappingProxyType({})
 
 
 class PeerView(NamedTuple):
@@ -50,7 +64,7 @@ class FollowerMemory(NamedTuple):
     phi_rate_m_s: complex = 0j
     last_tick_s: float | None = None
     peer_age_s: Mapping[int, float] = _NO_AGES
-    targets: Mapping[int, Sample] = _NO_TRACKS
+    targets: Mapping[int, TargetTrack] = _NO_TRACKS
     link_sums_m: tuple[complex, ...] | None = None
     link_rates_m_s: tuple[complex, ...] | None = None
     last_r: Sample | None = None

@@ -31,7 +31,7 @@ from agents.core.controller import enclosing_control
 from agents.core.estimator import (
     EstimatorParams,
     consensus_flows,
-    finite_difference_velocity,
+    lag_free_velocity,
     link_balance,
 )
 from agents.estimate_carry import REBASE_TAU_S, next_carry
@@ -42,6 +42,7 @@ from agents.follower_memory import FloatArray as FloatArray
 from agents.follower_memory import FollowerMemory as FollowerMemory
 from agents.follower_memory import PeerView as PeerView
 from agents.follower_memory import Sample as Sample
+from agents.follower_memory import TargetTrack as TargetTrack
 from agents.follower_memory import TickOutput as TickOutput
 
 # Its weights and edge fractions are tuples: the follower process builds one too, without
@@ -72,19 +73,26 @@ def peer_view(msg: FollowerState, receiver: int) -> PeerView:
 def observe_target(
     memory: FollowerMemory, setup: FollowerSetup, target: int, pos_m: FloatArray, stamp_s: float
 ) -> FollowerMemory:
-    """Fold one observation in: position, and velocity by filtered finite difference."""
+    """Fold one observation in: position, and velocity by finite difference, low-passed
+    and corrected for the lag that costs (estimator_one.lag_free_velocity)."""
     if target not in setup.observed:
         return memory
     prev = memory.targets.get(target)
+    pos = np.asarray(pos_m, float)
     if prev is None:
-        track = Sample(np.asarray(pos_m, float), ZERO2, stamp_s)
+        track = TargetTrack(pos, ZERO2, stamp_s)
     elif stamp_s <= prev.stamp_s:
         return memory  # duplicate or reordered: the newer sample stands
     else:
-        vel = finite_difference_velocity(
-            prev.value, prev.stamp_s, pos_m, stamp_s, prev.rate, setup.target_vel_tau_s
-        )
-        track = Sample(np.asarray(pos_m, float), vel, stamp_s)
+        dt = stamp_s - prev.stamp_s
+        raw = (pos - prev.value) / dt
+        if not prev.primed:  # the first velocity: nothing to smooth it against yet
+            track = TargetTrack(pos, raw, stamp_s, raw, ZERO2, True)
+        else:
+            vel, smooth, accel = lag_free_velocity(raw, dt, prev.smooth_m_s, prev.accel_m_s2,
+                                                   setup.target_vel_tau_s,
+                                                   setup.target_accel_tau_s)
+            track = TargetTrack(pos, vel, stamp_s, smooth, accel, True)
     return replace(memory, targets={**memory.targets, target: track})
 
 

@@ -36,6 +36,16 @@ class Sample:
 
 
 @dataclass(frozen=True)
+class TargetTrack(Sample):
+    """A target's last observed position with its velocity (a Sample), and the filter state
+    behind that velocity (agents.core.estimator_one.lag_free_velocity)."""
+
+    smooth_m_s: FloatArray = field(default_factory=lambda: np.zeros(2))
+    accel_m_s2: FloatArray = field(default_factory=lambda: np.zeros(2))
+    primed: bool = False  # False until a second observation gave a velocity
+
+
+@dataclass(frozen=True)
 class PeerView:
     """Latest state a neighbour or the successor published."""
 
@@ -56,7 +66,7 @@ class FollowerMemory:
     # Per peer, the age of its data at use, low-passed: the step limits follow the typical
     # age, not each jittered sample (which would make the commands jump).
     peer_age_s: dict[int, float] = field(default_factory=dict)
-    targets: dict[int, Sample] = field(default_factory=dict)
+    targets: dict[int, TargetTrack] = field(default_factory=dict)
     link_sums_m: FloatArray | None = None  # robust: (d, 2) own running sum per neighbour
     link_rates_m_s: FloatArray | None = None  # robust: (d, 2) the flows of the last tick
     # Continuity across membership changes (agents.estimate_carry): the last r_i we

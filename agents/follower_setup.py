@@ -37,6 +37,7 @@ class FollowerSetup:
     stale_after_s: float = 0.5  # a peer older than this is missing (no flow, no spacing)
     hold_after_s: float = 1.0  # longest extrapolation of any input; held afterwards
     target_vel_tau_s: float = 0.1
+    target_accel_tau_s: float = 0.5  # the acceleration that undoes the velocity's lag
     max_gap_s: float = 0.25  # longest dt the estimator integrates over one tick
     age_tau_s: float = 0.5  # time constant of the low-passed data ages
     # The estimator's own step (issue 15): it advances between control ticks too, on

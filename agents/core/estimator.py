@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from agents.core.estimator_one import EstimatorParams as EstimatorParams
 from agents.core.estimator_one import consensus_flows_c as consensus_flows_c
 from agents.core.estimator_one import finite_difference_velocity as finite_difference_velocity
+from agents.core.estimator_one import lag_free_velocity as lag_free_velocity
 from agents.core.estimator_one import link_balance_c as link_balance_c
 from agents.core.geometry import limited_sig, rate_cap
 

@@ -34,14 +34,17 @@ def test_link_balance_error_is_only_what_is_in_flight() -> None:
 
 def drift_and_metrics(
     estimator: str, delay_ticks: int, loss: float, jitter_ticks: int = 0,
-    scenario: str = "paper", duration_s: float = 30.0,
+    scenario: str = "paper", duration_s: float = 30.0, steady_drift: bool = False,
 ) -> tuple[float, float, float]:
-    """`robust2`: the robust estimator with its velocity stage (estimator order 2)."""
+    """(drift, error, jump); `robust2`: the robust estimator with its velocity stage
+    (estimator order 2); `steady_drift`: the drift over the second half only."""
     s = with_estimator(load_scenario(scenario), estimator)
     series = run_swarm(s, duration_s, 50.0, delay_ticks, loss, seed=3, jitter_ticks=jitter_ticks)
     drift = np.linalg.norm(series.estimate_m.mean(axis=1) - series.lap_m, axis=1)
     err = np.linalg.norm(series.estimate_m - series.lap_m[:, None], axis=2)
     steady = len(series.t_s) // 2
+    if steady_drift:
+        drift = drift[steady:]
     jump = np.linalg.norm(np.diff(series.command_m_s[steady:], axis=0), axis=2).max()
     return float(drift.max()), float(err[steady:].max()), float(jump)
 
@@ -58,11 +61,14 @@ def test_under_random_loss_robust_conserves_and_paper_drifts() -> None:
 @pytest.mark.timeout(120)
 def test_under_delay_and_loss_robust_stays_bounded_and_drifts_less() -> None:
     robust_drift, robust_err, robust_jump = drift_and_metrics("robust", 3, 0.2)
-    paper_drift, paper_err, _ = drift_and_metrics("paper", 3, 0.2)
     assert robust_drift < 0.0999
     assert robust_err < 0.0999
     assert robust_jump < 0.5
-    assert paper_drift > 2 * robust_drift and paper_err > robust_err
+    # Both drift while they start (targets' velocities not yet known); after that the
+    # robust one's mean holds the LAP (~1e-4 m) while the paper's stays off (0.02-0.03 m).
+    robust_steady, _, _ = drift_and_metrics("robust", 3, 0.2, steady_drift=True)
+    paper_steady, paper_err, _ = drift_and_metrics("paper", 3, 0.2, steady_drift=True)
+    assert paper_steady > 10 * robust_steady and paper_err > robust_err
 
 
 @pytest.mark.timeout(120)
