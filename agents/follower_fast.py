@@ -236,15 +236,18 @@ def follower_tick(memory: FollowerMemory, setup: FastSetup, own: Sample,
     """One control cycle at `now_s` (follower_logic.follower_tick)."""
     ref = setup.ref
     new_memory, r, dr = _advance(memory, setup, peers, now_s)
-    own_pos = own.held(now_s, ref.hold_after_s)
+    lead = ref.lead_s
+    at_s = now_s + lead
+    own_pos = own.held(at_s, ref.hold_after_s)
+    r_at = r + dr * lead
     succ = peers[setup.successor].pos
     if now_s - succ.stamp_s <= ref.stale_after_s:
-        succ_pos = succ.value + succ.rate * (now_s - succ.stamp_s)
+        succ_pos = succ.value + succ.rate * (at_s - succ.stamp_s)
     else:  # missing: where it should be, so that only radius and rotation act
-        succ_pos = r + (own_pos - r) * setup.rotation
+        succ_pos = r_at + (own_pos - r_at) * setup.rotation
     try:
         u, z, delta = enclosing_control_one(
-            own_pos, succ_pos, r, dr, setup.angle_rad, ref.control, ref.period_s,
+            own_pos, succ_pos, r_at, dr, setup.angle_rad, ref.control, ref.period_s,
             new_memory.peer_age_s[setup.successor])
     except ArithmeticError:  # numpy's inf where Python raises (|x| past 1e308)
         u, z, delta = 0j, math.nan, math.nan

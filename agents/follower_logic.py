@@ -272,18 +272,20 @@ def follower_tick(
     """One control cycle at `now_s`; call when `ready`, or after the first cycle with
     the peers not heard yet stood in for (agents.follower_membership.with_missing)."""
     new_memory, r, dr = _advance(memory, setup, peers, now_s)
-    own_pos = own.held(now_s, setup.hold_after_s)
+    at_s = now_s + setup.lead_s  # when the command acts (FollowerSetup.lead_s)
+    own_pos = own.held(at_s, setup.hold_after_s)
+    r_at = r + dr * setup.lead_s
     succ = peers[setup.successor].pos
     if succ.fresh(now_s, setup.stale_after_s):
-        succ_pos = succ.at(now_s)
+        succ_pos = succ.at(at_s)
     else:  # missing: where it should be, so that only radius and rotation act
-        rel = complex(*(own_pos - r)) * complex(math.cos(setup.angle_rad),
-                                                 math.sin(setup.angle_rad))
-        succ_pos = r + np.array([rel.real, rel.imag])
+        rel = complex(*(own_pos - r_at)) * complex(math.cos(setup.angle_rad),
+                                                    math.sin(setup.angle_rad))
+        succ_pos = r_at + np.array([rel.real, rel.imag])
     out = enclosing_control(
         own_pos[None, :],
         succ_pos[None, :],
-        r[None, :],
+        r_at[None, :],
         dr[None, :],
         np.array([setup.angle_rad]),
         setup.control,

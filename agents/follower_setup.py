@@ -38,6 +38,7 @@ class FollowerSetup:
     hold_after_s: float = 1.0  # longest extrapolation of any input; held afterwards
     target_vel_tau_s: float = 0.1
     target_accel_tau_s: float = 0.5  # the acceleration that undoes the velocity's lag
+    lead_s: float = 0.0  # the law runs on the state predicted this far ahead (Gains.lead_s)
     max_gap_s: float = 0.25  # longest dt the estimator integrates over one tick
     age_tau_s: float = 0.5  # time constant of the low-passed data ages
     # The estimator's own step (issue 15): it advances between control ticks too, on
@@ -69,4 +70,5 @@ class FollowerSetup:
             period_s=1.0 / scenario.run.rate_hz,
             estimator_period_s=1.0 / scenario.run.estimator_hz,
             robust=scenario.network.estimator == "robust",
+            lead_s=scenario.gains.lead_s,
         )

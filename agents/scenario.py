@@ -52,6 +52,14 @@ class Gains:
     # forward, so a link no longer needs a standing gap to carry the targets' velocity
     # difference -- the gap that puts ring16 at 0.16 m at 50 Hz (issue 15).  Robust only.
     estimator_order: int = 1
+    # The networked follower evaluates its law on the state it predicts this far ahead (own
+    # and successor positions at their velocities, the estimate at its rate): what passes
+    # between its inputs' stamp and the vehicle flying the command.  Unpredicted, that
+    # delay turns the ring's slow spacing modes' rotation into growth (their decay goes as
+    # g (1/2 - g L) (2 pi k / n)^2 for a spacing gain g and a delay L): ring64's k = 1 mode
+    # barely decays at 20 Hz without it (issue 15).  0: the paper's law on the latest data.
+    # Lock-step commands act at once, so it has nothing to lead and ignores it.
+    lead_s: float = 0.0
 
     @property
     def est_step_fraction(self) -> float:

@@ -122,6 +122,9 @@ def parse_successor(t: Table, f_pos: tuple[tuple[float, float], ...], center: tu
     return successor_from_order(order)
 
 
+MAX_LEAD_S = 1.0  # longer and the prediction is a guess: inputs are held after hold_after_s
+
+
 def _share(t: Table, key: str, default: float) -> float:
     fraction = number(t, key, "gains", default)
     if not 0.0 <= fraction <= 1.0:
@@ -132,14 +135,18 @@ def _share(t: Table, key: str, default: float) -> float:
 def parse_gains(t: Table) -> Gains:
     d = Gains()
     known_keys(t, d.__dataclass_fields__, "gains")
-    special = ("step_fraction", "estimator_step_fraction", "estimator_order")
+    special = ("step_fraction", "estimator_step_fraction", "estimator_order", "lead_s")
     names = [k for k in d.__dataclass_fields__ if k not in special]
     fraction = _share(t, "step_fraction", d.step_fraction)
     est = None if "estimator_step_fraction" not in t else _share(t, "estimator_step_fraction", 0)
     order = t.get("estimator_order", d.estimator_order)
     if isinstance(order, bool) or order not in (1, 2):
         raise ScenarioError("gains.estimator_order", f"must be 1 or 2, got {order!r}")
+    lead_s = number(t, "lead_s", "gains", d.lead_s)
+    if not 0.0 <= lead_s <= MAX_LEAD_S:
+        raise ScenarioError("gains.lead_s", f"must be within [0, {MAX_LEAD_S:g}] s, got {lead_s}")
     g = Gains(step_fraction=fraction, estimator_step_fraction=est, estimator_order=int(order),
+              lead_s=lead_s,
               **{k: positive(t, k, "gains", getattr(d, k)) for k in names})
     for key in ("alpha1", "alpha2", "alpha3"):
         if getattr(g, key) < 1.0:

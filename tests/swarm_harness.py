@@ -69,8 +69,11 @@ def run_swarm(
     loss: float = 0.0,
     seed: int = 0,
     jitter_ticks: int = 0,
+    vehicle_tau_s: float = 0.0,
 ) -> RunSeries:
-    """`jitter_ticks`: each message is late by a further 0..jitter_ticks ticks, at random."""
+    """`jitter_ticks`: each message is late by a further 0..jitter_ticks ticks, at random;
+    `vehicle_tau_s`: vehicles follow their commands with this first-order lag, as the
+    simulator's do (sim_backend.model), instead of at once."""
     dt, n = 1.0 / rate_hz, scenario.n
     rng = np.random.default_rng(seed)
     setups = [FollowerSetup.from_scenario(scenario, i) for i in range(n)]
@@ -98,8 +101,13 @@ def run_swarm(
             msg = _publish(i, memories[i], setup, r_now[i], dr_now[i], pos[i], vel[i], t)
             _post(mail, k, i, msg, setups, (delay_ticks, jitter_ticks, loss), rng)
         rows.append((t, pos.copy(), r_now, u_now, targets))
-        vel = u_now
-        pos = pos + dt * u_now
+        if vehicle_tau_s <= 0.0:
+            vel = u_now
+            pos = pos + dt * u_now
+        else:
+            new_vel = vel + (1.0 - np.exp(-dt / vehicle_tau_s)) * (u_now - vel)
+            pos = pos + 0.5 * dt * (vel + new_vel)
+            vel = new_vel
     t_s, p, r, u, tg = (np.array(x) for x in zip(*rows, strict=True))
     return RunSeries(t_s, p, r, u, tg)
 

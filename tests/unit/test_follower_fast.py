@@ -98,9 +98,10 @@ def same_memory(r: ref.FollowerMemory, f: fast.FollowerMemory) -> None:
 class Twins:
     """One follower, run by the reference and by the twin on the same inputs."""
 
-    def __init__(self, name: str, estimator: str, index: int, est_period_s: float) -> None:
+    def __init__(self, name: str, estimator: str, index: int, est_period_s: float,
+                 lead_s: float = 0.0) -> None:
         self.scenario = with_estimator(SCENARIOS[name], estimator)
-        self.index, self.est_period_s = index, est_period_s
+        self.index, self.est_period_s, self.lead_s = index, est_period_s, lead_s
         self.members = set(range(self.scenario.n))
         self.ref_setup, self.fast_setup = self._setups(self.members)
         self.ref_mem, self.fast_mem = ref.FollowerMemory(), fast.FollowerMemory()
@@ -109,7 +110,8 @@ class Twins:
 
     def _setups(self, members: set[int]) -> tuple[ref.FollowerSetup, fast.FastSetup]:
         setup = ref.FollowerSetup.from_scenario(self.scenario, self.index, members)
-        setup = dataclasses.replace(setup, estimator_period_s=self.est_period_s)
+        setup = dataclasses.replace(setup, estimator_period_s=self.est_period_s,
+                                    lead_s=self.lead_s)
         return setup, fast.FastSetup.of(setup)
 
     def check(self) -> None:
@@ -250,13 +252,15 @@ def _apply(twins: Twins, op: str, draws: Draws) -> None:
     estimator=st.sampled_from(["robust", "robust2", "paper"]),
     index=st.integers(0, 3),
     est_period_s=st.sampled_from([0.02, 0.005]),
+    lead_s=st.sampled_from([0.0, 0.1]),
     ops=st.lists(st.tuples(st.sampled_from(OPS), st.integers(0, 2**32)), min_size=20,
                  max_size=120),
 )
 def test_the_fast_follower_is_the_reference_over_random_runs(
-    name: str, estimator: str, index: int, est_period_s: float, ops: list[tuple[str, int]]
+    name: str, estimator: str, index: int, est_period_s: float, lead_s: float,
+    ops: list[tuple[str, int]],
 ) -> None:
-    twins = Twins(name, estimator, index, est_period_s)
+    twins = Twins(name, estimator, index, est_period_s, lead_s)
     for op, seed in ops:
         _apply(twins, op, Draws(seed))
 

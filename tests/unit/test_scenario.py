@@ -191,6 +191,19 @@ def test_estimator_step_fraction_is_its_own_share_and_checked() -> None:
         parse_scenario(with_share("1.5"))
 
 
+def test_lead_is_zero_by_default_and_checked() -> None:
+    base = load_scenario_text()
+
+    def with_lead(value: str) -> str:
+        return base.replace("alpha3 = 3.0", f"alpha3 = 3.0\nlead_s = {value}")
+
+    assert parse_scenario(base).gains.lead_s == 0.0
+    assert parse_scenario(with_lead("0.1")).gains.lead_s == 0.1
+    for bad in ("-0.05", "2.0", "nan", '"soon"'):
+        with pytest.raises(ScenarioError, match=r"gains\.lead_s"):
+            parse_scenario(with_lead(bad))
+
+
 def test_estimator_order_is_one_or_two_and_two_needs_the_robust_estimator() -> None:
     base = load_scenario_text()
 
