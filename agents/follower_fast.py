@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 from agents.core.controller_one import enclosing_control_one
 from agents.core.estimator_one import (
     consensus_flows_c,
+    finite_difference_velocity,
     lag_free_velocity,
     link_balance_c,
 )
@@ -72,14 +73,14 @@ def observe_target(
     elif stamp_s <= prev.stamp_s:
         return memory  # duplicate or reordered: the newer sample stands
     else:
-        dt = stamp_s - prev.stamp_s
-        raw = (pos_m - prev.value) / dt
         if not prev.primed:
+            raw = finite_difference_velocity(prev.value, prev.stamp_s, pos_m, stamp_s, 0j)
             track = _new(TargetTrack, (pos_m, raw, stamp_s, raw, 0j, True))
         else:
             ref = setup.ref
-            vel, smooth, accel = lag_free_velocity(raw, dt, prev.smooth, prev.accel,
-                                                   ref.target_vel_tau_s, ref.target_accel_tau_s)
+            vel, smooth, accel = lag_free_velocity(
+                prev.value, prev.stamp_s, pos_m, stamp_s, prev.smooth, prev.accel,
+                ref.target_vel_tau_s, ref.target_accel_tau_s)
             track = _new(TargetTrack, (pos_m, vel, stamp_s, smooth, accel, True))
     m = memory
     return _new(FollowerMemory, (m.phi_m, m.phi_rate_m_s, m.last_tick_s, m.peer_age_s,

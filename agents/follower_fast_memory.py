@@ -41,9 +41,6 @@ class TargetTrack(NamedTuple):
     accel: complex = 0j
     primed: bool = False
 
-    def held(self, t_s: float, limit_s: float) -> complex:
-        return self.value + self.rate * (min(t_s, self.stamp_s + limit_s) - self.stamp_s)
-
 
 _NO_AGES: Mapping[int, float] = MappingProxyType({})
 _NO_TRACKS: Mapping[int, TargetTrack] = MappingProxyType({})

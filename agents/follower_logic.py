@@ -31,6 +31,7 @@ from agents.core.controller import enclosing_control
 from agents.core.estimator import (
     EstimatorParams,
     consensus_flows,
+    finite_difference_velocity,
     lag_free_velocity,
     link_balance,
 )
@@ -84,14 +85,13 @@ def observe_target(
     elif stamp_s <= prev.stamp_s:
         return memory  # duplicate or reordered: the newer sample stands
     else:
-        dt = stamp_s - prev.stamp_s
-        raw = (pos - prev.value) / dt
         if not prev.primed:  # the first velocity: nothing to smooth it against yet
+            raw = finite_difference_velocity(prev.value, prev.stamp_s, pos, stamp_s, ZERO2)
             track = TargetTrack(pos, raw, stamp_s, raw, ZERO2, True)
         else:
-            vel, smooth, accel = lag_free_velocity(raw, dt, prev.smooth_m_s, prev.accel_m_s2,
-                                                   setup.target_vel_tau_s,
-                                                   setup.target_accel_tau_s)
+            vel, smooth, accel = lag_free_velocity(
+                prev.value, prev.stamp_s, pos, stamp_s, prev.smooth_m_s, prev.accel_m_s2,
+                setup.target_vel_tau_s, setup.target_accel_tau_s)
             track = TargetTrack(pos, vel, stamp_s, smooth, accel, True)
     return replace(memory, targets={**memory.targets, target: track})
 

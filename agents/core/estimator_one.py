@@ -82,17 +82,20 @@ def finite_difference_velocity(
     gain = dt / (tau_s + dt)
     return prev_vel_m_s + gain * (raw - prev_vel_m_s)
 
+
 def lag_free_velocity(
-    raw_m_s: Vec,
-    dt_s: float,
+    prev_pos_m: Vec,
+    prev_stamp_s: float,
+    pos_m: Vec,
+    stamp_s: float,
     smooth_m_s: Vec,
     accel_m_s2: Vec,
     tau_s: float,
     accel_tau_s: float,
 ) -> tuple[Vec, Vec, Vec]:
-    """(velocity, smooth, accel): a finite-difference velocity `raw_m_s` (over the last
-    `dt_s`, so true at its midpoint) low-passed with time constant tau, and corrected for
-    what that costs an accelerating target.
+    """(velocity, smooth, accel): `finite_difference_velocity` (over the stamps' gap, so
+    true at its midpoint; `smooth_m_s` its last value), corrected for what its low-pass
+    costs an accelerating target.  The stamps must increase.
 
     The low-passed velocity trails a constant acceleration a by a * (tau + dt / 2): on a
     20 Hz sensor with tau = 0.1 s, a target swinging at 0.05 m/s^2 reads 6 mm/s off, and
@@ -101,8 +104,8 @@ def lag_free_velocity(
     start from rest do not ring the velocity much), puts that lag back: exact for a constant
     acceleration, and for a slow sinusoid within its phase lag.
     """
-    gain = dt_s / (tau_s + dt_s) if tau_s > 0.0 else 1.0
-    smooth = smooth_m_s + gain * (raw_m_s - smooth_m_s)
-    accel_gain = dt_s / (accel_tau_s + dt_s)
-    accel = accel_m_s2 + accel_gain * ((smooth - smooth_m_s) / dt_s - accel_m_s2)
-    return smooth + accel * (tau_s + 0.5 * dt_s), smooth, accel
+    dt = stamp_s - prev_stamp_s
+    smooth = finite_difference_velocity(prev_pos_m, prev_stamp_s, pos_m, stamp_s, smooth_m_s,
+                                        tau_s)
+    accel = accel_m_s2 + dt / (accel_tau_s + dt) * ((smooth - smooth_m_s) / dt - accel_m_s2)
+    return smooth + accel * (tau_s + 0.5 * dt), smooth, accel

@@ -36,9 +36,8 @@ def track(pos_m: np.ndarray, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     accel: complex = 0.0
     lag_free, plain_out = [], []
     for k in range(2, len(t_s)):
-        dt = t_s[k] - t_s[k - 1]
-        vel, smooth, accel = lag_free_velocity((pos_m[k] - pos_m[k - 1]) / dt, dt, smooth, accel,
-                                               TAU_S, ACCEL_TAU_S)
+        vel, smooth, accel = lag_free_velocity(pos_m[k - 1], t_s[k - 1], pos_m[k], t_s[k],
+                                               smooth, accel, TAU_S, ACCEL_TAU_S)
         plain = finite_difference_velocity(pos_m[k - 1], t_s[k - 1], pos_m[k], t_s[k], plain,
                                            TAU_S)
         lag_free.append(vel)
