@@ -18,7 +18,6 @@ observe different targets.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 from collections import Counter
 from pathlib import Path
@@ -27,17 +26,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from deploy.recording.resume import read_back
+from deploy.rundir import SERIES_FILE
 from transport.messages import FollowerState, TruthSnapshot
 
 FloatArray = NDArray[np.float64]
 
 
 def read_deltas(run_dir: Path) -> tuple[FloatArray, FloatArray]:
-    """(t_s, e_delta per follower) from series.csv."""
-    with open(run_dir / "series.csv", newline="") as f:
-        rows = list(csv.reader(f))
-    head, data = rows[0], np.array(rows[1:], dtype=float)
-    cols = [i for i, name in enumerate(head) if name.startswith("delta")]
+    """(t_s, e_delta per follower) from series.csv: the true included-angle errors the
+    angle metric judges (`e<i>_e_delta`, deploy.rundir.series_columns), not the ones each
+    follower saw against its estimate (`delta<i>_delta`)."""
+    path = run_dir / SERIES_FILE
+    names = path.read_text().split("\n", 1)[0].split(",")
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    cols = [k for k, name in enumerate(names) if name.endswith("_e_delta")]
     return data[:, 0], data[:, cols]
 
 
