@@ -70,3 +70,15 @@ def test_inter_host_delay_goes_on_follower_links_across_hosts_only() -> None:
     text = _links(parse_deployment(doc), load_scenario("paper"))
     assert text.count("[[network.links]]") == 8  # 2 x 2 pairs, both ways
     assert "from = 1\nto = 3" in text and "from = 1\nto = 2" not in text
+
+
+@pytest.mark.parametrize("k_hosts", [1, 2, 3, 5])
+def test_routers_link_as_a_star_around_the_first_host(k_hosts: int) -> None:
+    # A tree: Zenoh 1.10's routers in a mesh lost a restarted router's routes
+    # (tests/integration/test_router_restarts.py).
+    hosts = [{"name": f"h{k}", "address": f"10.0.0.{k + 1}", "processes": []}
+             for k in range(k_hosts)]
+    dep = parse_deployment({"swarm": "s", "scenario": "paper", "hosts": hosts})
+    links = [(k, j) for k in range(k_hosts) for j in dep.router_links(k)]
+    assert links == [(k, 0) for k in range(1, k_hosts)]
+    assert len(links) == k_hosts - 1  # connected with no cycle
