@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from deploy.recording.resume import read_back
-from deploy.rundir import SERIES_FILE
+from deploy.rundir import SERIES_FILE, read_info, series_columns
 from transport.messages import FollowerState, TruthSnapshot
 
 FloatArray = NDArray[np.float64]
@@ -36,9 +36,9 @@ def read_deltas(run_dir: Path) -> tuple[FloatArray, FloatArray]:
     """(t_s, e_delta per follower) from series.csv: the true included-angle errors the
     angle metric judges (`e<i>_e_delta`, deploy.rundir.series_columns), not the ones each
     follower saw against its estimate (`delta<i>_delta`)."""
-    path = run_dir / SERIES_FILE
-    names = path.read_text().split("\n", 1)[0].split(",")
-    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    info = read_info(run_dir)
+    data = np.loadtxt(run_dir / SERIES_FILE, delimiter=",", skiprows=1, ndmin=2)
+    names = series_columns(info.n, info.m)
     cols = [k for k, name in enumerate(names) if name.endswith("_e_delta")]
     return data[:, 0], data[:, cols]
 

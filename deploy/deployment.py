@@ -82,6 +82,13 @@ class Deployment:
         """
         return () if k == 0 else (0,)
 
+    def router_argv(self, k: int, secure: bool) -> list[str]:
+        """`deploy.router`'s endpoint arguments for router k: where it listens, whom it links."""
+        argv = ["--listen", self.router_endpoint(k, secure)]
+        for j in self.router_links(k):
+            argv += ["--connect", self.router_endpoint(j, secure)]
+        return argv
+
     def index_of(self, name: str) -> int:
         for k, host in enumerate(self.hosts):
             if host.name == name:

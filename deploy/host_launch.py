@@ -78,9 +78,8 @@ class HostLaunch(Launch):
 
     def start_all(self) -> None:
         for k in self.local:
-            argv = ["--listen", self.router(k), "--swarm", self.keys.swarm,
-                    *(a for j in self.dep.router_links(k) for a in ("--connect", self.router(j))),
-                    *self.secrets.args_for(f"router-{k}")]
+            argv = [*self.dep.router_argv(k, secure=not self.args.insecure),
+                    "--swarm", self.keys.swarm, *self.secrets.args_for(f"router-{k}")]
             self.sup.start(f"router-{k}", "deploy.router", argv, prefix=self.prefix(k))
         mav = ["--mav-local-base", str(self.adapter_base),
                "--mav-vehicle-base", str(self.vehicle_base)]

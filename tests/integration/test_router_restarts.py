@@ -41,10 +41,7 @@ class _Routers:
         self.procs: dict[int, subprocess.Popen[bytes]] = {}
 
     def start(self, k: int) -> None:
-        argv = [sys.executable, "-m", "deploy.router", "--listen",
-                self.dep.router_endpoint(k, secure=False)]
-        for j in self.dep.router_links(k):
-            argv += ["--connect", self.dep.router_endpoint(j, secure=False)]
+        argv = [sys.executable, "-m", "deploy.router", *self.dep.router_argv(k, secure=False)]
         with (self.logs / f"router-{k}.log").open("ab") as log:
             self.procs[k] = subprocess.Popen(argv, cwd=REPO, stdout=log, stderr=log)
 
