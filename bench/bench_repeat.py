@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 KEYS = ("estimator_error_m", "radius_error_m", "angle_error", "settle_time_s",
-        "command_jump_m_s")
+        "command_jump_m_s", "silent_followers")
 EPS_M, EPS_DELTA = 0.0999, 0.0199
 
 
@@ -77,7 +77,8 @@ def lockstep(out: Path, scenario: str, duration_s: float) -> dict[str, Any]:
 
 
 def inside(r: dict[str, Any]) -> bool:
-    return (r.get("exit_code") == 0 and (r.get("estimator_error_m") or 1.0) < EPS_M
+    return (r.get("exit_code") == 0 and not r.get("silent_followers")
+            and (r.get("estimator_error_m") or 1.0) < EPS_M
             and (r.get("radius_error_m") or 1.0) < EPS_M
             and (r.get("angle_error") or 1.0) < EPS_DELTA)
 

@@ -22,7 +22,7 @@ RUN_COLUMNS = ("wall_s", "jobs", "load_1min", "host")
 
 @dataclass(frozen=True)
 class CellState:
-    status: str  # done | failed | interrupted | timeout | incomplete | stale | pending
+    status: str  # done | failed | silent | interrupted | timeout | incomplete | stale | pending
     exit_code: int | None = None
     wall_s: float | None = None
     metrics: dict[str, float | None] = field(default_factory=dict)
@@ -68,8 +68,10 @@ def cell_state(cell_dir: Path, argv: list[str]) -> CellState:
     code, wall = record.get("exit_code"), record.get("wall_s")
     # A run stopped by Ctrl-C also ends with clean exit codes: its own exit code tells.
     finished = code in (0, None) and not (metrics_doc or {}).get("stopped_early")
+    # A follower that sent no state leaves metrics of the others only: run it again.
+    silent = bool((metrics_doc or {}).get("silent_followers"))
     if ok_metrics and finished and launch_ok(read_json(cell_dir / "launch.json")):
-        status = "done"
+        status = "silent" if silent else "done"
     elif code == INTERRUPTED_EXIT:
         status = "interrupted"
     elif code == 124:

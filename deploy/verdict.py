@@ -64,10 +64,11 @@ class Verdict:
     load: str | None = None  # CPU per process and machine busy (deploy.cpu_load)
     ticks: str | None = None  # the followers' late control ticks
     memory: str | None = None  # peak resident memory per process (deploy.cpu_load)
+    silent: tuple[int, ...] = ()  # 0-based followers that sent no state: not judged whole
 
     @property
     def inside(self) -> bool:
-        return self.error is None and all(c.inside for c in self.checks)
+        return self.error is None and not self.silent and all(c.inside for c in self.checks)
 
 
 def _read(path: Path) -> dict[str, Any]:
@@ -116,6 +117,18 @@ def link_summary(metrics: dict[str, Any]) -> str | None:
     return ", ".join(parts)
 
 
+def silent_followers(metrics: dict[str, Any]) -> tuple[int, ...]:
+    """metrics.json's "silent_followers": followers whose estimates the run never saw."""
+    raw = metrics.get("silent_followers")
+    return tuple(i for i in raw if isinstance(i, int)) if isinstance(raw, list) else ()
+
+
+def silent_text(silent: tuple[int, ...], n: int | None) -> str:
+    names = ", ".join(str(i) for i in silent)
+    over = "" if n is None else f"; estimator error over the other {n - len(silent)}"
+    return f"follower{'s' if len(silent) > 1 else ''} {names} (0-based) sent no state{over}"
+
+
 def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
     metrics, info = _read(run_dir / "metrics.json"), _read(run_dir / "run.json")
     launch = _read(run_dir / "launch.json")
@@ -134,6 +147,7 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
         live if isinstance(live, str) and live else None,
         tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
         bool(launch), load_line(load), overrun_line(ticks), memory_line(load),
+        silent_followers(metrics),
     )
 
 
@@ -144,6 +158,7 @@ def verdict_json(v: Verdict) -> dict[str, Any]:
         "error": v.error,
         "checks": {c.key: {"value": c.value, "bound": c.bound, "inside": c.inside}
                    for c in v.checks},
+        "silent_followers": list(v.silent),
         "processes": list(v.processes),
         "live_url": v.live_url,
         "load": v.load,
@@ -158,6 +173,9 @@ def headline(v: Verdict) -> Text:
         return Text.assemble((f"{v.title}: NO VERDICT", "bold red"), f" ({v.error})")
     steady = _num(v.metrics.get("steady_from_s"))
     window = "" if steady is None else f" (steady state from {steady:g} s)"
+    if v.silent:  # the bounds hold for followers seen, which is not the swarm
+        return Text.assemble((f"{v.title}: INCOMPLETE", "bold red"),
+                             f" ({silent_text(v.silent, None)})")
     if v.inside:
         return Text.assemble((f"{v.title}: INSIDE the paper's bounds", "bold green"), window)
     return Text.assemble((f"{v.title}: OUTSIDE the paper's bounds", "bold red"), window)
@@ -177,6 +195,9 @@ def print_verdict(console: Console, v: Verdict) -> None:
         console.print(grid)
     settle = _num(v.metrics.get("settle_time_s"))
     rows = [] if v.error else [("settle time", "never" if settle is None else f"{settle:.1f} s")]
+    if v.silent:
+        n = len(v.metrics.get("followers") or {}) or None
+        rows.append(("silent", silent_text(v.silent, n)))
     if v.networked:
         rows.append(("processes", "; ".join(v.processes) or "none died, restarted or failed"))
     rows += [("links", v.links)] if v.links else []

@@ -4,9 +4,12 @@ The grid is the simulator's truth stream: one sample per `TruthSnapshot`, at exp
 `t = truth stamp - start_stamp_s`, kept when `0 <= t <= duration_s`.  Each follower's estimate
 and command at a sample are those of its latest `FollowerState` whose sender stamp is not after
 the truth stamp -- sender stamps, never receive times, so network delay does not shift data.
-Before a follower's first state its first state is used (metrics cannot take NaN); such
-samples are counted as "filled".  The age of the state used (truth stamp - state stamp) is
-what a benchmark reports as "neighbour-state age at use".
+Before a follower's first state its first state is used; such samples are counted as
+"filled".  A follower that sent no state at all (it died or starved before its first) has
+NaN estimates and commands: the run is kept, its metrics are over the others, and
+`Assembly.silent` names it so that the verdict cannot call the run inside the bounds.
+The age of the state used (truth stamp - state stamp) is what a benchmark reports as
+"neighbour-state age at use".
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ class Assembly:
     start_stamp_s: float
     duration_s: float  # planned, from the RunControl
     start_source: str  # "control", or "first_truth" when no start was heard
+    silent: tuple[int, ...] = ()  # 0-based followers that sent no state (NaN columns)
 
     @property
     def filled_samples(self) -> int:
@@ -152,7 +156,7 @@ class RunAssembler:
     def recent_series(self, window_s: float) -> RunSeries | None:
         """The last `window_s` of truth (by arrival) with states aligned: for live progress."""
         start = self.start_stamp_s()
-        if start is None or not self._truth_stamps_s or any(not s.stamps_s for s in self._states):
+        if start is None or not self._truth_stamps_s or all(not s.stamps_s for s in self._states):
             return None
         newest = self._truth_stamps_s[-1]
         k = len(self._truth_stamps_s)
@@ -181,12 +185,12 @@ class RunAssembler:
                 f"none of the {len(stamps)} truth samples lies in the experiment window "
                 f"[{start:.3f}, {start + duration:.3f}] (sender clock)"
             )
-        silent = [i for i, log in enumerate(self._states) if not log.stamps_s]
-        if silent:
-            raise DeployError(f"followers {silent} (0-based) sent no state")
+        silent = tuple(i for i, log in enumerate(self._states) if not log.stamps_s)
+        if len(silent) == self.n:
+            raise DeployError("no follower sent a state: nothing to judge")
         series, stats = self._series(rows, start)
         source = "control" if self.start is not None else "first_truth"
-        return Assembly(series, stats, start, duration, source)
+        return Assembly(series, stats, start, duration, source, silent)
 
     def _planned_duration_s(self) -> float:
         if self.start is not None:
@@ -201,6 +205,10 @@ class RunAssembler:
         cmd = np.empty((len(rows), self.n, 2))
         stats = []
         for i, log in enumerate(self._states):
+            if not log.stamps_s:
+                est[:, i] = cmd[:, i] = np.nan
+                stats.append(_stats(log, 0, np.empty(0)))
+                continue
             lo = 0 if tail_states is None else max(0, len(log.stamps_s) - tail_states)
             s_stamps = np.asarray(log.stamps_s[lo:])
             order = np.argsort(s_stamps, kind="stable")
@@ -237,4 +245,5 @@ def assembly_extra(asm: Assembly, drops: Counter[str]) -> dict[str, Any]:
         "state_age_p50_ms": [f.age_p50_ms for f in asm.followers],
         "state_age_p99_ms": [f.age_p99_ms for f in asm.followers],
         "assembler_drops": dict(drops),
+        "silent_followers": list(asm.silent),
     }

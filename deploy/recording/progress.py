@@ -7,7 +7,6 @@ metrics -- over the last second of truth with each follower's latest state align
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 from typing import Any
@@ -22,8 +21,10 @@ PROGRESS_FILE = "progress.json"
 WINDOW_S = 1.0
 
 
-def _finite_or_none(v: float) -> float | None:
-    return v if math.isfinite(v) else None
+def _worst_or_none(values: np.ndarray) -> float | None:
+    """The largest finite value; a silent follower's NaN columns do not hide the others."""
+    finite = values[np.isfinite(values)]
+    return float(finite.max()) if finite.size else None
 
 
 def live_errors(asm: RunAssembler, info: RunInfo, window_s: float = WINDOW_S) -> dict[str, Any]:
@@ -33,9 +34,9 @@ def live_errors(asm: RunAssembler, info: RunInfo, window_s: float = WINDOW_S) ->
         return {"max_abs_e_rho_m": None, "max_abs_e_delta": None, "max_estimator_error_m": None}
     errors = error_series(series, info.successor, np.asarray(info.angles_rad), info.rho_d_m)
     return {
-        "max_abs_e_rho_m": _finite_or_none(float(np.abs(errors.e_rho_m).max())),
-        "max_abs_e_delta": _finite_or_none(float(np.abs(errors.e_delta).max())),
-        "max_estimator_error_m": _finite_or_none(float(errors.estimator_error_m.max())),
+        "max_abs_e_rho_m": _worst_or_none(np.abs(errors.e_rho_m)),
+        "max_abs_e_delta": _worst_or_none(np.abs(errors.e_delta)),
+        "max_estimator_error_m": _worst_or_none(errors.estimator_error_m),
     }
 
 

@@ -15,6 +15,7 @@ import pytest
 from mcap.reader import make_reader
 
 from agents.scenario_file import load_scenario
+from deploy.verdict import read_verdict
 from tests.integration import runs
 from tests.integration.test_transport_zenoh import free_port
 from tests.recorder_synth import SynthRun
@@ -49,10 +50,13 @@ def pubs_keys(keys: SwarmKeys) -> list[str]:
     return [keys.control(), keys.truth(), *map(keys.follower_state, range(4))]
 
 
-def publish_paced(bus: ZenohBus, run: SynthRun, garbage_at: int) -> int:
-    """Each message at its own sender stamp (wall clock), as the swarm would send it."""
+def publish_paced(bus: ZenohBus, run: SynthRun, garbage_at: int, silent: int | None) -> int:
+    """Each message at its own sender stamp (wall clock), as the swarm would send it;
+    nothing from follower `silent` (it died or starved before its first state)."""
     sent = 0
     for i, (key, msg) in enumerate(run.samples()):
+        if silent is not None and key == run.keys.follower_state(silent):
+            continue
         delay = msg.header.stamp_s - time.time()
         if delay > 0:
             time.sleep(delay)  # the publishing rate itself, not a synchronisation
@@ -64,7 +68,10 @@ def publish_paced(bus: ZenohBus, run: SynthRun, garbage_at: int) -> int:
 
 
 @pytest.mark.timeout(90)
-def test_recorder_process_records_a_run_and_writes_outputs(tmp_path: Path) -> None:
+@pytest.mark.parametrize("silent", [None, 3], ids=["all", "follower-3-silent"])
+def test_recorder_process_records_a_run_and_writes_outputs(
+    tmp_path: Path, silent: int | None
+) -> None:
     swarm, endpoint = f"rec{os.getpid()}", loopback_endpoint(free_port())
     keys, out = SwarmKeys(swarm), tmp_path / "run"
     scenario = load_scenario("paper")
@@ -87,7 +94,7 @@ def test_recorder_process_records_a_run_and_writes_outputs(tmp_path: Path) -> No
             run = SynthRun(scenario, keys, time.time() + 0.3, duration_s=2.0)
             control = Stamper("launcher-0")
             bus.publish(keys.control(), encode(run.control(control, "start")))
-            sent = publish_paced(bus, run, garbage_at=200)
+            sent = publish_paced(bus, run, garbage_at=200, silent=silent)
             wait_for(lambda: (out / "progress.json").is_file(), 10, "progress.json")
             bus.publish(keys.control(), encode(run.control(control, "stop")))
             wait_for(lambda: proc.poll() is not None, 60, "recorder to exit")
@@ -103,21 +110,27 @@ def test_recorder_process_records_a_run_and_writes_outputs(tmp_path: Path) -> No
     assert 95 <= metrics["samples"] <= 101
     assert metrics["radius_error_m"] < 1e-6 and metrics["angle_error"] < 1e-6
     assert metrics["estimator_error_m"] < 0.01 and metrics["filled_samples"] == 0
+    # A follower that never spoke keeps the run (its truth and the others' states) and is
+    # named, so that the verdict says INCOMPLETE rather than inside or no verdict.
+    assert metrics["silent_followers"] == ([] if silent is None else [silent])
     rec = metrics["recorder"]
     assert rec["dropped"] == {"msgpack": 1} and rec["stop_reason"] == "control_stop"
-    assert sum(rec["messages_per_topic"][k] for k in pubs_keys(keys)) == sent + 2
+    assert sum(rec["messages_per_topic"].get(k, 0) for k in pubs_keys(keys)) == sent + 2
     assert all(f["seq_gaps"] == 0 for f in metrics["followers"].values())
+    if silent is not None:
+        assert metrics["followers"][str(silent)]["states"] == 0
     for name in ("series.csv", "run.json", "performance.png", "trajectory.png"):
         assert (out / name).stat().st_size > 0, name
     with (out / "recording.mcap").open("rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None
     topics = {c.topic for c in summary.channels.values()}
-    assert {keys.truth(), keys.control(), keys.follower_state(3),
+    assert {keys.truth(), keys.control(), keys.follower_state(0),
             keys.status("recorder", 0)} <= topics
     report = subprocess.run([sys.executable, "-m", "deploy.cli", "report", str(out)],
                             cwd=REPO, timeout=60, capture_output=True)
     assert report.returncode == 0, report.stderr.decode()
+    assert read_verdict(out, "run").inside is (silent is None)
 
 
 @pytest.mark.timeout(60)

@@ -10,12 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agents.core.metrics import worst
 from agents.core.timeseries import RunSeries
 from agents.errors import DeployError
 from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
 from deploy.recording.assembler import RunAssembler, align_latest
 from deploy.recording.outputs import write_final_outputs
+from deploy.recording.progress import live_errors
 from deploy.report import write_run_outputs
 from deploy.rundir import RunInfo
 from tests.recorder_synth import SynthRun, formation_m, lap_m, targets_m
@@ -39,6 +41,12 @@ def fed(scenario: Scenario, run: SynthRun, shuffle: bool = False) -> RunAssemble
     for msg in msgs:
         asm.add(msg)
     return asm
+
+
+def test_worst_ignores_nan_unless_all_is_nan() -> None:
+    assert worst(np.array([0.1, np.nan, 0.3])) == 0.3
+    assert np.isnan(worst(np.array([np.nan, np.nan])))
+    assert worst(np.array([0.1, np.inf])) == np.inf  # only NaN means "no data"
 
 
 def test_align_latest_picks_latest_not_after_and_flags_before_first() -> None:
@@ -121,15 +129,17 @@ def test_truth_of_the_wrong_shape_and_bad_index_dropped(paper: Scenario) -> None
     assert asm.truth_count == 0
 
 
-def test_no_truth_or_silent_follower_is_a_named_error(paper: Scenario) -> None:
+def test_no_truth_no_state_at_all_or_no_sample_in_window_is_a_named_error(
+    paper: Scenario,
+) -> None:
     with pytest.raises(DeployError, match="no truth"):
         RunAssembler(paper.n, paper.m).build()
     run = SynthRun(paper, SwarmKeys("u"), START_S)
     asm = RunAssembler(paper.n, paper.m)
     for _, msg in run.samples():
-        if not (isinstance(msg, FollowerState) and msg.index == 3):
+        if not isinstance(msg, FollowerState):
             asm.add(msg)
-    with pytest.raises(DeployError, match=r"\[3\]"):
+    with pytest.raises(DeployError, match="no follower sent a state"):
         asm.build()
     late = RunAssembler(paper.n, paper.m)
     late.add(dataclasses.replace(run.control(Stamper("l"), "start"), start_stamp_s=START_S + 99))
@@ -137,6 +147,42 @@ def test_no_truth_or_silent_follower_is_a_named_error(paper: Scenario) -> None:
         late.add(msg)
     with pytest.raises(DeployError, match="window"):
         late.build()
+
+
+def without_follower(scenario: Scenario, run: SynthRun, silent: int) -> RunAssembler:
+    asm = RunAssembler(scenario.n, scenario.m)
+    asm.add(run.control(Stamper("launcher-0"), "start"))
+    for _, msg in run.samples():
+        if not (isinstance(msg, FollowerState) and msg.index == silent):
+            asm.add(msg)
+    return asm
+
+
+def test_a_follower_that_sent_no_state_keeps_the_run_and_is_named(
+    paper: Scenario, tmp_path: Path
+) -> None:
+    run = SynthRun(paper, SwarmKeys("u"), START_S, duration_s=2.0)
+    out = without_follower(paper, run, 3).build()
+    assert out.silent == (3,)
+    assert np.isnan(out.series.estimate_m[:, 3]).all()
+    assert np.isnan(out.series.command_m_s[:, 3]).all()
+    assert np.isfinite(out.series.estimate_m[:, :3]).all()
+    assert np.isfinite(out.series.follower_pos_m).all()  # its truth is still there
+    assert out.followers[3].states == 0 and out.followers[3].age_p99_ms is None
+    recent = without_follower(paper, run, 3).recent_series(1.0)
+    assert recent is not None and np.isnan(recent.estimate_m[:, 3]).all()
+    live = live_errors(without_follower(paper, run, 3), RunInfo.from_scenario(paper, "x", 2.0))
+    assert live["max_estimator_error_m"] is not None and live["max_estimator_error_m"] < 1e-6
+
+    metrics = write_final_outputs(tmp_path, paper, without_follower(paper, run, 3), {})
+    assert metrics is not None and metrics.estimator_error_m < 1e-6  # over followers 0..2
+    doc = json.loads((tmp_path / "metrics.json").read_text())
+    assert doc["silent_followers"] == [3] and "error" not in doc
+    assert doc["radius_error_m"] < 1e-9 and doc["angle_error"] < 1e-9
+    csv = (tmp_path / "series.csv").read_text().splitlines()
+    assert len(csv) == 102 and "nan" in csv[1]
+    for name in ("performance.png", "trajectory.png"):
+        assert (tmp_path / name).is_file(), name
 
 
 def test_metrics_equal_those_of_write_run_outputs_on_the_same_data(

@@ -150,6 +150,24 @@ def test_a_metric_over_its_bound_or_no_metrics_says_so(tmp_path: Path) -> None:
     assert v.inside is False and verdict_json(v)["verdict"]["inside_bounds"] is False
 
 
+def test_a_follower_that_sent_no_state_makes_the_run_incomplete_not_inside(
+    tmp_path: Path,
+) -> None:
+    run = write_run(tmp_path / "run")
+    doc = json.loads((run / "metrics.json").read_text())
+    doc.update(silent_followers=[2], followers={str(i): {} for i in range(4)})
+    (run / "metrics.json").write_text(json.dumps(doc))
+    console, buf = plain_console()
+    v = read_verdict(run, "enclose run paper")
+    print_verdict(console, v)
+    text = buf.getvalue()
+    # Every metric is within its bound, but over three of the four followers only.
+    assert all(c.inside for c in v.checks) and v.inside is False
+    assert text.startswith("enclose run paper: INCOMPLETE (follower 2 (0-based) sent no state)")
+    assert "estimator error over the other 3" in text
+    assert verdict_json(v)["verdict"]["silent_followers"] == [2]
+
+
 def test_json_goes_alone_to_stdout_for_scripts(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

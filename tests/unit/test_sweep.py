@@ -186,9 +186,12 @@ def test_a_sweep_runs_every_cell_then_resume_skips_the_done_ones(tmp_path: Path)
     launch = spec.out / cells[2] / "launch.json"
     launch.write_text(launch.read_text().replace('"exit_code": 0}}', '"exit_code": -9}}'))
     (spec.out / cells[5] / "metrics.json").unlink()
+    silent = spec.out / cells[6] / "metrics.json"  # a follower never published: partial
+    silent.write_text(json.dumps({**json.loads(silent.read_text()), "silent_followers": [1]}))
+    assert collect(spec)[6].state.status == "silent"
     third = FakeRunner()
     assert run_sweep(spec, third, tty=False, figures=False) == 0
-    assert [p.name for p in third.calls] == [cells[2], cells[5]]
+    assert [p.name for p in third.calls] == [cells[2], cells[5], cells[6]]
 
 
 def test_a_failed_cell_is_recorded_and_the_sweep_goes_on(tmp_path: Path) -> None:
