@@ -60,6 +60,12 @@ class Gains:
     # barely decays at 20 Hz without it (issue 15).  0: the paper's law on the latest data.
     # Lock-step commands act at once, so it has nothing to lead and ignores it.
     lead_s: float = 0.0
+    # The spacing law's gain g = step_fraction / (2 dt) times its successor's data age L may
+    # not exceed this: above it the gain is cut to spacing_gain_age / L.  None (default):
+    # step_fraction / 2, the gain falls as soon as the age exceeds a period, which keeps
+    # small rings from chattering on jittered data; a large ring's slowest spacing mode
+    # (k = 1, decay ~ g (2 pi / n)^2) wants the gain kept (ring64; BENCHMARKS.md, issue 15).
+    spacing_gain_age: float | None = None
 
     @property
     def est_step_fraction(self) -> float:

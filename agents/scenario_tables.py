@@ -135,7 +135,8 @@ def _share(t: Table, key: str, default: float) -> float:
 def parse_gains(t: Table) -> Gains:
     d = Gains()
     known_keys(t, d.__dataclass_fields__, "gains")
-    special = ("step_fraction", "estimator_step_fraction", "estimator_order", "lead_s")
+    special = ("step_fraction", "estimator_step_fraction", "estimator_order", "lead_s",
+               "spacing_gain_age")
     names = [k for k in d.__dataclass_fields__ if k not in special]
     fraction = _share(t, "step_fraction", d.step_fraction)
     est = None if "estimator_step_fraction" not in t else _share(t, "estimator_step_fraction", 0)
@@ -145,8 +146,9 @@ def parse_gains(t: Table) -> Gains:
     lead_s = number(t, "lead_s", "gains", d.lead_s)
     if not 0.0 <= lead_s <= MAX_LEAD_S:
         raise ScenarioError("gains.lead_s", f"must be within [0, {MAX_LEAD_S:g}] s, got {lead_s}")
+    gain_age = None if "spacing_gain_age" not in t else positive(t, "spacing_gain_age", "gains", 1)
     g = Gains(step_fraction=fraction, estimator_step_fraction=est, estimator_order=int(order),
-              lead_s=lead_s,
+              lead_s=lead_s, spacing_gain_age=gain_age,
               **{k: positive(t, k, "gains", getattr(d, k)) for k in names})
     for key in ("alpha1", "alpha2", "alpha3"):
         if getattr(g, key) < 1.0:

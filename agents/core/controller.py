@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from agents.core.controller_one import MIN_RANGE_M as MIN_RANGE_M
 from agents.core.controller_one import ControlGains as ControlGains
 from agents.core.controller_one import enclosing_control_one as enclosing_control_one
+from agents.core.controller_one import spacing_step_s
 from agents.core.geometry import TWO_PI, limited_sig, rate_cap
 
 FloatArray = NDArray[np.float64]
@@ -48,7 +49,8 @@ def enclosing_control(
     desired included angles a_i.  `dt_s` is the time until the next command: it
     sets how much of the error one command may remove (`ControlGains.step_fraction`);
     `succ_age_s`, the age of the successor's position, stretches that step for the
-    angle: correcting on data older than a step by a step's worth oscillates.
+    angle: correcting on data older than a step by a step's worth oscillates
+    (controller_one.spacing_step_s).
     """
     # Plane vectors as complex numbers (zero-copy views): one call each for the
     # norm, the relative bearing and the 90-degree rotation keeps a 1 kHz loop cheap.
@@ -64,7 +66,8 @@ def enclosing_control(
     cap = rate_cap(gains.step_fraction, dt_s)
     w_z = limited_sig(z, 1.0 / gains.alpha2, gains.k_z, cap)
     # Half the cap for the angle: the successor's own correction moves delta_i too.
-    delta_cap = (0.5 * rate_cap(gains.step_fraction, max(dt_s, succ_age_s))) * rho * angles_rad
+    step_s = spacing_step_s(gains, dt_s, succ_age_s)
+    delta_cap = (0.5 * rate_cap(gains.step_fraction, step_s)) * rho * angles_rad
     w_delta = limited_sig(delta, 1.0 / gains.alpha3, gains.k_d, delta_cap) + gains.w_d_rad_s * rho
     u = radial * (1j * w_delta - w_z) + as_complex(r_rate_m_s)
     return ControlOutput(u_m_s=as_plane(u), z_m=z, delta=delta)

@@ -24,6 +24,22 @@ class ControlGains:
     rho_d_m: float
     w_d_rad_s: float
     step_fraction: float = 0.5  # see geometry.limited_sig; 0 gives the plain law
+    # Largest product of the spacing law's linear gain and its successor's data age
+    # (Gains.spacing_gain_age; None: step_fraction / 2, one step's share per age).
+    spacing_gain_age: float | None = None
+
+
+def spacing_step_s(gains: ControlGains, dt_s: float, succ_age_s: float) -> float:
+    """The step the angle's cap is computed for: dt, stretched by the successor's data age.
+
+    Near zero the spacing law is linear with gain g = step_fraction / (2 dt) (half the cap:
+    the successor's own correction moves delta too).  Correcting on data of age L with
+    g L large oscillates, so the gain is cut to spacing_gain_age / L where g L would
+    exceed it; by default that is at any age beyond a period."""
+    limit = gains.spacing_gain_age
+    if limit is None or gains.step_fraction <= 0.0:
+        return max(dt_s, succ_age_s)
+    return max(dt_s, succ_age_s * 0.5 * gains.step_fraction / limit)
 
 
 def enclosing_control_one(
@@ -53,7 +69,8 @@ def enclosing_control_one(
         / angle_rad
     cap = rate_cap(gains.step_fraction, dt_s)
     w_z = limited_sig_one(z, 1.0 / gains.alpha2, gains.k_z, cap)
-    delta_cap = (0.5 * rate_cap(gains.step_fraction, max(dt_s, succ_age_s))) * rho * angle_rad
+    step_s = spacing_step_s(gains, dt_s, succ_age_s)
+    delta_cap = (0.5 * rate_cap(gains.step_fraction, step_s)) * rho * angle_rad
     w_delta = (limited_sig_one(delta, 1.0 / gains.alpha3, gains.k_d, delta_cap)
                + gains.w_d_rad_s * rho)
     return radial * (1j * w_delta - w_z) + r_rate_m_s, z, delta

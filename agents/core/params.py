@@ -9,7 +9,8 @@ from agents.scenario import Scenario
 
 def control_gains(scenario: Scenario) -> ControlGains:
     g, p = scenario.gains, scenario.pattern
-    return ControlGains(g.k_z, g.alpha2, g.k_d, g.alpha3, p.rho_d_m, p.w_d_rad_s, g.step_fraction)
+    return ControlGains(g.k_z, g.alpha2, g.k_d, g.alpha3, p.rho_d_m, p.w_d_rad_s, g.step_fraction,
+                        g.spacing_gain_age)
 
 
 def estimator_params(scenario: Scenario) -> EstimatorParams:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 
 from agents.core.controller import ControlGains, enclosing_control
+from agents.core.controller_one import spacing_step_s
 from agents.core.estimator import (
     EdgeOperators,
     EstimatorParams,
@@ -168,3 +170,22 @@ def test_controller_moves_radially_towards_the_circle() -> None:
     assert out.u_m_s[0, 0] < 0.0  # outside the circle: inwards
     assert out.u_m_s[1, 1] > 0.0  # inside: outwards
     assert out.z_m[0] == pytest.approx(12.0)
+
+
+@pytest.mark.parametrize("limit", [None, 0.05, 0.35])
+def test_spacing_gain_times_successor_age_stays_under_its_limit(limit: float | None) -> None:
+    """Near zero the spacing law is linear, gain g = step_fraction / (2 step); the step
+    is stretched so that g x age <= limit (default step_fraction / 2), never shortened."""
+    gains = dataclasses.replace(GAINS, step_fraction=0.25, spacing_gain_age=limit)
+    bound = 0.5 * gains.step_fraction if limit is None else limit
+    dt = 0.05
+    for age in (0.0, 0.02, 0.05, 0.1, 0.2, 0.4, 3.0):
+        step = spacing_step_s(gains, dt, age)
+        gain = 0.5 * gains.step_fraction / step
+        assert step >= dt and gain * age <= bound * (1 + 1e-12)
+        if gain * age < bound * (1 - 1e-9):
+            assert step == dt  # cut only where the product would exceed the limit
+    # 0.35 keeps ring64's gain (2.5/s at 20 Hz) up to 0.14 s of age; the default halves
+    # it at 0.1 s.
+    assert spacing_step_s(dataclasses.replace(gains, spacing_gain_age=0.35), dt, 0.1) == dt
+    assert spacing_step_s(dataclasses.replace(gains, spacing_gain_age=None), dt, 0.1) == 0.1

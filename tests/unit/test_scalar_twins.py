@@ -61,11 +61,12 @@ def test_consensus_flows_and_link_balance(r: complex, nbrs: list[complex], a: fl
 
 @settings(max_examples=300)
 @given(pos=vec, succ=vec, r=vec, rate=vec, angle=st.floats(0.1, 6.2), f=fraction, step=dt,
-       succ_age=st.sampled_from([0.0, 0.01, 0.3, 1e6]), a2=alpha, a3=alpha)
+       succ_age=st.sampled_from([0.0, 0.01, 0.3, 1e6]), a2=alpha, a3=alpha,
+       gain_age=st.sampled_from([None, 0.05, 0.35]))
 def test_enclosing_control_one(pos: complex, succ: complex, r: complex, rate: complex,
                                angle: float, f: float, step: float, succ_age: float,
-                               a2: float, a3: float) -> None:
-    gains = ControlGains(1.5, a2, 2.0, a3, 8.0, 0.2, f)
+                               a2: float, a3: float, gain_age: float | None) -> None:
+    gains = ControlGains(1.5, a2, 2.0, a3, 8.0, 0.2, f, gain_age)
     out = enclosing_control(plane([pos]), plane([succ]), plane([r]), plane([rate]),
                             np.array([angle]), gains, step, succ_age)
     u, z, delta = enclosing_control_one(pos, succ, r, rate, angle, gains, step, succ_age)

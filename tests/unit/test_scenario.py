@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agents.core.params import control_gains
 from agents.core.profiles import TargetMotion
 from agents.errors import ConfigError, InadmissibleError, ScenarioError
 from agents.scenario_file import load_scenario, parse_scenario
@@ -202,6 +203,20 @@ def test_lead_is_zero_by_default_and_checked() -> None:
     for bad in ("-0.05", "2.0", "nan", '"soon"'):
         with pytest.raises(ScenarioError, match=r"gains\.lead_s"):
             parse_scenario(with_lead(bad))
+
+
+def test_spacing_gain_age_is_off_by_default_positive_and_reaches_the_control_gains() -> None:
+    base = load_scenario_text()
+
+    def with_limit(value: str) -> str:
+        return base.replace("alpha3 = 3.0", f"alpha3 = 3.0\nspacing_gain_age = {value}")
+
+    assert parse_scenario(base).gains.spacing_gain_age is None
+    scenario = parse_scenario(with_limit("0.35"))
+    assert control_gains(scenario).spacing_gain_age == 0.35
+    for bad in ("0", "-0.1", "nan", '"high"'):
+        with pytest.raises(ScenarioError, match=r"gains\.spacing_gain_age"):
+            parse_scenario(with_limit(bad))
 
 
 def test_estimator_order_is_one_or_two_and_two_needs_the_robust_estimator() -> None:
