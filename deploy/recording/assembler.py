@@ -164,7 +164,7 @@ class RunAssembler:
         while first > 0 and self._truth_stamps_s[first - 1] >= newest - window_s:
             first -= 1
         rows = np.arange(first, k)
-        series, _ = self._series(rows, start, tail_states=4 * (k - first) + 8)
+        series, _ = self._series(rows, start, tail_states=4 * (k - first) + 8, stats=False)
         return series
 
     # ---- the result ----------------------------------------------------------------------
@@ -198,16 +198,18 @@ class RunAssembler:
         return max(self._truth_stamps_s) - min(self._truth_stamps_s)
 
     def _series(
-        self, rows: IntArray, start_s: float, tail_states: int | None = None
+        self, rows: IntArray, start_s: float, tail_states: int | None = None, stats: bool = True
     ) -> tuple[RunSeries, tuple[FollowerStats, ...]]:
+        """The series on `rows` of the truth grid, and per follower its FollowerStats (empty
+        without `stats`: live progress, once a second, needs none of their percentiles)."""
         stamps = np.asarray(self._truth_stamps_s)[rows]
         est = np.empty((len(rows), self.n, 2))
         cmd = np.empty((len(rows), self.n, 2))
-        stats = []
+        found: list[FollowerStats] = []
         for i, log in enumerate(self._states):
             if not log.stamps_s:
                 est[:, i] = cmd[:, i] = np.nan
-                stats.append(_stats(log, 0, np.empty(0)))
+                found.append(_stats(log, 0, np.empty(0)))
                 continue
             lo = 0 if tail_states is None else max(0, len(log.stamps_s) - tail_states)
             s_stamps = np.asarray(log.stamps_s[lo:])
@@ -220,11 +222,12 @@ class RunAssembler:
             lag_s = np.where(filled, 0.0, stamps - s_stamps[used])[:, None]
             est[:, i] = np.asarray(log.r_m[lo:])[used] + lag_s * np.asarray(log.dr_m_s[lo:])[used]
             cmd[:, i] = np.asarray(log.u_m_s[lo:])[used]
-            ages_ms = 1000.0 * (stamps - s_stamps[used])[~filled]
-            stats.append(_stats(log, int(filled.sum()), ages_ms))
+            if stats:
+                ages_ms = 1000.0 * (stamps - s_stamps[used])[~filled]
+                found.append(_stats(log, int(filled.sum()), ages_ms))
         pos = np.stack([self._truth_pos_m[r] for r in rows])
         tgt = np.stack([self._truth_tgt_m[r] for r in rows])
-        return RunSeries(stamps - start_s, pos, est, cmd, tgt), tuple(stats)
+        return RunSeries(stamps - start_s, pos, est, cmd, tgt), tuple(found if stats else ())
 
 
 def _stats(log: _StateLog, filled: int, ages_ms: FloatArray) -> FollowerStats:
