@@ -11,6 +11,7 @@ from typing import Any
 
 from deploy.json_files import read_json
 from deploy.sweep_spec import Cell, SweepSpec, format_value
+from deploy.verdict import silent_followers
 
 RECORD = "sweep_cell.json"  # written by the sweep: the cell's argv, exit code, wall time
 METRICS = ("estimator_error_m", "radius_error_m", "angle_error", "settle_time_s",
@@ -69,7 +70,7 @@ def cell_state(cell_dir: Path, argv: list[str]) -> CellState:
     # A run stopped by Ctrl-C also ends with clean exit codes: its own exit code tells.
     finished = code in (0, None) and not (metrics_doc or {}).get("stopped_early")
     # A follower that sent no state leaves metrics of the others only: run it again.
-    silent = bool((metrics_doc or {}).get("silent_followers"))
+    silent = bool(silent_followers(metrics_doc or {}))
     if ok_metrics and finished and launch_ok(read_json(cell_dir / "launch.json")):
         status = "silent" if silent else "done"
     elif code == INTERRUPTED_EXIT:

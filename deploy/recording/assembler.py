@@ -209,7 +209,8 @@ class RunAssembler:
         for i, log in enumerate(self._states):
             if not log.stamps_s:
                 est[:, i] = cmd[:, i] = np.nan
-                found.append(_stats(log, 0, np.empty(0)))
+                if stats:
+                    found.append(_stats(log, 0, np.empty(0)))
                 continue
             lo = 0 if tail_states is None else max(0, len(log.stamps_s) - tail_states)
             s_stamps = np.asarray(log.stamps_s[lo:])
@@ -227,7 +228,7 @@ class RunAssembler:
                 found.append(_stats(log, int(filled.sum()), ages_ms))
         pos = np.stack([self._truth_pos_m[r] for r in rows])
         tgt = np.stack([self._truth_tgt_m[r] for r in rows])
-        return RunSeries(stamps - start_s, pos, est, cmd, tgt), tuple(found if stats else ())
+        return RunSeries(stamps - start_s, pos, est, cmd, tgt), tuple(found)
 
 
 def _stats(log: _StateLog, filled: int, ages_ms: FloatArray) -> FollowerStats:

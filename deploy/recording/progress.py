@@ -7,13 +7,14 @@ metrics -- over the last second of truth with each follower's latest state align
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agents.core.metrics import error_series
+from agents.core.metrics import error_series, worst
 from deploy.recording.assembler import RunAssembler
 from deploy.rundir import RunInfo
 
@@ -22,9 +23,10 @@ WINDOW_S = 1.0
 
 
 def _worst_or_none(values: np.ndarray) -> float | None:
-    """The largest finite value; a silent follower's NaN columns do not hide the others."""
-    finite = values[np.isfinite(values)]
-    return float(finite.max()) if finite.size else None
+    """The largest value (NaN ignored, as in the final metrics: a silent follower's NaN
+    columns do not hide the others); None when not finite."""
+    v = worst(values)
+    return v if math.isfinite(v) else None
 
 
 def live_errors(asm: RunAssembler, info: RunInfo, window_s: float = WINDOW_S) -> dict[str, Any]:
