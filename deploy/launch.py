@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,7 @@ log = logging.getLogger("enclose.run")
 START_DELAY_S = 1.0
 PROGRESS_PERIOD_S = 2.0
 START_REPEAT_S = 1.0  # the start word again, for processes (re)started after it
+STARTUP_RESTARTS = 2  # per process before the start: a third death there is not bad luck
 
 
 class Launch:
@@ -150,7 +152,20 @@ class Launch:
             time.sleep(0.05)
 
     def _check_children(self) -> None:
-        dead = self.sup.dead()
+        """Before the start, a process that dies (a vehicle that did not answer its
+        take-off while 60 processes were starting on 2 cores) is restarted as the policy
+        says, at most STARTUP_RESTARTS times; one that stays dead ends the launch."""
+        if self.watchdog is None:
+            startup = replace(self.policy,
+                              max_restarts=min(self.policy.max_restarts, STARTUP_RESTARTS))
+            self.watchdog = Watchdog(self.sup, startup, time.monotonic(), self._before_restart)
+        try:
+            self.watchdog.check()
+        finally:
+            self._raise_if_dead_for_good(self.watchdog)
+
+    def _raise_if_dead_for_good(self, dog: Watchdog) -> None:
+        dead = [c for c in self.sup.dead() if c.name not in dog.pending]
         if dead:
             c = dead[0]
             raise DeployError(
@@ -238,7 +253,10 @@ class Launch:
             return encode(RunControl(stamper.header(), "start", start, self.duration_s))
 
         t0 = self.t0_s = time.monotonic() + START_DELAY_S
-        self.watchdog = Watchdog(self.sup, self.policy, t0, self._before_restart)
+        if self.watchdog is None:
+            self.watchdog = Watchdog(self.sup, self.policy, t0, self._before_restart)
+        else:  # the one that watched the start-up: its events and restarts carry over
+            self.watchdog.rebase(t0, self.policy, self._before_restart)
         self.injector = FaultRunner(
             self.sup, self.faults, t0, self.watchdog.events, self.watchdog.pending,
             self._before_restart,
@@ -278,7 +296,8 @@ class Launch:
             mcap.rename(self.out / f"recording-part{child.restarts + 1}.mcap")
         if child.name == "recorder":
             pin_live_port(child.argv, self.live_url)
-        if child.name.startswith("follower-") and "--join" not in child.argv:
+        running = time.monotonic() >= self.t0_s  # before the start, all begin together
+        if running and child.name.startswith("follower-") and "--join" not in child.argv:
             child.argv.append("--join")
 
     def write_launch(self) -> None:

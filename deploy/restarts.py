@@ -113,6 +113,15 @@ class Watchdog:
                 self._restart(name, now)
         self._can_go_on()
 
+    def rebase(self, t0_s: float, policy: RestartPolicy,
+               before_restart: Callable[[Child], None]) -> None:
+        """Go on from the start-up watchdog into the run: events stay, restamped from the
+        experiment's start (so deaths before it have negative times), and the run's policy
+        and restart hook apply from now on; restarts already made still count."""
+        for e in self.events:
+            e["t_s"] = round(e["t_s"] + self.t0_s - t0_s, 3)
+        self.t0_s, self.policy, self.before_restart = t0_s, policy, before_restart
+
     def _event(self, now: float, child: Child, event: str, **extra: Any) -> None:
         row = {"t_s": round(now - self.t0_s, 3), "process": child.name, "event": event, **extra}
         self.events.append(row)

@@ -191,19 +191,49 @@ def test_ctrl_c_stops_every_process_and_keeps_the_recording(tmp_path: Path) -> N
     assert (out / "recording.mcap").stat().st_size > 1000
 
 
+def kill_at_birth(out: Path, name: str) -> None:
+    """SIGKILL `name` as soon as the launcher has started it: long before it links
+    (its vehicle's take-off alone takes seconds)."""
+    pids_file = out / "logs" / "pids.json"
+
+    def started() -> bool:
+        with contextlib.suppress(OSError, ValueError):
+            return name in json.loads(pids_file.read_text())
+        return False
+
+    wait_for(started, 120.0, f"{name} to start", period_s=0.01)
+    os.kill(json.loads(pids_file.read_text())[name], signal.SIGKILL)
+
+
 @pytest.mark.timeout(240)
-def test_a_dying_follower_fails_the_run_and_stops_the_rest(tmp_path: Path) -> None:
+def test_a_follower_dying_before_the_start_is_restarted_and_the_run_goes_on(
+    tmp_path: Path,
+) -> None:
     out = tmp_path / "run"
-    with launched(out, "--duration", "600") as proc:
-        pids_file = out / "logs" / "pids.json"
-        wait_for(lambda: (out / "progress.json").exists(), 120.0, "the run to start")
-        # The recorder writes progress.json; the followers may start after it.
-        wait_for(lambda: "follower-2" in json.loads(pids_file.read_text()), 60.0,
-                 "follower-2 to start")
-        victim = json.loads(pids_file.read_text())["follower-2"]
-        os.kill(victim, signal.SIGKILL)
+    with launched(out, "--duration", "10", "--no-live") as proc:
+        kill_at_birth(out, "follower-2")
+        output, _ = proc.communicate(timeout=200)
+    assert proc.returncode == 3, output  # the run went to its end, and says something died
+    launch = json.loads((out / "launch.json").read_text())
+    died, restarted = launch["events"][:2]
+    assert died["process"] == "follower-2" and died["signal"] == "SIGKILL", died
+    assert died["t_s"] < 0.0 and restarted["t_s"] < 0.0, launch["events"]  # before the start
+    assert restarted["event"] == "restarted" and restarted["process"] == "follower-2"
+    codes = assert_all_exited(out)
+    assert codes["follower-2"] == 0 and launch["processes"]["follower-2"]["restarts"] == 1
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["samples"] > 100 and not metrics.get("silent_followers"), metrics
+
+
+@pytest.mark.timeout(240)
+def test_with_restart_never_a_follower_dying_before_the_start_ends_the_launch(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "run"
+    with launched(out, "--duration", "600", "--restart", "never") as proc:
+        kill_at_birth(out, "follower-2")
         output, _ = proc.communicate(timeout=150)
     assert proc.returncode != 0
-    assert "follower-2" in output
+    assert "follower-2 exited with code -9" in output, output
     codes = assert_all_exited(out)
     assert codes["follower-2"] == -signal.SIGKILL

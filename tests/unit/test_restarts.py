@@ -95,3 +95,24 @@ def test_the_run_aborts_when_the_simulator_or_all_but_one_follower_die(tmp_path:
             poll_until(dog, lambda: False)
     finally:
         sup.stop_all(grace_s=1.0)
+
+
+def test_rebase_restamps_start_up_events_from_the_start_and_keeps_restart_counts(
+    tmp_path: Path,
+) -> None:
+    sup = Supervisor(tmp_path)
+    try:
+        sup.start("follower-0", "tests.child_proc", ["sleep", "30"])
+        sup.start("follower-1", "tests.child_proc", ["sleep", "30"])
+        victim = sup.start("follower-2", "tests.child_proc", ["exit", "2"])
+        launched_at = time.monotonic()
+        dog = Watchdog(sup, RestartPolicy(backoff_s=0.05, max_restarts=1), launched_at)
+        poll_until(dog, lambda: len(dog.events) == 3)  # died, restarted, died for good
+        assert dog.events[2]["restart"] == "limit reached"
+        hooked: list[str] = []
+        start = launched_at + 100.0
+        dog.rebase(start, RestartPolicy(backoff_s=0.05, max_restarts=3), hooked.append)
+        assert all(-100.0 < e["t_s"] < -90.0 for e in dog.events), dog.events
+        assert victim.restarts == 1 and dog.policy.max_restarts == 3 and dog.t0_s == start
+    finally:
+        sup.stop_all(grace_s=1.0)
