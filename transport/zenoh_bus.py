@@ -83,10 +83,14 @@ class ZenohSubscription:
         if sample is None:
             return []
         out: list[Received] = []
-        now = self._bus.now_s()
+        clock = self._bus.now_s
         while sample is not None:
             if sample.kind == _PUT:
-                out.append(_received(sample, now, None))
+                # The clock is read for each sample, after taking it: Zenoh keeps filling
+                # the ring while we drain, and a starved process (ring64's recorder, 2
+                # cores) preempted mid-drain took samples stamped after one early reading,
+                # refused them as future-stamped (4305 in one run) and lost them.
+                out.append(_received(sample, clock(), None))
                 if max_items is not None and len(out) >= max_items:
                     break
             sample = try_recv()
@@ -95,11 +99,11 @@ class ZenohSubscription:
     def _drain_arrived(self, max_items: int | None) -> list[Received]:
         assert self._arrived is not None
         out: list[Received] = []
-        now = self._bus.now_s()
+        clock = self._bus.now_s
         while self._arrived and (max_items is None or len(out) < max_items):
             arrival_s, sample = self._arrived.popleft()
             if sample.kind == _PUT:
-                out.append(_received(sample, now, arrival_s))
+                out.append(_received(sample, clock(), arrival_s))  # as drain: never before it
         return out
 
     def close(self) -> None:
