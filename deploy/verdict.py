@@ -65,6 +65,7 @@ class Verdict:
     ticks: str | None = None  # the followers' late control ticks
     memory: str | None = None  # peak resident memory per process (deploy.cpu_load)
     silent: tuple[int, ...] = ()  # 0-based followers that sent no state: not judged whole
+    recording: str | None = None  # what the recorder lost, when it lost enough to matter
 
     @property
     def inside(self) -> bool:
@@ -117,6 +118,23 @@ def link_summary(metrics: dict[str, Any]) -> str | None:
     return ", ".join(parts)
 
 
+LOST_WORTH_SAYING = 0.01  # of the messages the recorder should have had
+
+
+def recording_line(metrics: dict[str, Any]) -> str | None:
+    """What the recorder lost (sequence gaps) or refused, when over 1 % of what was sent:
+    a starved recorder judges the run on stale states (ring64 on a saturated machine)."""
+    decoder = _dict(_dict(metrics.get("recorder")).get("decoder"))
+    accepted, gaps = _num(decoder.get("accepted")) or 0.0, _num(decoder.get("seq_gap")) or 0.0
+    refused = sum(_num(v) or 0.0 for k, v in decoder.items() if k.startswith("drop_"))
+    sent = accepted + gaps
+    if sent <= 0 or gaps < LOST_WORTH_SAYING * sent:
+        return None
+    why = f", {refused:.0f} of them refused" if refused else ""
+    return (f"{100 * accepted / sent:.1f} % of the messages sent were recorded ({gaps:.0f} "
+            f"missing{why}): the errors are judged on incomplete data")
+
+
 def silent_followers(metrics: dict[str, Any]) -> tuple[int, ...]:
     """metrics.json's "silent_followers": followers whose estimates the run never saw."""
     raw = metrics.get("silent_followers")
@@ -147,7 +165,7 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
         live if isinstance(live, str) and live else None,
         tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
         bool(launch), load_line(load), overrun_line(ticks), memory_line(load),
-        silent_followers(metrics),
+        silent_followers(metrics), recording_line(metrics),
     )
 
 
@@ -164,6 +182,7 @@ def verdict_json(v: Verdict) -> dict[str, Any]:
         "load": v.load,
         "memory": v.memory,
         "late_ticks": v.ticks,
+        "recording": v.recording,
         "run_dir": str(v.run_dir),
     }}
 
@@ -201,6 +220,7 @@ def print_verdict(console: Console, v: Verdict) -> None:
     if v.networked:
         rows.append(("processes", "; ".join(v.processes) or "none died, restarted or failed"))
     rows += [("links", v.links)] if v.links else []
+    rows += [("recording", v.recording)] if v.recording else []
     rows += [("late ticks", v.ticks)] if v.ticks else []
     rows += [("CPU", v.load)] if v.load else []
     rows += [("memory", v.memory)] if v.memory else []

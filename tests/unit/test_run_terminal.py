@@ -204,3 +204,25 @@ def test_a_long_list_of_silent_links_is_cut_to_a_few_names() -> None:
     text = link_text({"links": {"count": 48, "silent": silent}})
     assert "silent 30: f0->f1, f1->f2, f2->f3, f3->f4 (+26 more)" in text
     assert "f4->f5" not in text
+
+
+def test_a_recorder_that_lost_messages_says_so_and_a_whole_recording_says_nothing(
+    tmp_path: Path,
+) -> None:
+    run = write_run(tmp_path / "run")
+    console, buf = plain_console()
+    print_verdict(console, read_verdict(run, "enclose run paper"))
+    assert "recording" not in buf.getvalue()
+    doc = json.loads((run / "metrics.json").read_text())
+    doc["recorder"] = {"decoder": {"accepted": 140703, "seq_gap": 28129,
+                                   "drop_rejected_future_stamp": 4305}}
+    (run / "metrics.json").write_text(json.dumps(doc))
+    console, buf = plain_console(width=200)
+    v = read_verdict(run, "enclose run paper")
+    print_verdict(console, v)
+    assert ("recording    83.3 % of the messages sent were recorded (28129 missing, 4305 of "
+            "them refused)") in buf.getvalue()
+    assert verdict_json(v)["verdict"]["recording"] == v.recording
+    doc["recorder"]["decoder"]["seq_gap"] = 1000  # 0.7 %: within what a run may lose
+    (run / "metrics.json").write_text(json.dumps(doc))
+    assert read_verdict(run, "enclose run paper").recording is None
