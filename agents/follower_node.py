@@ -68,7 +68,7 @@ class FollowerNode:
         self.index, self.bus, self.vehicle = index, bus, vehicle
         self.altitude_m = scenario.vehicle.altitude_m
         self.keys = SwarmKeys(swarm)
-        self.liveness = MembershipWatch(bus, self.keys)
+        self.liveness = MembershipWatch(bus, self.keys, scenario.n)
         self.subs = [
             bus.subscribe(self.keys.sensor_targets(index)),
             bus.subscribe(self.keys.control()),

@@ -1,124 +1,144 @@
-"""Who is alive: followers' Zenoh liveliness tokens and their heartbeats, as a member set.
+"""Who is alive: the followers' Zenoh liveliness tokens, as a member set.
 
-A follower is a member while its liveliness token is alive and its status (published
-about once a second from its loop: `agents.process.StatusReporter`) was heard within
-`SILENCE_S`.  A token vanishes ~11 ms after a crash or SIGKILL (and on a clean exit);
-the silence rule catches a process that is alive but stuck.
+A follower is a member while its liveliness token is alive.  Zenoh withdraws a token
+~11 ms after a crash or SIGKILL (and on a clean exit), and when its session's lease
+(10 s without a word: a frozen, SIGSTOPped process) runs out; a process whose loop is stuck
+while its Zenoh threads still run withdraws its own token (`StallGuard`, after STALL_S) and
+declares it again when the loop runs.  Every observer sees the same set, carried by Zenoh,
+with no traffic of ours.  Until the seventh session a follower was also dropped when its
+~1-Hz status had not been heard for 5 s, so every follower heard every other's status:
+O(n^2) messages, ~4000 a second at n = 64, as many as the ring's data, and on 2 cores the
+share of a core that ring64's simulator and recorder were missing (BENCHMARKS.md).
 
-SILENCE_S = 5 s: the status period (1 s) plus the longest ordinary stall a member must
-ride through (a 2 s SIGSTOP or scheduling pause) plus 2 s of margin for a loaded host.
-Shorter would drop and re-add members on every such pause (each change restarts the
-affected estimator links); longer only delays noticing a hung process, which Zenoh's
-own lease (10 s) would also remove.  Every observer applies the same rule to the same
-status stream, so they agree on the set up to one status delivery.
+STALL_S = 5 s: longer than the ordinary stalls a member must ride through (a 2-s pause, a
+garbage collection, a slow start-up phase of a restarted vehicle), short enough that a
+hung loop leaves the ring well before Zenoh's lease would notice a frozen process.
 
-`LivenessTracker` is pure (time is an argument); `MembershipWatch` feeds it from a Bus.
+A token's return can fail to reach a watch that saw it vanish (when the mesh re-forms
+around a restarted rendezvous), so while a scenario follower is missing the watch is
+declared again, whose history gives the tokens alive now: after REFRESH_S, then at
+doubling intervals up to REFRESH_MAX_S (a follower that died for good costs little).
+
+`TokenSet` is pure (time is an argument); `MembershipWatch` feeds it from a Bus.
 """
 
 from __future__ import annotations
 
-import math
+import logging
+import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from transport.bus import Bus
+from transport.bus import Bus, Token
 from transport.keys import SwarmKeys, parse_key
 
-SILENCE_S = 5.0
+log = logging.getLogger(__name__)
+STALL_S = 5.0
+REFRESH_S = 2.0
+REFRESH_MAX_S = 30.0
 
 
 @dataclass
-class LivenessTracker:
-    """Tokens and last-heard times of followers; `members(now)` is the live set."""
+class TokenSet:
+    """Followers with a live token, and when to ask Zenoh again for the ones missing."""
 
-    silence_s: float = SILENCE_S
+    expected: frozenset[int] = frozenset()  # the scenario's followers
     tokens: set[int] = field(default_factory=set)
-    heard_s: dict[int, float] = field(default_factory=dict)
-    last_eval_s: float | None = None
-    # Every follower asks every tick, and the set changes a few times a run: the last
-    # answer stands until a token comes or goes, a silent follower is heard again, or the
-    # first member could have fallen silent (ring64: 64 checks a tick, each of 64).
-    _last: frozenset[int] | None = None
-    _last_until_s: float = -math.inf
+    refresh_after_s: float = REFRESH_S
+    _missing_since_s: float | None = None
+    _next_refresh_s: float | None = None
 
-    def token(self, index: int, alive: bool, now_s: float) -> None:
-        self._last = None
-        if alive:
-            self.tokens.add(index)
-            self.heard_s[index] = max(self.heard_s.get(index, now_s), now_s)
-        else:
-            self.tokens.discard(index)
-            self.heard_s.pop(index, None)
+    def token(self, index: int, alive: bool) -> None:
+        (self.tokens.add if alive else self.tokens.discard)(index)
+        self.refresh_after_s = REFRESH_S  # a change: a missing one may be on its way back
 
-    def heard(self, index: int, now_s: float) -> None:
-        if index in self.tokens:
-            self.heard_s[index] = max(self.heard_s.get(index, now_s), now_s)
-            if self._last is not None and index not in self._last:
-                self._last = None
-
-    def members(self, now_s: float) -> frozenset[int]:
-        """Followers with a live token heard within `silence_s` of `now_s`.
-
-        If the observer itself did not evaluate for over half the silence time (it was
-        paused), everyone's silence is counted from its return: its own stall must not
-        make the others look silent.
-        """
-        if self.last_eval_s is not None and now_s - self.last_eval_s > 0.5 * self.silence_s:
-            for i in self.heard_s:
-                self.heard_s[i] = max(self.heard_s[i], now_s)
-            self._last = None
-        elif self.last_eval_s is not None and now_s < self.last_eval_s:
-            self._last = None  # a clock that steps back: judge afresh
-        self.last_eval_s = now_s
-        if self._last is not None and now_s <= self._last_until_s:
-            return self._last
-        self._last = frozenset(
-            i for i in self.tokens if now_s - self.heard_s.get(i, now_s) <= self.silence_s
-        )
-        # Heard times only move later while the set stands, so this bound is safe.
-        self._last_until_s = min((self.heard_s.get(i, now_s) for i in self._last),
-                                 default=math.inf) + self.silence_s
-        return self._last
+    def due_refresh(self, now_s: float) -> bool:
+        """True when the watch should be declared again (and the next time is set)."""
+        if self.expected <= self.tokens:
+            self._next_refresh_s = None
+            return False
+        if self._next_refresh_s is None:
+            self._next_refresh_s = now_s + self.refresh_after_s
+            return False
+        if now_s < self._next_refresh_s:
+            return False
+        self.refresh_after_s = min(REFRESH_MAX_S, 2.0 * self.refresh_after_s)
+        self._next_refresh_s = now_s + self.refresh_after_s
+        return True
 
 
 class MembershipWatch:
-    """The follower member set as seen through one Bus: tokens plus status heartbeats.
+    """The follower member set as seen through one Bus: the followers' tokens."""
 
-    When the mesh re-forms around a restarted process (the simulator is everyone's
-    rendezvous), a token's reappearance may not reach a watch that saw it vanish; a
-    status from a follower with no known token then re-declares the watch, whose
-    history gives the tokens alive now (at most once per REFRESH_S).
-    """
-
-    REFRESH_S = 1.0
-
-    def __init__(self, bus: Bus, keys: SwarmKeys, silence_s: float = SILENCE_S) -> None:
+    def __init__(self, bus: Bus, keys: SwarmKeys, n_followers: int = 0) -> None:
         self.bus, self.keys = bus, keys
-        self.tracker = LivenessTracker(silence_s)
+        self.tracker = TokenSet(frozenset(range(n_followers)))
         self.watch = bus.watch_alive(keys.alive_of("follower"))
-        self.status = bus.subscribe(keys.status_of("follower"), capacity=256)
         self.refreshes = 0
-        self._refreshed_s = -1e18
 
     def members(self, now_s: float) -> frozenset[int]:
         for ev in self.watch.drain_events():
             info = parse_key(ev.key)
             if info is not None and info.index is not None:
-                self.tracker.token(info.index, ev.alive, now_s)
-        unknown = False
-        for rec in self.status.drain():
-            # The key names the sender; a forged or garbled payload cannot add a member
-            # (only a token can), it can at most keep a token-holder counted as heard.
-            info = parse_key(rec.key)
-            if info is not None and info.index is not None:
-                self.tracker.heard(info.index, now_s)
-                unknown |= info.index not in self.tracker.tokens
-        if unknown and now_s - self._refreshed_s >= self.REFRESH_S:
-            self._refreshed_s = now_s
+                self.tracker.token(info.index, ev.alive)
+        if self.tracker.due_refresh(now_s):
             self.refreshes += 1
             self.watch.close()
             self.watch = self.bus.watch_alive(self.keys.alive_of("follower"))
-        return self.tracker.members(now_s)
+        return frozenset(self.tracker.tokens)
 
     def close(self) -> None:
         self.watch.close()
-        self.status.close()
+
+
+class StallGuard:
+    """This process's token, withdrawn by a watchdog thread while the loop is stuck.
+
+    The loop calls `alive()` every iteration (and while it waits on its vehicle); after
+    `stall_s` without one the thread withdraws the token, and the next `alive()` declares
+    it again.  A frozen process needs no guard: its lease runs out."""
+
+    def __init__(self, bus: Bus, key: str, stall_s: float = STALL_S,
+                 clock: Callable[[], float] = time.monotonic, period_s: float = 1.0) -> None:
+        self.bus, self.key, self.stall_s, self.clock = bus, key, stall_s, clock
+        self.withdrawals = 0
+        self._lock = threading.Lock()
+        self._token: Token | None = bus.declare_token(key)
+        self._last_s = clock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, args=(period_s,),
+                                        name="stall-guard", daemon=True)
+        self._thread.start()
+
+    def alive(self) -> None:
+        self._last_s = self.clock()
+        if self._token is None:
+            with self._lock:
+                if self._token is None and not self._stop.is_set():
+                    self._token = self.bus.declare_token(self.key)
+                    log.warning("loop running again: %s declared again", self.key)
+
+    def check(self) -> None:
+        """One look of the watchdog (its thread calls this every period)."""
+        stalled_s = self.clock() - self._last_s
+        if stalled_s <= self.stall_s or self._token is None:
+            return
+        with self._lock:
+            if self._token is not None:
+                self._token.close()
+                self._token = None
+                self.withdrawals += 1
+                log.warning("loop stalled %.1f s: %s withdrawn", stalled_s, self.key)
+
+    def _watch(self, period_s: float) -> None:
+        while not self._stop.wait(period_s):
+            self.check()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        with self._lock:
+            if self._token is not None:
+                self._token.close()
+                self._token = None

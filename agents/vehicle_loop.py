@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 from typing import Protocol
 
 from agents.errors import MavlinkError
+from agents.liveness import StallGuard
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter, VehicleState
 from agents.mavlink.modes import HOLD_MODE, OFFBOARD_MODE
 from agents.mavlink.offboard import OffboardKeeper
@@ -18,7 +19,7 @@ from agents.mavlink.startup import StartupTimeouts, start_offboard
 from agents.phases import log_phases, mark
 from agents.process import StatusReporter, StopFlag, Ticker, open_bus, stop_on_signals
 from agents.scenario import Scenario
-from transport.bus import Bus
+from transport.bus import Bus, Token
 from transport.keys import SwarmKeys
 
 log = logging.getLogger(__name__)
@@ -100,6 +101,19 @@ def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
                         "127.0.0.1); the adapter then listens on every address")
 
 
+def _nothing() -> None:
+    pass
+
+
+def _declare_alive(bus: Bus, key: str, role: str) -> tuple[Token | StallGuard, Callable[[], None]]:
+    """The process's token, and what its loop calls each iteration.  A follower's token is
+    its membership: a StallGuard withdraws it while the loop is stuck (agents.liveness)."""
+    if role == "follower":
+        guard = StallGuard(bus, key)
+        return guard, guard.alive
+    return bus.declare_token(key), _nothing
+
+
 def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, vehicle: int,
         make_node: NodeFactory) -> int:
     """Take off, declare the process linked, tick until stopped; returns the exit code."""
@@ -126,7 +140,7 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
             node.close()
             return 0
         stop.interrupt = False
-        token = bus.declare_token(keys.alive(role, index))
+        token, alive = _declare_alive(bus, keys.alive(role, index), role)
         node.status.set("linked")
         mark("linked")
         log_phases(f"{role} {index}")
@@ -145,6 +159,7 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
                     **mav.clock_counters(), **signing, **node.counters()}
 
         def heartbeat() -> None:
+            alive()
             if node.status.due():
                 node.status.publish(extra=extra())
 
@@ -153,7 +168,7 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
                 now = ticker.wait()
                 if watch.lost(mav.state, mav.flavour, now):
                     node.status.counters["vehicle_restarts"] += 1
-                    # Still a member while re-arming (status heard: agents.liveness).
+                    # Still a member while re-arming (agents.liveness.StallGuard).
                     mav.on_wait = heartbeat
                     try:
                         again = _start_again(mav, scenario.vehicle.altitude_m, stop, role,
@@ -164,6 +179,7 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
                         break
                     watch.since_s = None
                     continue
+                alive()
                 node.tick(now)
                 keeper.check(now)
                 node.status.state = "running" if node.start_s is not None else "linked"

@@ -60,7 +60,7 @@ class SensorPublisher:
         self.observers = [t.observed_by for t in scenario.targets]
         # The sensor model follows the membership: a target whose observers all left is
         # seen by the follower agents.membership re-assigns it to, as the followers expect.
-        self.liveness = MembershipWatch(bus, keys)
+        self.liveness = MembershipWatch(bus, keys, self.n)
         self.members: frozenset[int] = frozenset(range(self.n))
         self.noise_std_m = noise_std_m
         self.rng = np.random.default_rng(seed)

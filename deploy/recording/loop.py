@@ -84,7 +84,7 @@ class Recorder:
         self._token = bus.declare_token(self.keys.alive(ROLE, index))
         # Followers in and out, as they see it themselves (agents.liveness): the phases
         # of the run's metrics and the marks on its figures.
-        self.liveness = MembershipWatch(bus, self.keys)
+        self.liveness = MembershipWatch(bus, self.keys, scenario.n)
         self.membership: list[tuple[float, frozenset[int]]] = []
         self._started_wall_s = bus.now_s()
         self._next_tick_s = 0.0

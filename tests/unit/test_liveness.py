@@ -1,15 +1,17 @@
-"""Liveness: tokens and heartbeats make the member set; a follower node re-forms on a change."""
+"""Liveness: tokens make the member set; a stuck loop withdraws its own; a follower node
+re-forms on a change."""
 
 from __future__ import annotations
 
+import itertools
+import time
 from typing import Any, cast
 
 import numpy as np
-from hypothesis import given, settings
-from hypothesis import strategies as st
+import pytest
 
 from agents.follower import FollowerNode
-from agents.liveness import SILENCE_S, LivenessTracker, MembershipWatch
+from agents.liveness import REFRESH_MAX_S, REFRESH_S, MembershipWatch, StallGuard, TokenSet
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.scenario_file import load_scenario
 from transport.codec import encode
@@ -20,41 +22,22 @@ from transport.messages import ProcessStatus, Stamper
 KEYS = SwarmKeys("t")
 
 
-def test_token_makes_a_member_and_its_loss_removes_it() -> None:
-    tr = LivenessTracker()
-    tr.token(1, True, 0.0)
-    tr.token(2, True, 0.0)
-    assert tr.members(0.1) == {1, 2}
-    tr.token(2, False, 0.2)
-    assert tr.members(0.2) == {1}
-
-
-def test_silence_longer_than_the_timeout_removes_and_a_heartbeat_readds() -> None:
-    tr = LivenessTracker()
-    tr.token(1, True, 0.0)
-    tr.token(2, True, 0.0)
-    for k in range(1, 100):  # the observer ticks at 10 Hz; 2 is silent, 1 is heard at 1 Hz
-        t = 0.1 * k
-        if k % 10 == 0:
-            tr.heard(1, t)
-        members = tr.members(t)
-        assert members == ({1, 2} if t <= SILENCE_S else {1}), t
-    tr.heard(2, 10.0)
-    assert tr.members(10.0) == {1, 2}
-
-
-def test_a_two_second_pause_of_a_member_is_ridden_through() -> None:
-    tr = LivenessTracker()
-    tr.token(1, True, 0.0)
-    tr.heard(1, 0.99)  # its last status just before a 2 s stall, then 1 s until the next
-    assert all(tr.members(t) == {1} for t in np.arange(1.0, 4.0, 0.02))
-
-
-def test_the_observers_own_pause_does_not_make_the_others_silent() -> None:
-    tr = LivenessTracker()
-    tr.token(1, True, 0.0)
-    assert tr.members(0.0) == {1}
-    assert tr.members(8.0) == {1}  # we were stopped 8 s: nobody could be heard meanwhile
+def test_tokens_make_the_members_and_a_missing_one_is_asked_for_at_doubling_intervals(
+) -> None:
+    ts = TokenSet(frozenset({0, 1, 2}))
+    for i in (0, 1, 2):
+        ts.token(i, True)
+    assert ts.tokens == {0, 1, 2} and not ts.due_refresh(0.0)
+    ts.token(2, False)  # killed: asked for again after REFRESH_S, then ever more rarely
+    due = [t for t in (0.1 * k for k in range(1, 1200)) if ts.due_refresh(t)]
+    gaps = [b - a for a, b in itertools.pairwise(due)]
+    assert due[0] == pytest.approx(0.1 + REFRESH_S, abs=0.11)
+    assert gaps[:3] == pytest.approx([2 * REFRESH_S, 4 * REFRESH_S, 8 * REFRESH_S], abs=0.11)
+    assert max(gaps) == pytest.approx(REFRESH_MAX_S, abs=0.11)
+    ts.token(2, True)  # back: nothing to ask for, and the next miss starts short again
+    assert not ts.due_refresh(200.0)
+    ts.token(1, False)
+    assert not ts.due_refresh(200.0) and ts.due_refresh(200.0 + REFRESH_S)
 
 
 class FakeVehicle:
@@ -98,17 +81,54 @@ def test_watch_and_follower_node_reform_when_a_follower_leaves_and_returns() -> 
     node.close()
 
 
-def test_a_status_without_a_known_token_refreshes_the_watch() -> None:
+def test_a_token_whose_return_was_missed_is_found_by_asking_again() -> None:
     hub = MemoryHub()
     other = MemoryBus(hub, "f1")
     other.declare_token(KEYS.alive("follower", 1))
-    watch = MembershipWatch(MemoryBus(hub, "rec"), KEYS)
-    assert watch.members(0.0) == {1}
-    watch.tracker.token(1, False, 0.1)  # as if the vanish reached us but not the return
-    assert watch.members(0.2) == frozenset()
-    status(other, 1)
-    watch.members(0.3)  # heard, token unknown: re-declared, history on the next poll
-    assert watch.refreshes == 1 and watch.members(0.4) == {1}
+    watch = MembershipWatch(MemoryBus(hub, "rec"), KEYS, n_followers=2)
+    assert watch.members(0.0) == {1}  # follower 0 is missing: the clock to ask runs
+    watch.tracker.token(1, False)  # as if the vanish reached us but not the return
+    assert watch.members(0.1) == frozenset()
+    assert watch.members(0.1 + REFRESH_S) == frozenset() and watch.refreshes == 1
+    assert watch.members(0.2 + REFRESH_S) == {1}  # the new watch's history
+
+
+def test_a_stuck_loop_withdraws_its_token_and_declares_it_again_when_it_runs() -> None:
+    hub = MemoryHub()
+    now = [0.0]
+    guard = StallGuard(MemoryBus(hub, "f2"), KEYS.alive("follower", 2), stall_s=5.0,
+                       clock=lambda: now[0], period_s=3600.0)  # checked by hand below
+    watch = MembershipWatch(MemoryBus(hub, "sim"), KEYS, n_followers=3)
+    try:
+        assert watch.members(0.0) == {2}
+        now[0] = 4.9
+        guard.check()
+        assert watch.members(4.9) == {2}  # a 4.9-s stall is ridden through
+        now[0] = 5.2
+        guard.check()
+        assert watch.members(5.2) == frozenset() and guard.withdrawals == 1
+        guard.check()
+        assert guard.withdrawals == 1
+        guard.alive()
+        assert watch.members(5.3) == {2}
+    finally:
+        guard.close()
+    assert watch.members(5.4) == frozenset()  # closing withdraws it for good
+
+
+def test_the_guards_own_thread_withdraws_the_token_of_a_loop_that_stopped() -> None:
+    hub = MemoryHub()
+    guard = StallGuard(MemoryBus(hub, "f2"), KEYS.alive("follower", 2), stall_s=0.2,
+                       period_s=0.02)
+    watch = MembershipWatch(MemoryBus(hub, "sim"), KEYS, n_followers=3)
+    try:
+        assert watch.members(0.0) == {2}
+        deadline = time.monotonic() + 10.0
+        while watch.members(0.0) and time.monotonic() < deadline:  # the loop never calls
+            time.sleep(0.01)
+        assert watch.members(0.0) == frozenset() and guard.withdrawals == 1
+    finally:
+        guard.close()
 
 
 def test_a_returning_peer_numbering_from_zero_is_neither_stale_nor_duplicate() -> None:
@@ -152,43 +172,3 @@ def test_before_the_start_word_the_planned_ring_stands_and_alone_means_no_self_l
     node.tick(bus.now_s())
     assert node.members == {0, 1, 2, 3} and set(node.peer_subs) == {1, 3}
     node.close()
-
-
-def _fresh_members(t: LivenessTracker, now_s: float) -> frozenset[int]:
-    return frozenset(i for i in t.tokens if now_s - t.heard_s.get(i, now_s) <= t.silence_s)
-
-
-_EVENT = st.tuples(st.sampled_from(["up", "down", "heard", "ask"]), st.integers(0, 5),
-                   st.floats(0.0, 3.0, allow_nan=False))
-
-
-@settings(max_examples=300, deadline=None)
-@given(st.lists(_EVENT, max_size=150))
-def test_the_kept_member_set_is_always_the_one_worked_out_afresh(
-        events: list[tuple[str, int, float]]) -> None:
-    """members() keeps its last answer between changes (a follower asks every tick); at
-    every step it must equal the set worked out from scratch, pauses and all."""
-    t = LivenessTracker(silence_s=5.0)
-    now = 0.0
-    for kind, index, dt in events:
-        now += dt
-        if kind == "up":
-            t.token(index, True, now)
-        elif kind == "down":
-            t.token(index, False, now)
-        elif kind == "heard":
-            t.heard(index, now)
-        if kind == "ask" or index % 2:  # asked at irregular times, pauses included
-            assert t.members(now) == _fresh_members(t, now)
-
-
-def test_a_silent_member_heard_again_is_back_at_once_not_when_the_kept_set_expires() -> None:
-    t = LivenessTracker(silence_s=5.0)
-    t.token(1, True, 0.0)
-    t.token(2, True, 0.0)
-    for k in range(1, 7):  # 2 speaks every second, 1 says nothing
-        t.heard(2, float(k))
-        t.members(float(k))
-    assert t.members(6.0) == {2}
-    t.heard(1, 6.5)
-    assert t.members(6.5) == {1, 2}
