@@ -44,7 +44,7 @@ def child(index: int, args: argparse.Namespace, cred: str | None, life_s: float)
     endpoint = f"{'tcp' if cred is None else 'tls'}/127.0.0.1:{args.port}"
     cfg = ZenohConfig(mode=mode, listen=(endpoint,) if index == 0 else (),
                       connect=() if index == 0 else (endpoint,), identity=ident,
-                      runtime="one_thread")
+                      runtime="one_thread", user_config_path=args.zenoh_config)
     with ZenohBus(cfg) as bus:
         deadline = time.monotonic() + life_s
         if hub:
@@ -111,6 +111,8 @@ def main() -> int:
     p.add_argument("--settle-s", type=float, default=30.0)
     p.add_argument("--window-s", type=float, default=20.0)
     p.add_argument("--port", type=int, default=47311)
+    p.add_argument("--zenoh-config", default=None, metavar="JSON5",
+                   help="a Zenoh config for every process (e.g. a longer lease)")
     args, rest = p.parse_known_args()
     if rest and rest[-1].startswith("--child="):
         index, cred, life_s = rest[-1].split("=", 1)[1].split(",")
