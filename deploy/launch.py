@@ -165,7 +165,7 @@ class Launch:
             self._raise_if_dead_for_good(self.watchdog)
 
     def _raise_if_dead_for_good(self, dog: Watchdog) -> None:
-        dead = [c for c in self.sup.dead() if c.name not in dog.pending]
+        dead = dog.dead_for_good()
         if dead:
             c = dead[0]
             raise DeployError(

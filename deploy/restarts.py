@@ -113,6 +113,11 @@ class Watchdog:
                 self._restart(name, now)
         self._can_go_on()
 
+    def dead_for_good(self) -> list[Child]:
+        """Children whose death this watchdog recorded and will not undo: one that died
+        since the last check() is not among them (it may yet be restarted)."""
+        return [c for c in self.sup.dead() if self.handled(c) and c.name not in self.pending]
+
     def rebase(self, t0_s: float, policy: RestartPolicy,
                before_restart: Callable[[Child], None]) -> None:
         """Go on from the start-up watchdog into the run: events stay, restamped from the

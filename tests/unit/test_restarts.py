@@ -116,3 +116,26 @@ def test_rebase_restamps_start_up_events_from_the_start_and_keeps_restart_counts
         assert victim.restarts == 1 and dog.policy.max_restarts == 3 and dog.t0_s == start
     finally:
         sup.stop_all(grace_s=1.0)
+
+
+def test_a_death_not_yet_checked_is_not_dead_for_good(tmp_path: Path) -> None:
+    """The launcher ends a launch on a process dead for good; one that died after the
+    watchdog's last look may still be restarted (a start-up race that ended a ring64
+    launch though the policy would have restarted the process)."""
+    sup = Supervisor(tmp_path)
+    try:
+        sup.start("follower-0", "tests.child_proc", ["sleep", "30"])
+        sup.start("follower-1", "tests.child_proc", ["sleep", "30"])
+        dog = Watchdog(sup, RestartPolicy(backoff_s=5.0), time.monotonic())
+        victim = sup.start("follower-2", "tests.child_proc", ["exit", "2"])
+        deadline = time.monotonic() + 10.0
+        while victim.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert victim.poll() == 2 and dog.dead_for_good() == []  # dead, not yet seen
+        dog.check()
+        assert dog.pending and dog.dead_for_good() == []  # seen: a restart is due
+        never = Watchdog(sup, RestartPolicy("never"), time.monotonic())
+        never.check()
+        assert never.dead_for_good() == [victim]
+    finally:
+        sup.stop_all(grace_s=1.0)
