@@ -46,7 +46,6 @@ class TokenSet:
     expected: frozenset[int] = frozenset()  # the scenario's followers
     tokens: set[int] = field(default_factory=set)
     refresh_after_s: float = REFRESH_S
-    _missing_since_s: float | None = None
     _next_refresh_s: float | None = None
 
     def token(self, index: int, alive: bool) -> None:
