@@ -23,6 +23,7 @@ from agents.phases import mark
 from agents.scenario import Scenario
 from agents.scenario_file import load_scenario
 from transport.bus import Bus
+from transport.clock_sync import parse_clock_hosts
 from transport.codec import encode
 from transport.credentials import Identity
 from transport.keys import SwarmKeys
@@ -66,9 +67,13 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--mode", choices=("peer", "client"), default="peer",
                         help="Zenoh mode: peer (one host) or client of this host's router")
-    parser.add_argument("--clock-id", default=None, metavar="SENDER",
-                        help="estimate peers' clock offsets, probing as SENDER (e.g. "
-                        "follower-0): for swarms over hosts whose clocks differ")
+    parser.add_argument("--clock-host", type=int, default=None, metavar="K",
+                        help="this process runs on host K of a swarm over hosts whose "
+                        "clocks differ: map other hosts' stamps by their offsets, learnt "
+                        "from the routers' clock probes (transport.clock_sync)")
+    parser.add_argument("--clock-hosts", default="", metavar="S,S;S,..",
+                        help="with --clock-host: every host's sender ids (e.g. "
+                        "follower-0), hosts separated by ';' in router order")
     parser.add_argument("--log-level", default="INFO")
     add_network_arguments(parser)
 
@@ -98,8 +103,9 @@ def open_bus(args: argparse.Namespace, arrival_stamps: bool = False) -> Bus:
     )
     bus = ZenohBus(cfg)
     mark("bus_open")  # the session is up: its first link (TLS handshake included) is made
-    if getattr(args, "clock_id", None):
-        bus.start_clock_sync(SwarmKeys(args.swarm), args.clock_id)
+    if getattr(args, "clock_host", None) is not None:
+        bus.start_clock_sync(SwarmKeys(args.swarm), f"router-{args.clock_host}",
+                             clock_of=parse_clock_hosts(args.clock_hosts))
     return bus
 
 

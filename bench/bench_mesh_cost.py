@@ -1,6 +1,7 @@
 """What a Zenoh topology costs before any data flows: K processes, CPU each.
 
-    python bench/bench_mesh_cost.py --processes 64 [--insecure] [--star] [--status-hz 1]
+    python bench/bench_mesh_cost.py --processes 64 [--insecure] [--star] [--status-hz 1] \
+        [--clock per-process|per-host]
 
 Every process opens a Zenoh session as enclose's followers do (peer, multicast scouting
 off, 127.0.0.1, the one-thread runtime, mTLS and the swarm's ACL unless --insecure),
@@ -8,7 +9,11 @@ declares a liveliness token, subscribes to every follower's status and, with
 --status-hz > 0, publishes a 2-KB status (a follower's counters) at that rate: enclose's
 membership heartbeat, O(K^2) messages over the mesh.  Peers find each other through the
 first one and gossip into a full mesh (K (K - 1) / 2 links); `--star` makes process 0 a
-router and the rest its clients (one link each).  After a settling time the script reads
+router and the rest its clients (one link each).  `--clock per-host` runs enclose's
+clock exchange over hosts (transport.clock_sync: the router probes, every client
+listens; needs --star), `--clock per-process` the same probes between every pair of
+processes, as before the eighth session (needs --insecure: the ACL now gives clock keys
+to routers only).  After a settling time the script reads
 each process's CPU from /proc over a window and prints the mean and the worst, and the
 machine's busy share.  Nothing else should run meanwhile.
 """
@@ -47,6 +52,10 @@ def child(index: int, args: argparse.Namespace, cred: str | None, life_s: float)
                       runtime="one_thread", user_config_path=args.zenoh_config)
     with ZenohBus(cfg) as bus:
         deadline = time.monotonic() + life_s
+        if args.clock == "per-process":
+            bus.start_clock_sync(KEYS, name, probe=True)
+        elif args.clock == "per-host":
+            bus.start_clock_sync(KEYS, "router-0", probe=hub)
         if hub:
             while time.monotonic() < deadline:
                 time.sleep(0.5)
@@ -113,7 +122,13 @@ def main() -> int:
     p.add_argument("--port", type=int, default=47311)
     p.add_argument("--zenoh-config", default=None, metavar="JSON5",
                    help="a Zenoh config for every process (e.g. a longer lease)")
+    p.add_argument("--clock", choices=("none", "per-process", "per-host"), default="none",
+                   help="clock probes: none, between every pair, or the routers' (--star)")
     args, rest = p.parse_known_args()
+    if args.clock == "per-host" and not args.star:
+        p.error("--clock per-host needs --star (a router to probe)")
+    if args.clock == "per-process" and not args.insecure:
+        p.error("--clock per-process needs --insecure (clock keys are the routers' now)")
     if rest and rest[-1].startswith("--child="):
         index, cred, life_s = rest[-1].split("=", 1)[1].split(",")
         child(int(index), args, cred or None, float(life_s))
@@ -122,6 +137,7 @@ def main() -> int:
     what = "star (router + clients)" if args.star else "full mesh of peers"
     print(json.dumps({"processes": args.processes, "topology": what,
                       "security": not args.insecure, "status_hz": args.status_hz,
+                      "clock": args.clock,
                       **{k: round(v, 2) for k, v in r.items()}}))
     return 0
 

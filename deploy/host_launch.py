@@ -1,9 +1,10 @@
 """The part of a swarm that lives on some hosts of a deployment (deploy.deployment).
 
 `Launch` (one host, peers on loopback) is the special case; here every host runs a Zenoh
-router (`deploy.router`), the host's processes are its clients (`--mode client`), and
-every process estimates its peers' clock offsets (`--clock-id`, transport.clock_sync),
-since hosts do not share a clock.  The host of the `launcher` also waits for the whole
+router (`deploy.router`), the host's processes are its clients (`--mode client`), and,
+since hosts do not share a clock, the routers probe each other's clocks and every process
+maps the other hosts' stamps by what it hears of those probes (`--clock-host`,
+transport.clock_sync).  The host of the `launcher` also waits for the whole
 swarm, sends the start and stop words and reports; other hosts run their processes
 until those stop (the stop word) or this launcher is stopped.
 
@@ -25,6 +26,7 @@ from deploy.deployment import Deployment
 from deploy.launch import Launch
 from deploy.run_secrets import RunSecrets
 from transport.clock import clock_env
+from transport.clock_sync import format_clock_hosts, parse_clock_hosts
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
@@ -68,10 +70,17 @@ class HostLaunch(Launch):
 
     def client_args(self, name: str) -> list[str]:
         k = self.dep.host_of(name)
-        role, _, idx = name.rpartition("-")
-        sender = f"{role}-{idx}" if role else f"{name}-0"
+        clock = ["--clock-host", str(k), "--clock-hosts", self.clock_hosts()]
         return [*self.common(), "--mode", "client", "--connect", self.router(k),
-                "--clock-id", sender, *self.secrets.args_for(name)]
+                *(clock if self.clocks_differ() else []), *self.secrets.args_for(name)]
+
+    def clocks_differ(self) -> bool:
+        """More than one host: more than one clock (one host's processes share it)."""
+        return len(self.dep.hosts) > 1
+
+    def clock_hosts(self) -> str:
+        """Every host's sender ids (`--clock-hosts`): whose stamps run on which clock."""
+        return format_clock_hosts([[_sender(p) for p in h.processes] for h in self.dep.hosts])
 
     def router(self, k: int) -> str:
         return self.dep.router_endpoint(k, secure=not self.args.insecure)
@@ -80,6 +89,8 @@ class HostLaunch(Launch):
         for k in self.local:
             argv = [*self.dep.router_argv(k, secure=not self.args.insecure),
                     "--swarm", self.keys.swarm, *self.secrets.args_for(f"router-{k}")]
+            if self.clocks_differ():
+                argv += ["--clock-id", f"router-{k}"]
             self.sup.start(f"router-{k}", "deploy.router", argv, prefix=self.prefix(k))
         mav = ["--mav-local-base", str(self.adapter_base),
                "--mav-vehicle-base", str(self.vehicle_base)]
@@ -109,7 +120,9 @@ class HostLaunch(Launch):
             mode="client", connect=(self.router(k),), user_config_path=self.args.zenoh_config,
             identity=self.secrets.identity("launcher"),
             runtime=self.scenario.network.zenoh_runtime))
-        bus.start_clock_sync(self.keys, "launcher-0")
+        if self.clocks_differ():
+            bus.start_clock_sync(self.keys, f"router-{k}",
+                                 clock_of=parse_clock_hosts(self.clock_hosts()))
         return bus
 
     def expected_tokens(self) -> set[str]:
@@ -136,6 +149,11 @@ class HostLaunch(Launch):
                         for h in self.dep.hosts}
         out["inter_host_delay_ms"] = self.dep.inter_host_delay_ms
         return out
+
+
+def _sender(name: str) -> str:
+    """The sender id process `name` stamps its messages with (`sim` -> `sim-0`)."""
+    return name if name.rpartition("-")[2].isdigit() else f"{name}-0"
 
 
 def _source(scenario: str) -> str:

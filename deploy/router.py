@@ -7,7 +7,8 @@ There is no `zenohd` package on PyPI or Debian here; a zenoh-python session in r
 mode is a router (notes/multihost.md).  Multicast scouting stays off and it listens only
 on the endpoints given.  With credentials it speaks mTLS with the swarm's CA and enforces
 the swarm's ACL on its ingress: a client may put only its own keys (transport.access);
-other routers relay everyone's.  Runs until SIGTERM/SIGINT.
+other routers relay everyone's.  With `--clock-id router-<k>` it probes the other routers'
+clocks for its host's processes (transport.clock_sync).  Runs until SIGTERM/SIGINT.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from collections.abc import Sequence
 from agents.errors import EncloseError
 from agents.process import stop_on_signals
 from transport.credentials import Identity
+from transport.keys import SwarmKeys
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
@@ -34,8 +36,12 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                         help="another host's router (repeatable)")
     parser.add_argument("--credentials", default=None, metavar="IDENTITY_JSON")
-    parser.add_argument("--swarm", default="enclose", help="swarm name (for the logs)")
+    parser.add_argument("--swarm", default="enclose",
+                        help="swarm name (its key space, and the logs)")
     parser.add_argument("--zenoh-config", default=None, metavar="JSON5")
+    parser.add_argument("--clock-id", default=None, metavar="router-K",
+                        help="probe the other routers' clocks as this host's clock "
+                        "(transport.clock_sync): for hosts whose clocks differ")
     return parser.parse_args(argv)
 
 
@@ -51,6 +57,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         with stop_on_signals() as stop, ZenohBus(cfg) as bus:
             log.info("router %s of swarm %s: listen %s, connect %s", bus.zid, args.swarm,
                      args.listen, args.connect)
+            if args.clock_id is not None:
+                bus.start_clock_sync(SwarmKeys(args.swarm), args.clock_id, probe=True)
             idle = threading.Event()
             while not stop.raised:
                 idle.wait(0.2)

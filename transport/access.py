@@ -40,7 +40,7 @@ def own_keys(keys: SwarmKeys, name: str, n_followers: int) -> list[str]:
         role, i = name, 0
     else:
         i = int(idx)
-    out = [keys.status(role, i), keys.alive(role, i), keys.clock(role, i)]
+    out = [keys.status(role, i), keys.alive(role, i)]
     if role == "follower":
         out += [keys.follower_state(i), keys.follower_estimate(i)]
     elif role == "sim":

@@ -1,13 +1,25 @@
-"""The clock exchange of one process: probes out, probes in, offsets into a ClockBook.
+"""The clock exchange of a swarm over hosts: one offset per other host, not per process.
 
-A small thread (not the process loop: the loop may run at 10-50 Hz or block in start-up,
-and a probe's receive time must be taken when it arrives, not a tick later) polls the
-probe subscription every POLL_S and publishes a probe every PERIOD_S on
-`<swarm>/clock/<role>/<index>`.  Each probe echoes the newest probe heard from every peer
-(its stamp, our receive time), so every pair of processes gets a four-time NTP sample from
-each probe (transport.peer_clock).  Only the bus interface is used: publisher `put` and
-subscription `drain` are safe from another thread in Zenoh; nothing else is shared but
-the book.
+A clock belongs to a host: every process on it reads the same one.  So only the hosts'
+routers (deploy.router) probe each other: each publishes a probe every PERIOD_S on
+`<swarm>/clock/router/<k>` that echoes the newest probe heard from every other router (its
+stamp, our receive time), and each pair of routers gets NTP's four times from every probe
+(transport.peer_clock).  Every other process only listens to the routers' probes
+(`ClockListener`): it shares its own router's clock, so a probe from router b echoing our
+router's probe is a four-time sample of host b's clock against ours (t1 our router's
+send, t2 b's receive, t3 b's send, t4 our receive; the delay includes b -> us, not b ->
+our router).  A process's book then maps each sender to its host's router
+(`ClockBook.set_hosts`).  Cost: k routers' probes to every process (4k a second), where
+probes between all n processes cost 4n^2 (18 000 deliveries a second at n = 69, more than
+the ring's data: a 64-follower swarm over one router starved).
+
+Receive times are taken as a probe arrives, on Zenoh's receiving thread
+(`stamp_arrival`), not when it is read: a small thread (not the process loop, which may
+block in start-up) reads the probes and publishes ours once every PERIOD_S, one wake-up
+where polling every 10 ms for a prompt stamp cost each process 100 (6 900 a second at
+n = 69).  Only the bus interface is
+used: publisher `put` and subscription `drain` are safe from another thread in Zenoh;
+nothing else is shared but the book.
 """
 
 from __future__ import annotations
@@ -16,7 +28,7 @@ import logging
 import threading
 from collections.abc import Callable
 
-from agents.errors import CodecError, TransportError
+from agents.errors import CodecError, ConfigError, TransportError
 from transport.bus import Bus
 from transport.codec import decode, encode
 from transport.keys import SwarmKeys, parse_key
@@ -25,9 +37,24 @@ from transport.peer_clock import PROCESS_BOOK, ClockBook, exchange_sample
 
 log = logging.getLogger(__name__)
 PERIOD_S = 0.25
-POLL_S = 0.01  # a probe waits at most this long to be stamped; the least-delay filter
-# keeps the samples that waited least (2 ms polls cost ~500 wake-ups/s per process)
 QUEUE = 256
+
+
+def format_clock_hosts(hosts: list[list[str]]) -> str:
+    """The `--clock-hosts` argument: each host's sender ids, hosts in router order."""
+    return ";".join(",".join(senders) for senders in hosts)
+
+
+def parse_clock_hosts(spec: str) -> dict[str, str]:
+    """Sender id -> its host's router (`router-<k>`, k its position in `spec`)."""
+    out: dict[str, str] = {}
+    for k, part in enumerate(spec.split(";")):
+        for sender in filter(None, part.split(",")):
+            if sender in out or sender.rpartition("-")[1] != "-":
+                raise ConfigError("--clock-hosts", f"sender {sender!r} is twice in the "
+                                  "list or not <role>-<index>")
+            out[sender] = f"router-{k}"
+    return out
 
 
 class ClockExchange:
@@ -63,34 +90,65 @@ class ClockExchange:
         self.heard.pop(peer, None)
 
 
-class ClockSync:
-    """Runs a ClockExchange on a bus in a thread; `close()` before the bus closes."""
+class ClockListener:
+    """A process on the host of router `own_clock_id`: samples of the other routers'
+    clocks against ours, from their probes' echoes of our router (injected clock)."""
 
-    def __init__(self, bus: Bus, keys: SwarmKeys, sender_id: str,
-                 book: ClockBook = PROCESS_BOOK, period_s: float = PERIOD_S) -> None:
-        role, _, index = sender_id.rpartition("-")
-        self.exchange = ClockExchange(sender_id, bus.now_s, book)
+    def __init__(self, own_clock_id: str, book: ClockBook) -> None:
+        self.own_clock_id, self.book = own_clock_id, book
+        self.rejected = 0
+
+    def receive(self, probe: ClockProbe, t4_s: float) -> None:
+        peer = probe.header.sender_id
+        if peer == self.own_clock_id:
+            return  # our own host's clock
+        self.book.restart(peer, probe.epoch_s)
+        for echoed, t1, t2 in probe.echoes:
+            if echoed != self.own_clock_id:
+                continue
+            sample = exchange_sample(t1, t2, probe.header.stamp_s, t4_s)
+            if sample is None:
+                self.rejected += 1
+            else:
+                self.book.add(peer, probe.epoch_s, sample)
+
+
+class ClockSync:
+    """Runs the clock exchange on a bus in a thread; `close()` before the bus closes.
+
+    `clock_id` is this host's router (`router-<k>`); `probe` is True on the router itself
+    (it publishes probes), False on every other process of its host (it listens);
+    `clock_of` maps every sender to its host's router."""
+
+    def __init__(self, bus: Bus, keys: SwarmKeys, clock_id: str, probe: bool,
+                 clock_of: dict[str, str] | None = None, book: ClockBook = PROCESS_BOOK,
+                 period_s: float = PERIOD_S) -> None:
+        role, _, index = clock_id.rpartition("-")
+        if not role or not index.isdigit():
+            raise ConfigError("clock_id", f"{clock_id!r} is not router-<k>")
+        if clock_of is not None:
+            book.set_hosts(clock_of)
+        self.exchange = ClockExchange(clock_id, bus.now_s, book)
+        self.listener = None if probe else ClockListener(clock_id, book)
         self.period_s = period_s
         self._bus = bus
-        self._out = bus.declare_publisher(keys.clock(role, int(index)))
-        self._sub = bus.subscribe(keys.all_clock(), QUEUE)
+        self._out = bus.declare_publisher(keys.clock(role, int(index))) if probe else None
+        self._sub = bus.subscribe(keys.role_clocks(role), QUEUE, stamp_arrival=True)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="clock-sync", daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
-        next_s = 0.0
         while not self._stop.is_set():
             try:
                 for rec in self._sub.drain():
-                    self._receive(rec.key, rec.payload, rec.recv_stamp_s)
-                now = self._bus.now_s()
-                if now >= next_s:
-                    next_s = now + self.period_s
+                    t4_s = rec.recv_stamp_s if rec.arrival_s is None else rec.arrival_s
+                    self._receive(rec.key, rec.payload, t4_s)
+                if self._out is not None:
                     self._out.put(encode(self.exchange.probe()))
             except TransportError as exc:  # closing, or a link down: try again next poll
                 log.debug("clock sync: %s", exc)
-            self._stop.wait(POLL_S)
+            self._stop.wait(self.period_s)
 
     def _receive(self, key: str, payload: bytes, t4_s: float) -> None:
         try:
@@ -100,8 +158,12 @@ class ClockSync:
             return
         info = parse_key(key)
         owner = None if info is None else f"{info.role}-{info.index}"
-        if isinstance(msg, ClockProbe) and msg.header.sender_id == owner:
+        if not isinstance(msg, ClockProbe) or msg.header.sender_id != owner:
+            return
+        if self.listener is None:
             self.exchange.receive(msg, t4_s)
+        else:
+            self.listener.receive(msg, t4_s)
 
     def close(self) -> None:
         self._stop.set()

@@ -289,11 +289,13 @@ class ImpairedBus(ClosingContext):
     def publish(self, key: str, payload: bytes) -> None:
         self.inner.publish(key, payload)
 
-    def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY) -> ImpairedSubscription:
+    def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY,
+                  stamp_arrival: bool = False) -> ImpairedSubscription:
         # What the impairment holds back is in flight, not queued at the receiver: a small
         # receive queue (agents.follower_node.PEER_QUEUE) must not cap the emulated delay.
         held = max(capacity, DEFAULT_CAPACITY)
-        return ImpairedSubscription(self, self.inner.subscribe(key_expr, capacity), held)
+        inner = self.inner.subscribe(key_expr, capacity, stamp_arrival)
+        return ImpairedSubscription(self, inner, held)
 
     def declare_token(self, key: str) -> Token:
         return self.inner.declare_token(key)

@@ -86,8 +86,9 @@ class SwarmKeys:
         """Clock probes of process (role, i) (transport.clock_sync)."""
         return f"{self.prefix}/clock/{validate_name(role, 'role')}/{_index(i, 'index')}"
 
-    def all_clock(self) -> str:
-        return f"{self.prefix}/clock/**"
+    def role_clocks(self, role: str) -> str:
+        """Clock probes of every process of `role` (the hosts' routers probe each other)."""
+        return f"{self.prefix}/clock/{validate_name(role, 'role')}/*"
 
     def all_follower_states(self) -> str:
         return f"{self.prefix}/follower/*/state"

@@ -169,7 +169,9 @@ class MemoryBus(BusBase):
         self._check_open()
         return MemoryPublisher(self, key, congestion)
 
-    def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY) -> MemorySubscription:
+    def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY,
+                  stamp_arrival: bool = False) -> MemorySubscription:
+        # Delivery is immediate here: a sample arrives when drained (arrival_s None).
         self._check_open()
         sub = MemorySubscription(self, key_expr, capacity)
         with self.hub.lock:

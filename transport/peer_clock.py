@@ -21,9 +21,11 @@ and is pushed forward by any faster clock it hears), not an offset estimate; it 
 with the host's system clock, not the process clock the data are stamped with, and a
 one-way stamp cannot separate offset from delay.
 
-`ClockBook` holds one estimate per sender id; `Decoder`s map every stamp of every message
+`ClockBook` holds one estimate per clock; `Decoder`s map every stamp of every message
 from its sender's clock onto ours (`to_local`) before anything checks or ages it.  A
-sender without an estimate is taken to share our clock (one host: nothing changes).
+clock is a host's, not a process's: the book maps each sender to its host's clock
+(`set_hosts`; transport.clock_sync estimates one offset per other host).  A sender without
+an estimate is taken to share our clock (one host: nothing changes).
 """
 
 from __future__ import annotations
@@ -132,12 +134,19 @@ _STAMP_FIELDS: dict[type, tuple[str, ...]] = {
 
 
 class ClockBook:
-    """Offsets of every peer heard (by sender id); written by one clock-sync thread,
-    read by the process loop (a float read is atomic)."""
+    """Offsets of every clock heard (by the id of the process that probes it: one per
+    host); written by one clock-sync thread, read by the process loop (a float read is
+    atomic).  `clock_of` maps a sender to the clock it stamps with (its host's)."""
 
     def __init__(self) -> None:
         self.peers: dict[str, PeerClock] = {}
+        self.clock_of: dict[str, str] = {}
         self._lock = threading.Lock()
+
+    def set_hosts(self, clock_of: dict[str, str]) -> None:
+        """Sender id -> the id of the clock it stamps with (its host's router); senders
+        on our own host map to our own clock, which is never in `peers`."""
+        self.clock_of = dict(clock_of)
 
     def add(self, sender_id: str, epoch_s: float, sample: ClockSample) -> None:
         with self._lock:
@@ -154,7 +163,7 @@ class ClockBook:
                 peer.restart(epoch_s)
 
     def offset_s(self, sender_id: str) -> float | None:
-        peer = self.peers.get(sender_id)
+        peer = self.peers.get(self.clock_of.get(sender_id, sender_id))
         return None if peer is None else peer.offset_s
 
     def to_local(self, msg: Message) -> Message:

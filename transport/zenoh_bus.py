@@ -47,19 +47,21 @@ def _received(sample: zenoh.Sample, now_s: float, arrival_s: float | None) -> Re
 
 
 class ZenohSubscription:
-    """A ring of the newest `capacity` samples.  With arrival stamps (ZenohConfig), a
-    callback stamps each sample on its way in and only appends to a bounded deque.  It
-    runs on Zenoh's receiving thread (`indirect=False`), where the ring is filled too: the
-    default hands every sample to a Python thread of its own first, a wake-up the ring's
-    path does not have, which the latency would then include."""
+    """A ring of the newest `capacity` samples.  With arrival stamps (ZenohConfig, or
+    this subscription's `stamp_arrival`), a callback stamps each sample on its way in and
+    only appends to a bounded deque.  It runs on Zenoh's receiving thread
+    (`indirect=False`), where the ring is filled too: the default hands every sample to a
+    Python thread of its own first, a wake-up the ring's path does not have, which the
+    latency would then include."""
 
-    def __init__(self, bus: ZenohBus, key_expr: str, capacity: int) -> None:
+    def __init__(self, bus: ZenohBus, key_expr: str, capacity: int,
+                 stamp_arrival: bool = False) -> None:
         self.key_expr = key_expr
         self._bus = bus
         self._arrived: deque[tuple[float, zenoh.Sample]] | None = None
         self._ring: zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]] | None = None
         self._sub: zenoh.Subscriber[None] | zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]
-        if bus.cfg.arrival_stamps:
+        if bus.cfg.arrival_stamps or stamp_arrival:
             arrived = self._arrived = deque(maxlen=capacity)
             clock = bus.now_s
 
@@ -208,9 +210,10 @@ class ZenohBus(BusBase):
         self._check_open()
         return self._own(ZenohPublisher(self, key, congestion))
 
-    def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY) -> ZenohSubscription:
+    def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY,
+                  stamp_arrival: bool = False) -> ZenohSubscription:
         self._check_open()
-        return self._own(ZenohSubscription(self, key_expr, capacity))
+        return self._own(ZenohSubscription(self, key_expr, capacity, stamp_arrival))
 
     def declare_token(self, key: str) -> ZenohToken:
         self._check_open()
@@ -224,10 +227,12 @@ class ZenohBus(BusBase):
         """Zenoh ids of the peers this session is linked to right now."""
         return [str(z) for z in self.session.info.peers_zid()]
 
-    def start_clock_sync(self, keys: SwarmKeys, sender_id: str) -> ClockSync:
-        """Estimate peers' clock offsets from here on (transport.clock_sync)."""
+    def start_clock_sync(self, keys: SwarmKeys, clock_id: str, probe: bool = False,
+                         clock_of: dict[str, str] | None = None) -> ClockSync:
+        """Estimate the other hosts' clock offsets from here on (transport.clock_sync):
+        `clock_id` is this host's router, `probe` True on the router itself."""
         if self.clock_sync is None:
-            self.clock_sync = ClockSync(self, keys, sender_id)
+            self.clock_sync = ClockSync(self, keys, clock_id, probe, clock_of)
         return self.clock_sync
 
     def close(self) -> None:

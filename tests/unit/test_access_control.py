@@ -19,15 +19,16 @@ KEYS = SwarmKeys("acl")
 def test_each_process_owns_only_its_keys() -> None:
     assert set(own_keys(KEYS, "follower-2", 4)) == {
         KEYS.follower_state(2), KEYS.follower_estimate(2), KEYS.status("follower", 2),
-        KEYS.alive("follower", 2), KEYS.clock("follower", 2)}
+        KEYS.alive("follower", 2)}
     sim = own_keys(KEYS, "sim", 4)
     assert KEYS.truth() in sim and KEYS.sensor_targets(3) in sim and KEYS.control() not in sim
     assert KEYS.control() in own_keys(KEYS, "launcher", 4)
     assert set(own_keys(KEYS, "recorder", 4)) == {KEYS.status("recorder", 0),
-                                                  KEYS.alive("recorder", 0),
-                                                  KEYS.clock("recorder", 0)}
+                                                  KEYS.alive("recorder", 0)}
     assert set(own_keys(KEYS, "target-1", 4)) == {KEYS.status("target", 1),
-                                                  KEYS.alive("target", 1), KEYS.clock("target", 1)}
+                                                  KEYS.alive("target", 1)}
+    # Clock probes are the routers' alone (transport.clock_sync): no process may forge one.
+    assert not any("/clock/" in k for k in own_keys(KEYS, "follower-2", 4))
 
 
 def test_routers_relay_every_swarm_key_but_are_named_apart() -> None:

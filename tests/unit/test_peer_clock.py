@@ -1,6 +1,7 @@
-"""Per-peer clock offsets from the probe exchange, on injected clocks (transport.peer_clock,
-transport.clock_sync.ClockExchange, transport.clock): offsets of seconds, 100 ppm drift,
-delays with jitter, loss, a peer restarting, a clock step."""
+"""Per-host clock offsets from the routers' probe exchange, on injected clocks
+(transport.peer_clock, transport.clock_sync.ClockExchange and ClockListener,
+transport.clock): offsets of seconds, 100 ppm drift, delays with jitter, loss, a router
+restarting, a clock step, and a process that only listens to the routers."""
 
 from __future__ import annotations
 
@@ -14,7 +15,12 @@ from agents.errors import ConfigError
 from transport.bus import Received
 from transport.checks import DEFAULT_LIMITS
 from transport.clock import SkewedClock, clock_env, process_clock
-from transport.clock_sync import ClockExchange
+from transport.clock_sync import (
+    ClockExchange,
+    ClockListener,
+    format_clock_hosts,
+    parse_clock_hosts,
+)
 from transport.codec import decode, encode
 from transport.decoder import Decoder
 from transport.messages import ClockProbe, FollowerState, Header, RunControl
@@ -64,6 +70,8 @@ class Net:
     def __init__(self, hosts: list[Host], base_s: float = 0.010, jitter_s: float = 0.003,
                  loss: float = 0.2, seed: int = 1) -> None:
         self.hosts = {h.name: h for h in hosts}
+        # Processes that only listen: name -> (their host, listener); same clock as the host.
+        self.listeners: dict[str, tuple[Host, ClockListener]] = {}
         self.base_s, self.jitter_s, self.loss = base_s, jitter_s, loss
         self.rng = random.Random(seed)
         self.events: list[tuple[float, int, str, str, bytes]] = []
@@ -79,16 +87,21 @@ class Net:
     def run_until(self, t_end: float) -> None:
         while self.events and self.events[0][0] <= t_end:
             t, _, kind, name, payload = heapq.heappop(self.events)
-            host = self.hosts[name]
+            host = self.hosts.get(name) or self.listeners[name][0]
             host.now = t
             assert host.ex is not None
             if kind == "send":
                 wire = encode(host.ex.probe())
-                for other in self.hosts.values():
-                    if other is not host and self.rng.random() >= self.loss:
+                for other in [*self.hosts, *self.listeners]:
+                    if other != name and self.rng.random() >= self.loss:
                         delay = self.base_s + self.rng.expovariate(1.0 / self.jitter_s)
-                        self._push(t + delay, "recv", other.name, wire)
+                        self._push(t + delay, "recv", other, wire)
                 self._push(t + 0.25, "send", name, b"")
+            elif name in self.listeners:
+                on, listener = self.listeners[name]
+                probe = decode(payload)
+                assert isinstance(probe, ClockProbe)
+                listener.receive(probe, on.local(t))
             else:
                 probe = decode(payload)
                 assert isinstance(probe, ClockProbe)
@@ -142,6 +155,44 @@ def test_a_clock_step_without_restart_is_relocked() -> None:
     net.hosts["follower-1"].offset_s += 0.5  # e.g. NTP stepped the host clock
     net.run_until(12.5)
     assert abs(net.error_s("follower-0", "follower-1", 12.5)) < 0.002
+
+
+def test_a_listening_process_learns_the_other_hosts_from_the_routers_probes() -> None:
+    routers = [Host("router-0", -0.8, -100.0), Host("router-1", 0.0, 0.0),
+               Host("router-2", 1.3, 100.0)]
+    net = Net(routers, jitter_s=0.005, seed=3)
+    book = ClockBook()
+    book.set_hosts(parse_clock_hosts("sim-0,launcher-0;follower-0;follower-1,follower-2"))
+    listener = ClockListener("router-0", book)
+    net.listeners["follower-9"] = (routers[0], listener)
+    for t in (3.0, 60.0):
+        net.run_until(t)
+        for peer in ("router-1", "router-2"):
+            truth = net.hosts[peer].local(t) - routers[0].local(t)
+            est = book.offset_s(peer)
+            assert est is not None and abs(est - truth) < 0.002, (peer, t)
+    assert "router-0" not in book.peers  # our own host's clock: never estimated
+    assert book.offset_s("sim-0") is None  # a sender on our host: same clock
+    assert book.offset_s("follower-2") == book.offset_s("router-2")
+    ahead_s = routers[2].local(60.0) - routers[0].local(60.0)  # 2.1 s and 12 ms of drift
+    moved = book.to_local(_state(101.3))  # follower-2, on host 2
+    assert abs(moved.header.stamp_s - (101.3 - ahead_s)) < 0.002
+    # A restarted router is re-learned by the listener too.
+    routers[2].offset_s, routers[2].now = 4.0, 60.0
+    routers[2].start(60.0)
+    net.run_until(61.5)
+    truth = routers[2].local(61.5) - routers[0].local(61.5)
+    assert abs((book.offset_s("follower-1") or 0.0) - truth) < 0.002
+
+
+def test_clock_hosts_argument_round_trips_and_refuses_a_sender_twice() -> None:
+    spec = format_clock_hosts([["launcher-0", "sim-0"], [], ["follower-0"]])
+    assert parse_clock_hosts(spec) == {"launcher-0": "router-0", "sim-0": "router-0",
+                                       "follower-0": "router-2"}
+    with pytest.raises(ConfigError, match="clock-hosts"):
+        parse_clock_hosts("follower-0;follower-0")
+    with pytest.raises(ConfigError, match="clock-hosts"):
+        parse_clock_hosts("sim")
 
 
 def test_peer_clock_prefers_the_least_delayed_sample_of_its_window() -> None:
