@@ -83,6 +83,7 @@ class MavlinkAdapter:
         self._state = NO_STATE
         self._armed, self._mode = False, "UNKNOWN"
         self._last_rx_s = -math.inf
+        self.heard_s = -math.inf  # our clock when the vehicle last sent anything
         self._last_hb_tx_s = -math.inf
         self._link_reported_ok = False
         self.vclock = VehicleClock(f"vehicle {cfg.target_sysid or '?'}")
@@ -120,6 +121,11 @@ class MavlinkAdapter:
     @property
     def state(self) -> VehicleState:
         return self._state
+
+    @property
+    def telemetry_seen(self) -> bool:
+        """A position ever arrived: from then on `state.link_ok` says if it is heard."""
+        return self._last_rx_s > -math.inf
 
     def poll(self) -> VehicleState:
         """Drain the socket, keep our heartbeat going, update the link flag; never blocks."""
@@ -189,11 +195,13 @@ class MavlinkAdapter:
         src = msg.get_srcSystem()
         kind = msg.get_type()
         if kind == "HEARTBEAT":
-            self._heartbeat(msg, addr)
+            if self._heartbeat(msg, addr):
+                self.heard_s = now
             return
         if self.sysid is None or src != self.sysid or msg.get_srcComponent() != 1:
             self.counters["ignored_other_system"] += 1
             return
+        self.heard_s = now
         if kind == "LOCAL_POSITION_NED":
             self._local_position(msg, now)
         elif kind == "TIMESYNC":
@@ -221,16 +229,17 @@ class MavlinkAdapter:
         return self.statustexts[len(self.statustexts) - min(self.statustext_count - count,
                                                             len(self.statustexts)):]
 
-    def _heartbeat(self, msg: MAVLinkMessage, addr: Addr) -> None:
+    def _heartbeat(self, msg: MAVLinkMessage, addr: Addr) -> bool:
+        """Apply our vehicle's HEARTBEAT; False if it is somebody else's."""
         flavour = flavour_of_autopilot(msg.autopilot)
         src = msg.get_srcSystem()
         if flavour is None or msg.get_srcComponent() != 1:
-            return  # ground stations, companions, gimbals: not our vehicle
+            return False  # ground stations, companions, gimbals: not our vehicle
         if self.sysid is None:
             self.sysid = src
         if src != self.sysid:
             self.counters["ignored_other_system"] += 1
-            return
+            return False
         if self.flavour is None:
             log.info("vehicle %d is %s at %s:%d", src, flavour, *addr)
         self.flavour = flavour
@@ -238,6 +247,7 @@ class MavlinkAdapter:
         self._armed = bool(msg.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
         self._mode = decode_custom_mode(flavour, msg.custom_mode)
         self._state = replace(self._state, armed=self._armed, mode=self._mode)
+        return True
 
     def _local_position(self, msg: MAVLinkMessage, now: float) -> None:
         x, y, z, vx, vy, vz = msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz

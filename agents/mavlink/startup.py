@@ -3,6 +3,12 @@
 PX4:       arm, NAV_TAKEOFF (param7 = AMSL altitude), stream setpoints, DO_SET_MODE OFFBOARD.
 ArduPilot: DO_SET_MODE GUIDED, arm, NAV_TAKEOFF (param7 = relative altitude), stream setpoints.
 Commands are re-sent when no COMMAND_ACK arrives within `retry_s`, as SDKs do.
+
+A command's timeout, and a mode's or a take-off's, counts only the time the vehicle is
+heard (`HeardClock`): a vehicle whose telemetry stopped has not refused anything, it is
+unheard (its radio dropped, or a starved simulator, as when 64 followers start on 2
+cores and make ~2 100 TLS handshakes: followers gave up on take-off ACKs the simulator
+had not had the CPU to send).  Silence has its own limit, `silent_s` per wait.
 """
 
 from __future__ import annotations
@@ -45,57 +51,97 @@ class StartupTimeouts:
     setpoint_hz: float = 20.0
     altitude_tolerance_m: float = 0.3
     telemetry_hz: float = 50.0
+    silent_s: float = 30.0  # a wait that heard nothing from the vehicle this long fails
     # Streams the agent reads only at start-up (or not at all), asked down as a companion
     # computer does on PX4/ArduPilot; not off: a ground station on the vehicle still sees them.
     slow_telemetry_hz: float = 4.0
 
 
+HEARD_WINDOW_S = 1.5  # before telemetry: any message this recent (1-Hz HEARTBEATs)
+
+
+class HeardClock:
+    """Seconds during which the vehicle was heard, since creation: its telemetry link up
+    (`link_ok`) once it streams, any message within HEARD_WINDOW_S before; raises
+    MavlinkError once it was unheard for more than `silent_s` in all."""
+
+    def __init__(self, ad: MavlinkAdapter, silent_s: float, what: str) -> None:
+        self.ad, self.silent_limit_s, self.what = ad, silent_s, what
+        self._last_s = ad.clock()
+        self.heard_s = self.silent_s = 0.0
+
+    def __call__(self) -> float:
+        now = self.ad.clock()
+        step, self._last_s = max(0.0, now - self._last_s), now
+        if self._heard(now):
+            self.heard_s += step
+        else:
+            self.silent_s += step
+            if self.silent_s > self.silent_limit_s:
+                raise MavlinkError(f"vehicle {self.ad.sysid} unheard for "
+                                   f"{self.silent_limit_s:.1f} s while waiting for {self.what}")
+        return self.heard_s
+
+    def _heard(self, now: float) -> bool:
+        if self.ad.telemetry_seen:
+            return self.ad.state.link_ok
+        return now - self.ad.heard_s < HEARD_WINDOW_S
+
+
 def wait_until(ad: MavlinkAdapter, ok: Callable[[VehicleState], bool], timeout_s: float,
-               what: str, keepalive_hz: float = 0.0) -> VehicleState:
-    """Poll until ok(state); streams zero-velocity setpoints at keepalive_hz meanwhile."""
-    deadline = ad.clock() + timeout_s
+               what: str, keepalive_hz: float = 0.0,
+               clock: Callable[[], float] | None = None) -> VehicleState:
+    """Poll until ok(state); streams zero-velocity setpoints at keepalive_hz meanwhile.
+
+    `clock` (default: the adapter's) is what the timeout counts: a HeardClock stops while
+    the vehicle is unheard."""
+    elapsed = clock or ad.clock
+    deadline = elapsed() + timeout_s
     next_keepalive = ad.clock()
     while True:
         state = ad.poll()
         if ok(state):
             return state
-        now = ad.clock()
-        if now >= deadline:
+        if elapsed() >= deadline:
             raise MavlinkError(f"timed out after {timeout_s:.1f} s waiting for {what}")
+        now = ad.clock()
         if keepalive_hz > 0.0 and now >= next_keepalive:
             ad.send_velocity_enu(ZERO)
             next_keepalive = now + 1.0 / keepalive_hz
-        wake = min(deadline, next_keepalive) if keepalive_hz > 0.0 else deadline
-        ad.wait_readable(min(wake - now, 0.05))
+        wake = next_keepalive - now if keepalive_hz > 0.0 else 0.05
+        ad.wait_readable(max(0.0, min(wake, 0.05)))
 
 
 def command(ad: MavlinkAdapter, cmd: int, params: tuple[float, ...], t: StartupTimeouts,
             keepalive_hz: float = 0.0) -> None:
     """Send a command until ACCEPTED; raises CommandRejectedError or MavlinkError on timeout.
 
-    No ACK, or TEMPORARILY_REJECTED: re-send every retry_s.  IN_PROGRESS: keep waiting.
+    No ACK, or TEMPORARILY_REJECTED: re-send every retry_s (of real time: a lost
+    datagram is re-sent while unheard too).  IN_PROGRESS: keep waiting.  The timeout,
+    command_s, counts only time the vehicle is heard (HeardClock).
     """
-    deadline = ad.clock() + t.command_s
+    heard = HeardClock(ad, t.silent_s, f"the ACK of command {cmd}")
     attempt = 0
     texts_before = ad.statustext_count
     while True:
         ad.send_command(cmd, params, confirmation=min(attempt, 255))
         attempt += 1
-        retry_at = min(deadline, ad.clock() + t.retry_s)
+        retry_at = ad.clock() + t.retry_s
 
         def settled(_s: VehicleState, retry_at: float = retry_at) -> bool:
             result = ad.acks.get(cmd)
             if result in (ACCEPTED,) or result not in (None, TEMPORARILY_REJECTED, IN_PROGRESS):
                 return True
-            return ad.clock() >= (deadline if result == IN_PROGRESS else retry_at)
+            return heard() >= t.command_s or (result != IN_PROGRESS and ad.clock() >= retry_at)
 
-        wait_until(ad, settled, t.command_s + 1.0, f"ACK of command {cmd}", keepalive_hz)
+        wait_until(ad, settled, t.command_s + 1.0, f"ACK of command {cmd}", keepalive_hz,
+                   heard)
         result = ad.acks.get(cmd)
         if result == ACCEPTED:
             return
         if result not in (None, TEMPORARILY_REJECTED, IN_PROGRESS):
             raise CommandRejectedError(cmd, int(result), _why(ad, texts_before))
-        if ad.clock() >= deadline:
+        if heard() >= t.command_s:
             if result is None:
                 raise MavlinkError(f"no COMMAND_ACK for command {cmd} within {t.command_s:.1f} s")
             raise CommandRejectedError(cmd, result, "(still rejected at timeout) " +
@@ -113,7 +159,7 @@ def set_mode(ad: MavlinkAdapter, name: str, t: StartupTimeouts, keepalive_hz: fl
         raise MavlinkError("flavour unknown: no heartbeat yet")
     command(ad, MAV_CMD_DO_SET_MODE, do_set_mode_params(ad.flavour, name), t, keepalive_hz)
     wait_until(ad, lambda s: s.mode == name, t.command_s, f"mode {name} in HEARTBEAT",
-               keepalive_hz)
+               keepalive_hz, HeardClock(ad, t.silent_s, f"mode {name}"))
 
 
 def _no_mark(phase: str) -> None:
@@ -187,7 +233,8 @@ def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts,
     command(ad, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, math.nan, math.nan, math.nan, alt_param), t)
     mark("takeoff_accepted")
     state = wait_until(ad, lambda s: s.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m,
-                       t.takeoff_s, f"take-off to {altitude_m:.1f} m", t.setpoint_hz)
+                       t.takeoff_s, f"take-off to {altitude_m:.1f} m", t.setpoint_hz,
+                       HeardClock(ad, t.silent_s, "the take-off"))
     mark("at_altitude")
     return state
 
