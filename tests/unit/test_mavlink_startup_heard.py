@@ -80,14 +80,14 @@ def test_a_vehicle_unheard_for_5_s_is_waited_for_not_given_up() -> None:
 
 def test_a_heard_vehicle_that_never_acks_still_fails_after_command_s() -> None:
     v = ScriptedVehicle(quiet_from_s=1.0, quiet_until_s=2.0, answers_at_s=math.inf)
-    with pytest.raises(MavlinkError, match="no COMMAND_ACK for command 22 within 3.0 s"):
+    with pytest.raises(MavlinkError, match=r"no COMMAND_ACK for command 22 within 3\.0 s"):
         command(cast(MavlinkAdapter, v), 22, (0.0,) * 7, T)
     assert v.t == pytest.approx(4.0, abs=0.1)  # 3 s heard + the 1-s gap
 
 
 def test_a_vehicle_that_stays_silent_fails_after_silent_s_naming_what_we_waited_for() -> None:
     v = ScriptedVehicle(quiet_from_s=0.0, quiet_until_s=math.inf, answers_at_s=0.0)
-    with pytest.raises(MavlinkError, match=r"unheard for 20.0 s while waiting for the ACK"):
+    with pytest.raises(MavlinkError, match=r"unheard for 20\.0 s while waiting for the ACK"):
         command(cast(MavlinkAdapter, v), 400, (1.0,), T)
     assert v.t == pytest.approx(20.0, abs=0.1)
 
