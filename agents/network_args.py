@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LOSS_MODELS, ZENOH_RUNTIMES, Scenario
+from agents.scenario import (
+    AGENT_SCHEDS,
+    ESTIMATORS,
+    LINK_PROTOCOLS,
+    LOSS_MODELS,
+    ZENOH_RUNTIMES,
+    Scenario,
+)
 from agents.scenario_checks import check_estimator_order
 from agents.scenario_network import IMPAIRMENT_KEYS, impairment
 
@@ -23,6 +30,9 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--zenoh-runtime", choices=ZENOH_RUNTIMES, default=None,
                    help="split (default): Zenoh's own threads per process; one_thread: all on "
                         "one (less CPU per message, a little more latency: large swarms)")
+    g.add_argument("--agent-sched", choices=AGENT_SCHEDS, default=None,
+                   help="normal (default) | batch: followers, targets and the recorder do not "
+                        "preempt the simulator when they wake (a machine they oversubscribe)")
     g.add_argument("--delay-ms", type=float, default=None, help="added one-way delay per message")
     g.add_argument("--jitter-ms", type=float, default=None, help="std of the added delay")
     g.add_argument("--loss", type=float, default=None, help="fraction of messages lost")
@@ -41,7 +51,8 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
 def network_overrides(args: argparse.Namespace) -> list[str]:
     """The flags given, as argv for a child process."""
     argv: list[str] = []
-    for dest in ("estimator", "estimator_order", "link", "zenoh_runtime", *IMPAIRMENT_KEYS,
+    for dest in ("estimator", "estimator_order", "link", "zenoh_runtime", "agent_sched",
+                 *IMPAIRMENT_KEYS,
                  "impair_seed"):
         value = getattr(args, dest, None)
         if value is not None:
@@ -57,7 +68,7 @@ def apply_network_arguments(scenario: Scenario, args: argparse.Namespace) -> Sce
         default = impairment(given, "command line", net.default)
         links = tuple((s, d, impairment(given, "command line", spec)) for s, d, spec in net.links)
         net = dataclasses.replace(net, default=default, links=links)
-    for dest in ("estimator", "link", "zenoh_runtime"):
+    for dest in ("estimator", "link", "zenoh_runtime", "agent_sched"):
         if getattr(args, dest, None) is not None:
             net = dataclasses.replace(net, **{dest: getattr(args, dest)})
     if getattr(args, "impair_seed", None) is not None:

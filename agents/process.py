@@ -20,7 +20,7 @@ from types import FrameType
 from agents.errors import EncloseError
 from agents.network_args import add_network_arguments, apply_network_arguments
 from agents.phases import mark
-from agents.scenario import Scenario
+from agents.scenario import NetworkConfig, Scenario
 from agents.scenario_file import load_scenario
 from transport.bus import Bus
 from transport.clock_sync import parse_clock_hosts
@@ -107,6 +107,20 @@ def open_bus(args: argparse.Namespace, arrival_stamps: bool = False) -> Bus:
         bus.start_clock_sync(SwarmKeys(args.swarm), f"router-{args.clock_host}",
                              clock_of=parse_clock_hosts(args.clock_hosts))
     return bus
+
+
+def apply_agent_sched(network: NetworkConfig) -> None:
+    """Run this process SCHED_BATCH if the scenario says so (NetworkConfig.agent_sched).
+
+    Called on the main thread before the bus opens: Linux sets a thread's policy, and the
+    threads made later (Zenoh's, the stall guard) inherit it.  A batch thread does not
+    preempt the running one when it wakes (the scheduler's tick does); it gets the same
+    share of the CPU.  No privilege is needed."""
+    if network.agent_sched == "batch":
+        try:
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+        except (OSError, AttributeError) as exc:  # not Linux: the default policy stays
+            log.warning("agent_sched batch not applied: %s", exc)
 
 
 def process_main(

@@ -29,6 +29,7 @@ LINK_PROTOCOLS = ("tcp", "udp")
 # How each process runs Zenoh (transport.zenoh_config.RUNTIME_SETTINGS): "split", its own
 # threads for receiving, sending and the rest; "one_thread", all of it on one.
 ZENOH_RUNTIMES = ("split", "one_thread")
+AGENT_SCHEDS = ("normal", "batch")
 LOSS_MODELS = ("independent", "gilbert_elliott")
 REBALANCE = ("scale", "keep")
 
@@ -173,6 +174,10 @@ class NetworkConfig:
     links: tuple[tuple[int, int, LinkImpairment], ...] = ()  # (from, to) 0-based overrides
     seed: int = 0
     zenoh_runtime: str = "split"
+    # "batch": followers, targets and the recorder run SCHED_BATCH (agents.process
+    # apply_agent_sched): their wake-ups no longer preempt the simulator, which stands for
+    # the physical world, on a machine they oversubscribe (ring64 on 2 cores).
+    agent_sched: str = "normal"
 
     def impairment(self, sender: int, receiver: int) -> LinkImpairment:
         for src, dst, spec in self.links:

@@ -8,6 +8,7 @@ from typing import Any
 
 from agents.errors import ScenarioError
 from agents.scenario import (
+    AGENT_SCHEDS,
     ESTIMATORS,
     LINK_PROTOCOLS,
     LOSS_MODELS,
@@ -53,7 +54,7 @@ def impairment(table: Table, where: str, base: LinkImpairment) -> LinkImpairment
 
 
 def network(table: Table, n: int) -> NetworkConfig:
-    known = {"estimator", "link", "seed", "links", "zenoh_runtime"}
+    known = {"estimator", "link", "seed", "links", "zenoh_runtime", "agent_sched"}
     unknown = set(table) - set(IMPAIRMENT_KEYS) - known
     if unknown:
         raise ScenarioError(f"network.{sorted(unknown)[0]}", "is not a known network setting")
@@ -86,4 +87,6 @@ def network(table: Table, n: int) -> NetworkConfig:
         seed=seed,
         zenoh_runtime=choice(table.get("zenoh_runtime", "split"), ZENOH_RUNTIMES,
                              "network.zenoh_runtime"),
+        agent_sched=choice(table.get("agent_sched", "normal"), AGENT_SCHEDS,
+                           "network.agent_sched"),
     )

@@ -17,7 +17,14 @@ from agents.mavlink.offboard import OffboardKeeper
 from agents.mavlink.signing import load_key
 from agents.mavlink.startup import StartupTimeouts, start_offboard
 from agents.phases import log_phases, mark
-from agents.process import StatusReporter, StopFlag, Ticker, open_bus, stop_on_signals
+from agents.process import (
+    StatusReporter,
+    StopFlag,
+    Ticker,
+    apply_agent_sched,
+    open_bus,
+    stop_on_signals,
+)
 from agents.scenario import Scenario
 from transport.bus import Bus, Token
 from transport.keys import SwarmKeys
@@ -117,6 +124,7 @@ def _declare_alive(bus: Bus, key: str, role: str) -> tuple[Token | StallGuard, C
 def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, vehicle: int,
         make_node: NodeFactory) -> int:
     """Take off, declare the process linked, tick until stopped; returns the exit code."""
+    apply_agent_sched(scenario.network)
     cfg = AdapterConfig.px4_sitl(vehicle, args.mav_local_base, args.mav_vehicle_base)
     if getattr(args, "mav_vehicle_host", None):  # a companion computer off the vehicle's host
         cfg = replace(cfg, remote_host=args.mav_vehicle_host, local_host="0.0.0.0")

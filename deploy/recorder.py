@@ -27,6 +27,7 @@ from agents.errors import EncloseError
 from agents.phases import log_phases, mark
 from agents.process import (
     add_bus_arguments,
+    apply_agent_sched,
     load_run_scenario,
     open_bus,
     profiled,
@@ -80,6 +81,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _record(args: argparse.Namespace) -> int:
     try:
         scenario = load_run_scenario(args)
+        apply_agent_sched(scenario.network)
         with stop_on_signals() as stop, open_bus(args) as bus:
             live = start_live(args)
             recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index, live=live)

@@ -45,3 +45,37 @@ def test_the_zenoh_runtime_follows_the_scenario_unless_overridden() -> None:
         ["--zenoh-runtime", "one_thread"]
     with pytest.raises(SystemExit):
         parse("--zenoh-runtime", "two_threads")
+
+
+def test_agent_sched_follows_the_scenario_unless_overridden() -> None:
+    ring64, paper = load_scenario("ring64"), load_scenario()
+    assert (ring64.network.agent_sched, paper.network.agent_sched) == ("batch", "normal")
+    normal = apply_network_arguments(ring64, parse("--agent-sched", "normal"))
+    assert normal.network.agent_sched == "normal"
+    assert network_overrides(parse("--agent-sched", "batch")) == ["--agent-sched", "batch"]
+    with pytest.raises(SystemExit):
+        parse("--agent-sched", "fifo")
+
+
+def test_batch_is_set_on_the_calling_thread_and_inherited_by_its_threads() -> None:
+    import os
+    import threading
+
+    from agents.process import apply_agent_sched
+
+    seen: dict[str, int] = {}
+
+    def agent() -> None:  # a thread of its own: pytest's main thread keeps its policy
+        apply_agent_sched(load_scenario("ring64").network)
+        seen["self"] = os.sched_getscheduler(0)
+        child = threading.Thread(target=lambda: seen.update(child=os.sched_getscheduler(0)))
+        child.start()
+        child.join()
+
+    t = threading.Thread(target=agent)
+    t.start()
+    t.join(timeout=10)
+    assert seen == {"self": os.SCHED_BATCH, "child": os.SCHED_BATCH}
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER
+    apply_agent_sched(load_scenario().network)  # "normal": nothing changes
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER

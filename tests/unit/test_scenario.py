@@ -235,6 +235,16 @@ def test_estimator_order_is_one_or_two_and_two_needs_the_robust_estimator() -> N
         parse_scenario(with_order("2", '\n[network]\nestimator = "paper"\n'))
 
 
+def test_agent_sched_is_normal_or_batch() -> None:
+    base = load_scenario_text()
+    assert parse_scenario(base).network.agent_sched == "normal"
+    batch = parse_scenario(base + '\n[network]\nagent_sched = "batch"\n')
+    assert batch.network.agent_sched == "batch"
+    for bad in ('"fifo"', "1", "true"):
+        with pytest.raises(ScenarioError, match=r"network\.agent_sched"):
+            parse_scenario(base + f"\n[network]\nagent_sched = {bad}\n")
+
+
 def test_zenoh_runtime_is_split_or_one_thread() -> None:
     base = load_scenario_text()
     assert parse_scenario(base).network.zenoh_runtime == "split"
