@@ -8,7 +8,9 @@ message stamps need, and non-empty `listen`/`connect` lists given here, which
 are explicit choices of the caller.  Keys the file leaves unset get the safe
 values, so a file that only tunes, say, buffers never opens multicast scouting
 or a listener on every interface.  (A key the file sets to Zenoh's own default
-reads as unset: ask for a 65535-byte batch as 65534.)
+reads as unset: ask for a 65535-byte batch as 65534.)  Shared memory is off (nothing
+here uses it, and its watchdog threads cost every process) unless the file mentions
+`shared_memory` at all.
 
 With an `identity` (transport.credentials) the session is authenticated: every link
 is mutual TLS with the swarm's CA (a peer without a swarm certificate cannot link),
@@ -49,6 +51,7 @@ ENDPOINT_PROTOCOLS = (*LINK_PROTOCOLS, "tls")
 # samples are under 1 KB, so a batch still holds a tick's worth; a larger message is
 # fragmented, not lost.  Both sides of a link agree on the smaller batch size.
 LINK_BUFFER_BYTES = 8192
+SHM_KEY = "transport/shared_memory/enabled"
 _MODES = ("peer", "client", "router")
 
 
@@ -93,6 +96,12 @@ def _is_set(config: zenoh.Config, default: zenoh.Config, key: str) -> bool:
     return bool(config.get_json(key) != default.get_json(key))
 
 
+def _mentions(path: str | None, word: str) -> bool:
+    """The user's file names `word`: a boolean set to Zenoh's default cannot be told from
+    an unset one, so any mention leaves the setting to the file."""
+    return path is not None and word in Path(path).read_text(errors="replace")
+
+
 def _put(config: zenoh.Config, key: str, value: object) -> None:
     # insert_json5 takes a JSON5 *string*, not a Python value.
     config.insert_json5(key, json.dumps(value))
@@ -131,6 +140,11 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
     for key in ("transport/link/tx/batch_size", "transport/link/rx/buffer_size"):
         if not (user and _is_set(config, default, key)):
             _put(config, key, LINK_BUFFER_BYTES)
+    # Nothing here sends through shared memory (no SHM provider; samples < 1 KB), but with
+    # it on every session runs two watchdog threads, one at SCHED_FIFO, ~35 wake-ups a
+    # second: a 64-process mesh idles at 0.40 % of a core each instead of 0.46 %.
+    if not (user and _mentions(cfg.user_config_path, "shared_memory")):
+        _put(config, SHM_KEY, False)
     _put(config, "timestamping/enabled", True)
     if cfg.lowlatency:
         _put(config, "transport/unicast/lowlatency", True)

@@ -36,6 +36,7 @@ def test_defaults_are_safe_peer_on_loopback() -> None:
     assert get(cfg, "transport/unicast/lowlatency") is False
     assert get(cfg, "transport/link/tx/batch_size") == LINK_BUFFER_BYTES
     assert get(cfg, "transport/link/rx/buffer_size") == LINK_BUFFER_BYTES
+    assert get(cfg, "transport/shared_memory/enabled") is False  # no watchdog threads
 
 
 def test_explicit_endpoints_and_lowlatency() -> None:
@@ -67,13 +68,14 @@ def test_user_file_settings_win_and_unset_keys_stay_safe(tmp_path: Path) -> None
 def test_user_file_silent_on_scouting_gets_multicast_off(tmp_path: Path) -> None:
     path = tmp_path / "zenoh.json5"
     path.write_text('{ transport: { unicast: { max_links: 2 },'
-                    ' link: { tx: { batch_size: 32768 } } } }')
+                    ' link: { tx: { batch_size: 32768 } }, shared_memory: { enabled: true } } }')
     cfg = ZenohConfig(user_config_path=str(path), listen=(loopback_endpoint(17004),))
     assert get(cfg, "scouting/multicast/enabled") is False
     assert get(cfg, "transport/link/tx/batch_size") == 32768  # the user's
     assert get(cfg, "transport/link/rx/buffer_size") == LINK_BUFFER_BYTES  # ours
     assert get(cfg, "listen/endpoints") == ["tcp/127.0.0.1:17004"]
     assert get(cfg, "transport/unicast/max_links") == 2
+    assert get(cfg, "transport/shared_memory/enabled") is True  # the user's
 
 
 @pytest.mark.parametrize("kwargs", [
