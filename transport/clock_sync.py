@@ -57,42 +57,10 @@ def parse_clock_hosts(spec: str) -> dict[str, str]:
     return out
 
 
-class ClockExchange:
-    """The pure part: what to send, and what a received probe teaches (injected clock)."""
-
-    def __init__(self, sender_id: str, clock: Callable[[], float], book: ClockBook) -> None:
-        self.sender_id, self.clock, self.book = sender_id, clock, book
-        self.epoch_s = clock()
-        self.stamper = Stamper(sender_id, clock)
-        self.heard: dict[str, tuple[float, float]] = {}  # peer -> (its stamp t1, our t2)
-        self.rejected = 0
-
-    def probe(self) -> ClockProbe:
-        echoes = tuple((peer, t1, t2) for peer, (t1, t2) in sorted(self.heard.items()))
-        return ClockProbe(self.stamper.header(), self.epoch_s, echoes)
-
-    def receive(self, probe: ClockProbe, t4_s: float) -> None:
-        peer = probe.header.sender_id
-        if peer == self.sender_id:
-            return
-        self.heard[peer] = (probe.header.stamp_s, t4_s)
-        self.book.restart(peer, probe.epoch_s)
-        for echoed, t1, t2 in probe.echoes:
-            if echoed != self.sender_id:
-                continue
-            sample = exchange_sample(t1, t2, probe.header.stamp_s, t4_s)
-            if sample is None:
-                self.rejected += 1
-            else:
-                self.book.add(peer, probe.epoch_s, sample)
-
-    def forget(self, peer: str) -> None:
-        self.heard.pop(peer, None)
-
-
 class ClockListener:
-    """A process on the host of router `own_clock_id`: samples of the other routers'
-    clocks against ours, from their probes' echoes of our router (injected clock)."""
+    """What a received probe teaches a process on the host of router `own_clock_id`:
+    a sample of the sender's clock against ours from its echo of our router's probe (the
+    router itself is such a process, whose probes they are)."""
 
     def __init__(self, own_clock_id: str, book: ClockBook) -> None:
         self.own_clock_id, self.book = own_clock_id, book
@@ -113,6 +81,30 @@ class ClockListener:
                 self.book.add(peer, probe.epoch_s, sample)
 
 
+class ClockExchange:
+    """A router's part: what to send (echoes of every probe heard), and what a received
+    probe teaches (ClockListener, on our own id; injected clock)."""
+
+    def __init__(self, sender_id: str, clock: Callable[[], float], book: ClockBook) -> None:
+        self.sender_id, self.clock, self.book = sender_id, clock, book
+        self.epoch_s = clock()
+        self.stamper = Stamper(sender_id, clock)
+        self.heard: dict[str, tuple[float, float]] = {}  # peer -> (its stamp t1, our t2)
+        self.listener = ClockListener(sender_id, book)
+
+    def probe(self) -> ClockProbe:
+        echoes = tuple((peer, t1, t2) for peer, (t1, t2) in sorted(self.heard.items()))
+        return ClockProbe(self.stamper.header(), self.epoch_s, echoes)
+
+    def receive(self, probe: ClockProbe, t4_s: float) -> None:
+        if probe.header.sender_id != self.sender_id:
+            self.heard[probe.header.sender_id] = (probe.header.stamp_s, t4_s)
+        self.listener.receive(probe, t4_s)
+
+    def forget(self, peer: str) -> None:
+        self.heard.pop(peer, None)
+
+
 class ClockSync:
     """Runs the clock exchange on a bus in a thread; `close()` before the bus closes.
 
@@ -128,8 +120,8 @@ class ClockSync:
             raise ConfigError("clock_id", f"{clock_id!r} is not router-<k>")
         if clock_of is not None:
             book.set_hosts(clock_of)
-        self.exchange = ClockExchange(clock_id, bus.now_s, book)
-        self.listener = None if probe else ClockListener(clock_id, book)
+        self.exchange = ClockExchange(clock_id, bus.now_s, book) if probe else None
+        self.listener = self.exchange.listener if self.exchange else ClockListener(clock_id, book)
         self.period_s = period_s
         self._bus = bus
         self._out = bus.declare_publisher(keys.clock(role, int(index))) if probe else None
@@ -144,7 +136,7 @@ class ClockSync:
                 for rec in self._sub.drain():
                     t4_s = rec.recv_stamp_s if rec.arrival_s is None else rec.arrival_s
                     self._receive(rec.key, rec.payload, t4_s)
-                if self._out is not None:
+                if self._out is not None and self.exchange is not None:
                     self._out.put(encode(self.exchange.probe()))
             except TransportError as exc:  # closing, or a link down: try again next poll
                 log.debug("clock sync: %s", exc)
@@ -154,16 +146,13 @@ class ClockSync:
         try:
             msg = decode(payload)
         except CodecError:
-            self.exchange.rejected += 1
+            self.listener.rejected += 1
             return
         info = parse_key(key)
         owner = None if info is None else f"{info.role}-{info.index}"
         if not isinstance(msg, ClockProbe) or msg.header.sender_id != owner:
             return
-        if self.listener is None:
-            self.exchange.receive(msg, t4_s)
-        else:
-            self.listener.receive(msg, t4_s)
+        (self.listener if self.exchange is None else self.exchange).receive(msg, t4_s)
 
     def close(self) -> None:
         self._stop.set()
