@@ -235,21 +235,16 @@ def test_estimator_order_is_one_or_two_and_two_needs_the_robust_estimator() -> N
         parse_scenario(with_order("2", '\n[network]\nestimator = "paper"\n'))
 
 
-def test_agent_sched_is_normal_or_batch() -> None:
+@pytest.mark.parametrize(("key", "default", "other", "bad"), [
+    ("zenoh_runtime", "split", "one_thread", '"threads"'),
+    ("agent_sched", "normal", "batch", '"fifo"'),
+])
+def test_network_choices_default_accept_the_other_and_name_a_bad_value(
+        key: str, default: str, other: str, bad: str) -> None:
     base = load_scenario_text()
-    assert parse_scenario(base).network.agent_sched == "normal"
-    batch = parse_scenario(base + '\n[network]\nagent_sched = "batch"\n')
-    assert batch.network.agent_sched == "batch"
-    for bad in ('"fifo"', "1", "true"):
-        with pytest.raises(ScenarioError, match=r"network\.agent_sched"):
-            parse_scenario(base + f"\n[network]\nagent_sched = {bad}\n")
-
-
-def test_zenoh_runtime_is_split_or_one_thread() -> None:
-    base = load_scenario_text()
-    assert parse_scenario(base).network.zenoh_runtime == "split"
-    one = parse_scenario(base + '\n[network]\nzenoh_runtime = "one_thread"\n')
-    assert one.network.zenoh_runtime == "one_thread"
-    for bad in ('"threads"', "1", "true"):
-        with pytest.raises(ScenarioError, match=r"network\.zenoh_runtime"):
-            parse_scenario(base + f"\n[network]\nzenoh_runtime = {bad}\n")
+    assert getattr(parse_scenario(base).network, key) == default
+    chosen = parse_scenario(base + f'\n[network]\n{key} = "{other}"\n')
+    assert getattr(chosen.network, key) == other
+    for value in (bad, "1", "true"):
+        with pytest.raises(ScenarioError, match=rf"network\.{key}"):
+            parse_scenario(base + f"\n[network]\n{key} = {value}\n")
