@@ -128,10 +128,9 @@ class HostLaunch(Launch):
     def expected_tokens(self) -> set[str]:
         if self.coordinator:
             return super().expected_tokens()
-        local = {p for k in self.local for p in self.dep.hosts[k].processes}
+        local = {_sender(p) for k in self.local for p in self.dep.hosts[k].processes}
         return {t for t in super().expected_tokens()
-                if t.rsplit("/", 2)[-2] + "-" + t.rsplit("/", 1)[-1] in
-                {p if "-" in p else f"{p}-0" for p in local}}
+                if t.rsplit("/", 2)[-2] + "-" + t.rsplit("/", 1)[-1] in local}
 
     def fly(self, bus: object) -> None:
         if self.coordinator:
