@@ -107,7 +107,9 @@ class HostLaunch(Launch):
                 "--send-base-port", str(self.adapter_base),
                 "--noise-std-m", str(self.args.noise_std_m)], prefix=pre)
         elif name == "recorder":
-            self.sup.start(name, "deploy.recorder", [*argv, "--out", str(self.out)], prefix=pre)
+            self.sup.start(name, "deploy.recorder",
+                           [*argv, "--out", str(self.out), *self.recorder_sensor_argv()],
+                           prefix=pre)
         elif name != "launcher":
             role, _, idx = name.rpartition("-")
             extra = ["--mav-vehicle-host", self.sim_address] if remote else []

@@ -80,6 +80,11 @@ class Launch:
         extra += network_overrides(self.args)
         return ["--scenario", scen, "--swarm", self.keys.swarm, *extra]
 
+    def recorder_sensor_argv(self) -> list[str]:
+        """Noiseless target observations are the truth's target positions again: the
+        recorder leaves them out (deploy.recording.loop)."""
+        return [] if getattr(self.args, "noise_std_m", 0.0) > 0.0 else ["--no-sensor"]
+
     def start_all(self) -> None:
         c, s = self.common(), self.scenario
         mav = [
@@ -110,7 +115,8 @@ class Launch:
         # It imports what it alone needs (MCAP, its outputs) after the fork: not in the movers.
         self.sup.start(
             "recorder", "deploy.recorder",
-            [*joins, "--out", str(self.out), *sec("recorder"), *recorder_live_argv(self.args)],
+            [*joins, "--out", str(self.out), *sec("recorder"), *recorder_live_argv(self.args),
+             *self.recorder_sensor_argv()],
             fork=True,
         )
         # Targets first: the followers come from the fork server, which may still be

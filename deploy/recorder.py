@@ -52,6 +52,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--live-host", default=DEFAULT_HOST,
                         help="address the live view listens on (default 127.0.0.1: this "
                         "machine only; the view has no authentication)")
+    parser.add_argument("--no-sensor", dest="record_sensor", action="store_false",
+                        help="do not record the target observations (the launcher's choice "
+                        "when the sensor is noiseless: the truth holds the same positions)")
     parser.add_argument("-v", "--verbose", action="store_true")
     return parser.parse_args(argv)
 
@@ -84,7 +87,8 @@ def _record(args: argparse.Namespace) -> int:
         apply_agent_sched(scenario.network)
         with stop_on_signals() as stop, open_bus(args) as bus:
             live = start_live(args)
-            recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index, live=live)
+            recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index, live=live,
+                                record_sensor=args.record_sensor)
             mark("linked")  # its liveliness token is declared
             log_phases("recorder")
             try:

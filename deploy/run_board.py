@@ -29,6 +29,8 @@ ERRORS = (
 )
 MAX_ROWS = 10  # more processes than this: followers as one row, plus any not healthy
 REDRAW_S = 1.0  # progress.json changes once a second: redrawing faster shows nothing new
+BEHIND_SHOWN_S = 2.0  # a recorder further behind the bus than this: its live figures lag
+RECORDING_STATES = ("linked", "running")  # after these no input is due: "behind" means nothing
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,14 @@ def link_text(progress: dict[str, Any]) -> str:
     return ", ".join(parts)
 
 
+def lag_text(progress: dict[str, Any]) -> str | None:
+    """The recorder's backlog when it is large: the errors and links shown are that old."""
+    behind = _num(progress.get("recorder_behind_s"))
+    if behind is None or behind <= BEHIND_SHOWN_S or progress.get("state") not in RECORDING_STATES:
+        return None
+    return f"recorder {behind:.1f} s behind (live figures lag)"
+
+
 def process_rows(processes: Sequence[ProcessView]) -> list[ProcessView]:
     """Every process, or for a big swarm the followers as one row and every unhealthy one."""
     if len(processes) <= MAX_ROWS:
@@ -123,6 +133,9 @@ def render_board(view: BoardView) -> Group:
         style = "" if p.health.startswith(("up", "exited 0")) else "yellow"
         procs.add_row(p.name, Text(p.health, style=style), p.state, str(p.restarts or ""))
     lines: list[Any] = [head, errors, procs, Text(f"links: {link_text(view.progress)}")]
+    lag = lag_text(view.progress)
+    if lag:
+        lines.append(Text(lag, style="yellow"))
     lines += [Text(f"{k}: {v}") for k, v in view.extra.items()]
     if view.live_url:
         lines.append(Text(f"live view: {view.live_url}"))
@@ -137,8 +150,10 @@ def board_line(view: BoardView) -> str:
         for label, value, _, inside in error_cells(view)
     )
     up = sum(p.health == "up" for p in view.processes)
+    lag = lag_text(view.progress)
     return (f"t = {max(0.0, view.t_s):6.1f} / {view.duration_s:g} s  {errs}  "
-            f"processes {up}/{len(view.processes)} up  links: {link_text(view.progress)}")
+            f"processes {up}/{len(view.processes)} up  links: {link_text(view.progress)}"
+            + (f"  {lag}" if lag else ""))
 
 
 class LiveBoard:

@@ -117,17 +117,36 @@ class SensorPublisher:
 
 def sensor_every_ticks(tick_hz: float, sensor_hz: float) -> int:
     """Ticks between observations: the most that still gives at least `sensor_hz` (a 20-Hz
-    swarm on the 50-Hz simulator: every 2nd tick, 25 Hz), and never below one tick.  Each
+    swarm on a 50-Hz simulator: every 2nd tick, 25 Hz), and never below one tick.  Each
     observation is a message to a follower and the recorder, so one faster than the
     followers' loop is read by nobody (ring64 at 20 Hz: 3 200 of them a second)."""
     return max(1, math.floor(tick_hz / sensor_hz + 1e-9))
 
 
+MAX_DEFAULT_TICK_HZ = 50.0
+
+
+def sim_tick_hz(control_hz: float) -> float:
+    """The simulator's default tick rate for a swarm whose loop runs at `control_hz`: the
+    largest whole multiple of it not above 50 Hz (50 Hz for faster loops, as before).
+
+    On a whole multiple, position telemetry and target observations come exactly once per
+    control period.  ring64's 20 Hz on 50 Hz ticks got them every 40 or 60 ms (2.5 ticks)
+    and 25 observations a second per follower; on 40 Hz ticks, every 50 ms and 20 a second:
+    a fifth fewer simulator ticks and sensor messages (simulator late ticks 22-32 % against
+    27-60 % in alternate runs; BENCHMARKS.md, ninth session).  The vehicle model is an
+    exact discretisation, so a coarser tick does not change its dynamics."""
+    if control_hz >= MAX_DEFAULT_TICK_HZ:
+        return MAX_DEFAULT_TICK_HZ
+    return control_hz * math.floor(MAX_DEFAULT_TICK_HZ / control_hz + 1e-9)
+
+
 def run(args: argparse.Namespace) -> int:
     scenario = load_run_scenario(args)
+    tick_hz = args.rate_hz or sim_tick_hz(scenario.run.rate_hz)
     cfg = SimConfig(
-        rate_hz=args.rate_hz,
-        telemetry_hz=args.telemetry_hz,
+        rate_hz=tick_hz,
+        telemetry_hz=args.telemetry_hz or tick_hz,
         flavour=scenario.vehicle.flavour,
         host=args.mav_host,
         listen_base_port=args.base_port,
@@ -141,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
             scenario,
             bus,
             keys,
-            sensor_every_ticks(args.rate_hz, args.sensor_hz or scenario.run.rate_hz),
+            sensor_every_ticks(tick_hz, args.sensor_hz or scenario.run.rate_hz),
             args.noise_std_m,
             args.seed,
             late_s=lambda t: sim.boot_time_s() - t,
@@ -186,9 +205,12 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="enclose-swarm-sim", description=__doc__)
     add_bus_arguments(parser)
-    parser.add_argument("--rate-hz", type=float, default=50.0, help="simulation tick rate")
+    parser.add_argument("--rate-hz", type=float, default=None,
+                        help="simulation tick rate (default: the largest whole multiple of "
+                        "the scenario's control rate not above 50 Hz)")
     # Each agent asks its vehicle down to its own loop rate (agents.vehicle_loop).
-    parser.add_argument("--telemetry-hz", type=float, default=50.0)
+    parser.add_argument("--telemetry-hz", type=float, default=None,
+                        help="default rate of the position streams (default: the tick rate)")
     parser.add_argument(
         "--sensor-hz",
         type=float,

@@ -112,10 +112,12 @@ class SwarmKeys:
     def everything(self) -> str:
         return f"{self.prefix}/**"
 
-    def recorded(self) -> tuple[str, ...]:
-        """What a recorder subscribes to: everything but the estimator-rate states."""
+    def recorded(self, sensor: bool = True) -> tuple[str, ...]:
+        """What a recorder subscribes to: everything but the estimator-rate states, and but
+        the target observations when `sensor` is false."""
         p = self.prefix
-        return (self.all_follower_states(), f"{p}/sensor/**", self.truth(), self.control(),
+        observed = (f"{p}/sensor/**",) if sensor else ()
+        return (self.all_follower_states(), *observed, self.truth(), self.control(),
                 self.all_status(), self.all_alive())
 
 

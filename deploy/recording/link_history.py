@@ -9,6 +9,11 @@ A restarted receiver starts its counters again from zero: its first interval aft
 that has no value.  `age_p50_ms` and `age_p99_ms` are the receiver's whole-run figures
 at that time.  Times are seconds of the receiver's status stamp on the bus clock; the
 writer turns them into experiment time.
+
+A link is silent when its receiver's latest status is SILENT_AFTER_S older than the newest
+follower status seen: judged against the stream, not the wall clock, so a recorder that
+drains seconds behind the bus does not call every link silent (its lag is reported apart,
+`recorder_behind_s` in progress.json).
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ from transport.messages import ProcessStatus
 LINKS_CSV = "links.csv"
 COLUMNS = ("t_s", "link", "rx", "offered", "delivered", "age_mean_ms", "age_p50_ms",
            "age_p99_ms")
-SILENT_AFTER_S = 3.0  # a link with no status this long is reported as silent
+SILENT_AFTER_S = 3.0  # a receiver this far behind the newest follower status is silent
 
 
 @dataclass(frozen=True)
@@ -55,8 +60,12 @@ class LinkHistory:
         self.samples: list[LinkSample] = []
         self._last: dict[str, Mapping[str, int]] = {}  # link -> counters of its last sample
         self._latest: dict[str, LinkSample] = {}
+        # Newest follower status stamp, with or without link counters: the reference
+        # against which a receiver counts as silent (the stream's time, not ours).
+        self._newest_s = -math.inf
 
     def add(self, status: ProcessStatus) -> None:
+        self._newest_s = max(self._newest_s, status.header.stamp_s)
         c = status.counters
         for name in sorted(k[3:] for k in c if k.startswith("rx_") and not k.startswith("rx_dup")):
             link = f"{name}->f{status.index}"
@@ -84,10 +93,14 @@ class LinkHistory:
                 "age_n": int(c.get(f"age_n_{name}", 0)),
                 "age_sum_us": int(c.get(f"age_sum_us_{name}", 0))}
 
-    def summary(self, now_s: float) -> dict[str, Any]:
-        """For progress.json: the worst link now (small: the launcher's board reads it)."""
+    def summary(self) -> dict[str, Any]:
+        """For progress.json: the worst link now (small: the launcher's board reads it).
+
+        Silent: the receiver stopped reporting while others went on.  If every receiver
+        stopped (or our own input did), none is: `recorder_behind_s` tells that.
+        """
         latest = list(self._latest.values())
-        fresh = [s for s in latest if now_s - s.stamp_s <= SILENT_AFTER_S]
+        fresh = [s for s in latest if self._newest_s - s.stamp_s <= SILENT_AFTER_S]
         ratios = [(s.delivered, s.link) for s in fresh if s.delivered is not None]
         ages = [(s.age_mean_ms, s.link) for s in fresh if s.age_mean_ms is not None]
         worst_ratio = min(ratios, default=None)

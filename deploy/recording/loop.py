@@ -8,6 +8,7 @@ liveliness token, and at the end the run's outputs.  Bad payloads are counted by
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -23,7 +24,7 @@ from deploy.recording.link_history import LinkHistory
 from deploy.recording.links import FINAL_STATES, link_report
 from deploy.recording.live_server import LiveServer
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
-from deploy.recording.progress import PROGRESS_FILE, live_errors
+from deploy.recording.progress import PROGRESS_FILE, behind_s, live_errors
 from deploy.recording.resume import newest_part, read_back
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
 from deploy.rundir import RunInfo
@@ -50,7 +51,7 @@ class Recorder:
                  index: int = 0, period_s: float = 1.0,
                  final_status_wait_s: float = FINAL_STATUS_WAIT_S,
                  chunk_bytes: int = DEFAULT_CHUNK_BYTES, live: LiveServer | None = None,
-                 scene_hz: float | None = DEFAULT_SCENE_HZ) -> None:
+                 scene_hz: float | None = DEFAULT_SCENE_HZ, record_sensor: bool = True) -> None:
         self.bus, self.scenario, self.run_dir = bus, scenario, run_dir
         self.keys = SwarmKeys(swarm)
         self.index = index
@@ -58,6 +59,7 @@ class Recorder:
         self.final_status_wait_s = final_status_wait_s
         self.follower_status: dict[int, ProcessStatus] = {}  # latest, per follower index
         self.link_history = LinkHistory()  # links.csv, links.png, progress.json "links"
+        self.newest_stamp_s = -math.inf  # newest sender stamp processed: how far behind we are
         run_dir.mkdir(parents=True, exist_ok=True)
         self.mcap = McapLog(run_dir / MCAP_FILE, chunk_size=chunk_bytes,
                             metadata={"swarm": swarm, "scenario": scenario.name})
@@ -75,7 +77,11 @@ class Recorder:
         self._status = bus.declare_publisher(self.keys.status(ROLE, index), Congestion.DROP)
         # Everything but the followers' estimator-rate states (issue 15): up to 400 per
         # second per follower, for their neighbours; the 50 Hz states carry the same estimate.
-        self._subs = [bus.subscribe(k, QUEUE_CAPACITY) for k in self.keys.recorded()]
+        # Without `record_sensor`, not the target observations either: noiseless, they are
+        # the truth's target positions again, and in ring64 they were half of what the
+        # recorder decoded (1 280 a second), where it fell seconds behind.
+        self._subs = [bus.subscribe(k, QUEUE_CAPACITY)
+                      for k in self.keys.recorded(sensor=record_sensor)]
         # After the subscription: what arrives while we read back waits in its queue.
         self.carried: Counter[str] = Counter()
         self._carry_on()
@@ -110,6 +116,8 @@ class Recorder:
         return len(inbound)
 
     def _record(self, key: str, msg: Message, recv_stamp_s: float) -> None:
+        if msg.header.sender_id != self._stamper.sender_id:  # our own status is always fresh
+            self.newest_stamp_s = max(self.newest_stamp_s, msg.header.stamp_s)
         self.mcap.write(key, msg, recv_stamp_s)
         self.asm.add(msg)
         if isinstance(msg, ProcessStatus) and msg.role == "follower":
@@ -263,6 +271,7 @@ class Recorder:
         }
 
     def progress(self) -> dict[str, Any]:
+        now = self.bus.now_s()
         return {
             "state": self.state,
             "t_s": self.asm.latest_experiment_time_s(),
@@ -272,8 +281,9 @@ class Recorder:
             "follower_states": self.asm.state_counts(),
             "messages_total": sum(self.mcap.messages.values()),
             "dropped_total": self.decoder.dropped_total,
-            "links": self.link_history.summary(self.bus.now_s()),
-            "wall_stamp_s": self.bus.now_s(),
+            "links": self.link_history.summary(),
+            "recorder_behind_s": behind_s(now, self.newest_stamp_s),
+            "wall_stamp_s": now,
             "live_url": self.live_url,
         }
 

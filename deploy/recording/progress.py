@@ -42,6 +42,13 @@ def live_errors(asm: RunAssembler, info: RunInfo, window_s: float = WINDOW_S) ->
     }
 
 
+def behind_s(now_s: float, newest_stamp_s: float) -> float | None:
+    """progress.json "recorder_behind_s": the bus clock minus the newest sender stamp the
+    recorder has processed -- its backlog.  Receive stamps cannot show it: a sample is
+    stamped when it is drained, however long it waited.  None before any message."""
+    return round(now_s - newest_stamp_s, 2) if math.isfinite(newest_stamp_s) else None
+
+
 def write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
     """Readers never see a half-written file: write a sibling, then rename over."""
     tmp = path.with_name(f".{path.name}.tmp")

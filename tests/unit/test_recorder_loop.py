@@ -17,7 +17,7 @@ from tests.recorder_synth import SynthRun
 from transport.codec import decode, encode
 from transport.keys import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
-from transport.messages import ProcessStatus, Stamper
+from transport.messages import Header, ProcessStatus, Stamper
 
 START_S = 1_700_000_000.0
 
@@ -168,3 +168,66 @@ def test_a_restarted_recorder_carries_on_the_runs_outputs(paper: Scenario, tmp_p
     recorded = sum(topics(tmp_path / MCAP_FILE).values())
     # + the stop word, + the recorder's own status messages
     assert recorded >= carried["messages"] + len(samples) - half + 1
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("record_sensor", [True, False])
+def test_target_observations_are_recorded_only_when_asked(
+        paper: Scenario, tmp_path: Path, record_sensor: bool) -> None:
+    """The launcher leaves noiseless observations out (`--no-sensor`): the truth holds them."""
+    from transport.messages import TargetObservation
+
+    hub, keys = MemoryHub(), SwarmKeys("obs")
+    run = SynthRun(paper, keys, START_S, duration_s=1.0)
+    with MemoryBus(hub, "recorder") as rbus, MemoryBus(hub, "swarm") as sbus:
+        recorder = Recorder(rbus, "obs", paper, tmp_path, record_sensor=record_sensor)
+        control = Stamper("launcher-0")
+        sbus.publish(keys.control(), encode(run.control(control, "start")))
+        seen = Stamper("sim-0")
+        for key, msg in run.samples():
+            sbus.publish(key, encode(msg))
+        for i in range(paper.n):
+            sbus.publish(keys.sensor_targets(i), encode(TargetObservation(
+                seen.header(START_S + 0.5), i, 0, (1.0, 2.0), START_S + 0.5, None)))
+        sbus.publish(keys.control(), encode(run.control(control, "stop")))
+        assert recorder.run(lambda: False, poll_s=0.0) == "control_stop"
+        assert recorder.finish()
+    sensor_topics = {t for t in topics(tmp_path / MCAP_FILE) if "/sensor/" in t}
+    assert (len(sensor_topics) == paper.n) if record_sensor else not sensor_topics
+    assert keys.truth() in topics(tmp_path / MCAP_FILE)
+
+
+@pytest.mark.timeout(30)
+def test_a_recorder_behind_the_bus_says_by_how_much_and_calls_no_link_silent(
+    paper: Scenario, tmp_path: Path
+) -> None:
+    """A saturated recorder drains the followers' statuses 5 s after they were sent: all
+    links deliver, so none is silent; the lag is progress.json's "recorder_behind_s"
+    (against the senders' stamps: its own status, stamped as it ticks, does not count)."""
+    hub, keys, clock = MemoryHub(), SwarmKeys("behind"), [START_S + 5.3]
+    with MemoryBus(hub, "recorder", clock=lambda: clock[0]) as rbus, \
+            MemoryBus(hub, "swarm", clock=lambda: clock[0]) as sbus:
+        recorder = Recorder(rbus, "behind", paper, tmp_path, scene_hz=None)
+        assert recorder.progress()["recorder_behind_s"] is None  # nothing processed yet
+        for i in range(4):
+            counters = {f"rx_f{(i - 1) % 4}": 10, f"seq_last_f{(i - 1) % 4}": 9}
+            status = ProcessStatus(Header(f"follower-{i}", 0, START_S + 0.1 * i), "follower",
+                                   i, "running", counters)
+            sbus.publish(keys.status("follower", i), encode(status))
+        recorder.step()
+        progress = recorder.progress()
+        recorder.mcap.close()
+    assert progress["links"]["count"] == 4 and progress["links"]["silent"] == []
+    assert progress["recorder_behind_s"] == pytest.approx(5.0)
+
+
+@pytest.mark.parametrize(("noise_std_m", "argv"), [(0.0, ["--no-sensor"]), (0.2, [])])
+def test_the_launcher_records_observations_only_when_they_are_noisy(
+        noise_std_m: float, argv: list[str]) -> None:
+    from argparse import Namespace
+    from types import SimpleNamespace
+
+    from deploy.launch import Launch
+
+    launch = SimpleNamespace(args=Namespace(noise_std_m=noise_std_m))
+    assert Launch.recorder_sensor_argv(launch) == argv  # type: ignore[arg-type]

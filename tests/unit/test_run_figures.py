@@ -58,9 +58,37 @@ def test_link_history_gives_loss_and_age_per_interval_and_survives_a_restart() -
     assert second.age_mean_ms == pytest.approx(800_000 / 40 / 1000)  # 20 ms
     assert second.age_p99_ms == 25.0 and second.offered == 100
     assert third.delivered is None and third.age_mean_ms is None
-    summary = h.summary(now_s=104.0)
+    summary = h.summary()
     assert summary["count"] == 1 and summary["silent"] == []
-    assert h.summary(now_s=110.0)["silent"] == ["f0->f1"]
+
+
+def ring_status(i: int, k: int, stamp_s: float, n: int = 4) -> ProcessStatus:
+    """Follower i's k-th status in a ring of n: one link in, from its predecessor, which
+    delivers all of its 10 messages a second."""
+    j = (i - 1) % n
+    return status(i, stamp_s, **{f"rx_f{j}": 10 * (k + 1), f"seq_last_f{j}": 10 * k + 9})
+
+
+def test_links_are_not_silent_when_all_statuses_are_old_but_fresh_to_each_other() -> None:
+    """A recorder 5 s behind the bus: every status it has is 5 s old, yet all kept coming.
+    Silence is judged against the newest status, not the wall clock (no `now` at all)."""
+    h = LinkHistory()
+    for k in range(3):
+        for i in range(4):
+            h.add(ring_status(i, k, 100.0 + k + 0.1 * i))
+    summary = h.summary()  # the wall clock would be ~107.3 here
+    assert summary["count"] == 4 and summary["silent"] == []
+    assert summary["min_delivered"] == 1.0
+
+
+def test_a_receiver_whose_statuses_stopped_while_others_went_on_is_silent() -> None:
+    h = LinkHistory()
+    for k in range(9):
+        for i in range(4):
+            if i != 2 or k <= 4:  # follower 2 says nothing after 104 s, the others go to 108 s
+                h.add(ring_status(i, k, 100.0 + k))
+    summary = h.summary()
+    assert summary["silent"] == ["f1->f2"] and summary["count"] == 4
 
 
 def test_links_csv_round_trip(tmp_path: Path) -> None:

@@ -11,7 +11,15 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from deploy.run_board import BoardView, LiveBoard, ProcessView, board_line, link_text, render_board
+from deploy.run_board import (
+    BoardView,
+    LiveBoard,
+    ProcessView,
+    board_line,
+    lag_text,
+    link_text,
+    render_board,
+)
 from deploy.verdict import announce, print_verdict, read_verdict, verdict_json
 
 ESC = "\x1b"
@@ -204,6 +212,26 @@ def test_a_long_list_of_silent_links_is_cut_to_a_few_names() -> None:
     text = link_text({"links": {"count": 48, "silent": silent}})
     assert "silent 30: f0->f1, f1->f2, f2->f3, f3->f4 (+26 more)" in text
     assert "f4->f5" not in text
+
+
+def test_a_recorder_far_behind_the_bus_says_so_on_the_board_and_the_line() -> None:
+    behind = {**PROGRESS, "recorder_behind_s": 6.27}
+    console, buf = plain_console()
+    console.print(render_board(view(progress=behind)))
+    assert "recorder 6.3 s behind (live figures lag)" in buf.getvalue()
+    assert board_line(view(progress=behind)).endswith("recorder 6.3 s behind (live figures lag)")
+
+
+@pytest.mark.parametrize("progress", [
+    {**PROGRESS, "recorder_behind_s": 0.4},  # the usual: under the threshold
+    {**PROGRESS, "recorder_behind_s": None},  # nothing processed yet
+    {**PROGRESS, "state": "done", "recorder_behind_s": 9.0},  # after the stop no input is due
+])
+def test_a_recorder_keeping_up_or_done_says_nothing_of_lag(progress: dict[str, object]) -> None:
+    assert lag_text(progress) is None
+    console, buf = plain_console()
+    console.print(render_board(view(progress=progress)))
+    assert "behind" not in buf.getvalue() and "behind" not in board_line(view(progress=progress))
 
 
 def test_a_recorder_that_lost_messages_says_so_and_a_whole_recording_says_nothing(

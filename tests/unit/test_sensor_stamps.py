@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from agents.scenario_file import load_scenario
-from deploy.swarm_sim import SensorPublisher, sensor_every_ticks
+from deploy.swarm_sim import SensorPublisher, sensor_every_ticks, sim_tick_hz
 from sim_backend.model import FleetState
 from sim_backend.runtime import spawn_points_ned
 from transport.codec import decode
@@ -37,3 +37,14 @@ def test_observations_come_at_least_as_often_as_asked_and_at_most_once_a_tick(
         sensor_hz: float, every: int, effective_hz: float) -> None:
     assert sensor_every_ticks(50.0, sensor_hz) == every
     assert 50.0 / every == effective_hz >= min(sensor_hz, 50.0)
+
+
+@pytest.mark.parametrize(("control_hz", "tick_hz"),
+                         [(20.0, 40.0), (50.0, 50.0), (25.0, 50.0), (30.0, 30.0), (10.0, 50.0),
+                          (7.0, 49.0), (100.0, 50.0)])
+def test_the_simulator_ticks_on_a_whole_multiple_of_the_control_rate(
+        control_hz: float, tick_hz: float) -> None:
+    assert sim_tick_hz(control_hz) == pytest.approx(tick_hz)
+    if control_hz <= 50.0:  # one observation per control period, exactly
+        every = sensor_every_ticks(sim_tick_hz(control_hz), control_hz)
+        assert sim_tick_hz(control_hz) / every == pytest.approx(control_hz)
