@@ -27,6 +27,7 @@ from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
 from deploy.recording.progress import PROGRESS_FILE, behind_s, live_errors
 from deploy.recording.resume import newest_part, read_back
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
+from deploy.recording.view_feed import ViewFeed
 from deploy.rundir import RunInfo
 from transport.bus import Bus, Congestion
 from transport.checks import RECORDER_LIMITS
@@ -70,9 +71,8 @@ class Recorder:
         self._info = RunInfo.from_scenario(scenario, "networked", scenario.run.duration_s)
         # The live view's frames go into the MCAP always (replay looks as live did) and to
         # the WebSocket server when there is one; scene_hz None turns the view off.
-        self.live = live
-        self.view = None if scene_hz is None else LiveView(self._info, scene_hz)
-        self.view_errors = 0
+        self.feed = ViewFeed(self.mcap, None if scene_hz is None
+                             else LiveView(self._info, scene_hz), live)
         self._stamper = Stamper(f"{ROLE}-{index}", bus.now_s)
         self._status = bus.declare_publisher(self.keys.status(ROLE, index), Congestion.DROP)
         # Everything but the followers' estimator-rate states (issue 15): up to 400 per
@@ -106,9 +106,9 @@ class Recorder:
         inbound = [item for sub in self._subs for item in self.decoder.drain(sub)]
         for item in inbound:
             self._record(item.received.key, item.message, item.received.recv_stamp_s)
-            self._view_add(item.message, item.received.recv_stamp_s)
-        if inbound and self.view is not None:
-            self._show(self.view.frames)
+            self.feed.add(item.message, item.received.recv_stamp_s)
+        if inbound:
+            self.feed.show_new()
         if self.asm.start is not None and self.state == "linked":
             self._info = RunInfo.from_scenario(self.scenario, "networked",
                                                self.asm.start.duration_s)
@@ -123,31 +123,6 @@ class Recorder:
         if isinstance(msg, ProcessStatus) and msg.role == "follower":
             self.follower_status[msg.index] = msg
             self.link_history.add(msg)
-
-    def _view_add(self, msg: Message, recv_stamp_s: float) -> None:
-        if self.view is None:
-            return
-        try:
-            self.view.add(msg, recv_stamp_s)
-        except Exception:  # the view must never cost the recording
-            self._view_failed()
-
-    def _show(self, make: Callable[[], list[RawFrame]]) -> None:
-        """The view's frames into the MCAP and to the live server, if any."""
-        try:
-            frames = make()
-        except Exception:
-            self._view_failed()
-            return
-        for frame in frames:
-            self.mcap.write_raw(frame)
-            if self.live is not None:
-                self.live.publish(frame)
-
-    def _view_failed(self) -> None:
-        if not self.view_errors:
-            log.exception("live view failed (counted in view_errors; recording goes on)")
-        self.view_errors += 1
 
     def _carry_on(self) -> None:
         """A restarted recorder: take over what the dead one recorded (deploy.recording.resume)."""
@@ -169,10 +144,7 @@ class Recorder:
         if now < self._next_tick_s:
             return
         self._next_tick_s = now + self.period_s
-        view = self.view
-        if view is not None:
-            members = self.membership[-1][1] if self.membership else None
-            self._show(lambda: view.tick_frames(now, members))
+        self.feed.tick(now, self.membership[-1][1] if self.membership else None)
         self.mcap.flush()
         self._publish_status()
         write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
@@ -229,8 +201,7 @@ class Recorder:
     def finish(self) -> bool:
         """Close the MCAP first (it must survive), then write outputs; True if metrics exist."""
         self._set_state("stopping")
-        if self.live is not None:
-            self.live.stop()
+        self.feed.stop()
         self.mcap.close()
         try:
             # Imported here: its figures need matplotlib (~1 s of imports), which would
@@ -265,7 +236,7 @@ class Recorder:
                 "carried_on": dict(self.carried),
                 "live": {"url": self.live_url, "frames_sent": self.live_frames_sent,
                          "frames_per_topic": dict(sorted(self.mcap.frames.items())),
-                         "view_errors": self.view_errors},
+                         "view_errors": self.feed.errors},
             },
             "links": link_report(self.follower_status, self.asm.state_counts()),
         }
@@ -289,11 +260,11 @@ class Recorder:
 
     @property
     def live_url(self) -> str | None:
-        return None if self.live is None else self.live.url
+        return self.feed.url
 
     @property
     def live_frames_sent(self) -> int:
-        return 0 if self.live is None else self.live.frames_sent
+        return self.feed.frames_sent
 
     def _status_counters(self) -> dict[str, int]:
         out = self.decoder.counters()
