@@ -48,7 +48,8 @@ def swarm_run(out: Path, scenario: str, duration_s: float, extra: list[str]) -> 
     cost: dict[str, Any] = {}
     if (out / "launch.json").exists():
         launch = json.loads((out / "launch.json").read_text())
-        sim = launch["status"].get("sim-0", {})
+        # As the flight ended: after it, every vehicle whose follower stopped fails safe.
+        sim = (launch.get("status_at_stop") or launch["status"]).get("sim-0", {})
         cost = load_figures(launch.get("load") or {})
     return {"exit_code": code, **result, **cost,
             **{k: sim.get(k) for k in ("overruns", "catch_ups", "caught_up_ticks", "failsafes")}}

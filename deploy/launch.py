@@ -62,6 +62,9 @@ class Launch:
         self.secrets = RunSecrets(None)
         self.timings: dict[str, float] = {}
         self.board = StatusBoard()
+        # The statuses as the flight ended, before the processes stop: a vehicle whose
+        # follower has stopped fails safe, so the final counts include the shutdown.
+        self.status_at_stop: dict[str, Any] | None = None
         self.policy = RestartPolicy(args.restart, args.max_restarts)
         self.watchdog: Watchdog | None = None
         flags = [parse_fault_flag(f, scenario.n, scenario.m) for f in args.fault]
@@ -221,6 +224,7 @@ class Launch:
                 except KeyboardInterrupt:
                     interrupted = True
                     log.warning("interrupted: stopping the run, keeping what was recorded")
+                self.status_at_stop = self.board.as_dict()
                 self.write_launch()  # the recorder draws its events on the figures
                 bus.publish(
                     self.keys.control(),

@@ -62,6 +62,7 @@ def launch_report(launch: Launch) -> dict[str, Any]:
         "faults": [f.__dict__ for f in launch.faults],
         "events": [] if launch.watchdog is None else launch.watchdog.events,
         "status": launch.board.as_dict(),
+        "status_at_stop": launch.status_at_stop,
         "load": load_report(launch),
     }
 

@@ -146,6 +146,9 @@ def test_paper_case_forms_the_formation_and_every_process_exits_cleanly(tmp_path
     assert set(launch["load"]["process_cpu_pct"]) >= {"sim", "recorder", "follower-0"}
     assert launch["load"]["ticks"]["ticks"] > 4 * 20 * 50 * 0.9  # 4 followers, >= 20 s at 50 Hz
     assert launch["load"]["ticks"]["sim_ticks"] > 20 * 50 * 0.9  # the simulator's, apart
+    # No vehicle failed safe in flight (followers stop before the simulator, and their
+    # vehicles then hold: "status", the last heard, may count those).
+    assert launch["status_at_stop"]["sim-0"]["failsafes"] == 0, launch["status_at_stop"]
     codes = assert_all_exited(out)
     assert set(codes) == {"sim", "recorder", "follower-0", "follower-1", "follower-2",
                           "follower-3", "target-0", "target-1"}
