@@ -1,10 +1,11 @@
-"""Repeatability (issue 9): the main job N times, against the lock-step run at 50 Hz.
+"""Repeatability (issue 9): the main job N times, against the lock-step run at its control rate.
 
 Runs `enclose run --duration D` with the defaults N times (real processes on loopback),
-then `enclose simulate --dt 0.02 --duration D` once, and prints every run's metrics,
-the distribution (min / median / max) and the issue's checks: every run inside the
-paper's bounds, worst estimator error <= 1.5x the lock-step one, command jump < 0.5 m/s.
-Simulator overruns and catch-ups come from launch.json (the simulator's last status).
+then `enclose simulate` once at the scenario's control rate (`--dt` = 1 / rate_hz), and
+prints every run's metrics, the distribution (min / median / max) and the issue's checks:
+every run inside the paper's bounds, worst estimator error <= 1.5x the lock-step one,
+command jump < 0.5 m/s.  Simulator overruns and catch-ups come from launch.json (the
+simulator's status as the flight ended).
 
 Each run also reports its cost (launch.json "load"): the share of follower ticks that ran
 late, the simulator's late ticks, the followers' mean CPU, the largest follower's peak RSS
@@ -27,6 +28,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from agents.scenario_file import load_scenario
 
 KEYS = ("estimator_error_m", "radius_error_m", "angle_error", "settle_time_s",
         "command_jump_m_s", "silent_followers")
@@ -69,10 +72,11 @@ def load_figures(load: dict[str, Any]) -> dict[str, Any]:
             "busy_pct": load.get("machine_busy_pct")}
 
 
-def lockstep(out: Path, scenario: str, duration_s: float) -> dict[str, Any]:
+def lockstep(out: Path, scenario: str, duration_s: float, rate_hz: float) -> dict[str, Any]:
     shutil.rmtree(out, ignore_errors=True)
-    subprocess.run([sys.executable, "-m", "deploy.cli", "simulate", scenario, "--dt", "0.02",
-                    "--duration", str(duration_s), "--out", str(out), "--no-progress"],
+    subprocess.run([sys.executable, "-m", "deploy.cli", "simulate", scenario,
+                    "--dt", f"{1 / rate_hz}", "--duration", str(duration_s), "--out", str(out),
+                    "--no-progress"],
                    stdout=subprocess.DEVNULL, check=True)
     return {k: metrics(out).get(k) for k in KEYS}
 
@@ -93,7 +97,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("runs/bench-repeat"))
     parser.add_argument("extra", nargs="*", help="more `enclose run` arguments (after --)")
     args = parser.parse_args()
-    ref = lockstep((args.out / "lockstep-50hz").resolve(), args.scenario, args.duration)
+    # The reference at the swarm's own control rate (ring64: 20 Hz), not a fixed 50 Hz.
+    rate_hz = load_scenario(args.scenario).run.rate_hz
+    ref = lockstep((args.out / f"lockstep-{rate_hz:g}hz").resolve(), args.scenario,
+                   args.duration, rate_hz)
     cols = [*KEYS, "late_pct", "sim_late_pct", "follower_cpu_pct", "follower_rss_mb", "busy_pct",
             "overruns",
             "catch_ups", "failsafes"]
@@ -107,8 +114,9 @@ def main() -> None:
         print(f"| {k + 1} | {r['exit_code']} | " +
               " | ".join(f"{r.get(c):.4g}" if isinstance(r.get(c), float) else str(r.get(c))
                          for c in cols) + " |", flush=True)
-    print("| lock-step 50 Hz | | " + " | ".join(f"{ref[c]:.4g}" if isinstance(ref.get(c), float)
-                                               else str(ref.get(c)) for c in KEYS) + " |")
+    print(f"| lock-step {rate_hz:g} Hz | | "
+          + " | ".join(f"{ref[c]:.4g}" if isinstance(ref.get(c), float) else str(ref.get(c))
+                       for c in KEYS) + " |")
     print("\n| metric | min | median | max |\n|---|---|---|---|")
     for c in (*KEYS, "late_pct", "sim_late_pct", "follower_cpu_pct", "follower_rss_mb",
               "busy_pct"):
@@ -122,7 +130,7 @@ def main() -> None:
     print(f"\n{n_inside} of {len(runs)} runs inside the paper's bounds; worst late ticks "
           f"{late:.2f} % (target < 1 %)")
     print(f"worst estimator error {worst:.4g} m = {worst / ref['estimator_error_m']:.2f}x the "
-          f"lock-step run at 50 Hz ({ref['estimator_error_m']:.4g} m); target <= 1.5x")
+          f"lock-step run at {rate_hz:g} Hz ({ref['estimator_error_m']:.4g} m); target <= 1.5x")
     print(f"largest command jump {jump:.3g} m/s; target < 0.5 m/s")
 
 
