@@ -101,31 +101,90 @@ def phase_report(
     """Per phase: its members, the time the re-formed ring took to enter the paper's bounds
     (|e_rho| < eps_rho and |e_delta| < eps_delta for every member, to the end of the phase;
     None if it never did) and the largest errors over the phase's second half."""
-    eps_rho, eps_delta = scenario.run.eps_rho_m, scenario.run.eps_delta
-    out: list[dict[str, object]] = []
-    for k, (start, end, members) in enumerate(phases):
-        row: dict[str, object] = {"from_s": start, "to_s": end, "members": list(members)}
-        last = end if k == len(phases) - 1 else end - 1e-9  # the change belongs to the next
-        window = (series.t_s >= start) & (series.t_s <= last)
-        if len(members) >= 2 and window.sum() >= 2:
-            row.update(_phase_numbers(series, scenario, members, start, last, eps_rho, eps_delta))
-        out.append(row)
-    return out
+    report = PhaseReport(scenario, phases)
+    report.add(series)
+    return report.result()
 
 
-def _phase_numbers(series: RunSeries, scenario: Scenario, members: tuple[int, ...],
-                   start: float, end: float, eps_rho: float, eps_delta: float
-                   ) -> dict[str, object]:
-    t, err, _ = ring_errors(series, scenario, members, start, end)
-    inside = np.all((np.abs(err.e_rho_m) < eps_rho) & (np.abs(err.e_delta) < eps_delta), axis=1)
-    outside = np.nonzero(~inside)[0]
-    reform = None
-    if inside[-1]:
-        reform = 0.0 if len(outside) == 0 else float(t[outside[-1] + 1] - start)
-    late = t >= 0.5 * (start + end)
-    return {
-        "reform_s": reform,
-        "estimator_error_m": float(err.estimator_error_m[late].max()),
-        "radius_error_m": float(np.abs(err.e_rho_m[late]).max()),
-        "angle_error": float(np.abs(err.e_delta[late]).max()),
-    }
+class _Phase:
+    """One phase's numbers, gathered chunk by chunk."""
+
+    def __init__(self, scenario: Scenario, start: float, end: float,
+                 members: tuple[int, ...], last: bool) -> None:
+        self.start, self.end, self.members = start, end, members
+        self.to_s = end if last else end - 1e-9  # the change belongs to the next
+        self.rows = 0
+        self.ring: tuple[list[int], tuple[int, ...], FloatArray] | None = None
+        if len(members) >= 2:
+            form = membership(scenario, members)
+            idx = list(form.members)
+            local = {i: k for k, i in enumerate(idx)}
+            self.ring = (idx, tuple(local[form.successor[i]] for i in idx),
+                         np.array([form.angles_rad[i] for i in idx]))
+        self.reform: float | None = None  # the first sample after the last one outside
+        self.reform_next = False
+        self.inside_last = False
+        self.late: list[float] = [-np.inf] * 3  # estimator, radius, angle (NaN shows)
+        self.late_rows = 0
+
+    def add(self, series: RunSeries, rho_d_m: float, eps: tuple[float, float]) -> None:
+        window = (series.t_s >= self.start) & (series.t_s <= self.to_s)
+        if not np.any(window):
+            return
+        self.rows += int(window.sum())
+        if self.ring is None:
+            return
+        idx, successor, angles = self.ring
+        sub = RunSeries(series.t_s[window], series.follower_pos_m[window][:, idx],
+                        series.estimate_m[window][:, idx], series.command_m_s[window][:, idx],
+                        series.target_pos_m[window])
+        err = error_series(sub, successor, angles, rho_d_m)
+        t = sub.t_s
+        inside = np.all((np.abs(err.e_rho_m) < eps[0]) & (np.abs(err.e_delta) < eps[1]), axis=1)
+        if self.reform_next:
+            self.reform, self.reform_next = float(t[0] - self.start), False
+        outside = np.nonzero(~inside)[0]
+        if len(outside):
+            if outside[-1] + 1 < len(t):
+                self.reform = float(t[outside[-1] + 1] - self.start)
+            else:
+                self.reform_next = True
+        self.inside_last = bool(inside[-1])
+        late = t >= 0.5 * (self.start + self.to_s)
+        if np.any(late):
+            self.late_rows += int(late.sum())
+            for k, values in enumerate((err.estimator_error_m[late], np.abs(err.e_rho_m[late]),
+                                        np.abs(err.e_delta[late]))):
+                v = float(values.max())
+                self.late[k] = np.nan if np.isnan(v) or np.isnan(self.late[k]) \
+                    else max(self.late[k], v)
+
+    def result(self) -> dict[str, object]:
+        row: dict[str, object] = {"from_s": self.start, "to_s": self.end,
+                                  "members": list(self.members)}
+        if self.ring is not None and self.rows >= 2:
+            late = [v if self.late_rows else None for v in self.late]
+            row.update({
+                "reform_s": (0.0 if self.reform is None else self.reform)
+                if self.inside_last else None,
+                "estimator_error_m": late[0], "radius_error_m": late[1], "angle_error": late[2],
+            })
+        return row
+
+
+class PhaseReport:
+    """`phase_report` of a series fed in consecutive chunks (time order)."""
+
+    def __init__(self, scenario: Scenario,
+                 phases: list[tuple[float, float, tuple[int, ...]]]) -> None:
+        self.rho_d_m = scenario.pattern.rho_d_m
+        self.eps = (scenario.run.eps_rho_m, scenario.run.eps_delta)
+        self.phases = [_Phase(scenario, start, end, members, k == len(phases) - 1)
+                       for k, (start, end, members) in enumerate(phases)]
+
+    def add(self, series: RunSeries) -> None:
+        for phase in self.phases:
+            phase.add(series, self.rho_d_m, self.eps)
+
+    def result(self) -> list[dict[str, object]]:
+        return [phase.result() for phase in self.phases]

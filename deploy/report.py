@@ -1,56 +1,96 @@
-"""Turn a recorded run into metrics.json, series.csv and figures: one code path for all runs."""
+"""Turn a run into metrics.json, series.csv/series.parquet and figures: one code path for all
+runs, lock-step (a series in memory) or recorded (read from disk chunk by chunk)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import logging
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from agents.core.metrics import Metrics, compute_metrics, error_series
-from agents.core.timeseries import RunSeries
+from agents.core.metrics import Metrics, MetricsAccumulator, error_series
+from agents.core.timeseries import FloatArray, RunSeries, decimated_rows
 from deploy.figures import performance_figure, trajectory_figure
 from deploy.figures_links import LINKS_PNG, link_health_figure
 from deploy.marks import run_marks
 from deploy.recording.link_history import LINKS_CSV, read_links_csv
 from deploy.rundir import (
     METRICS_FILE,
-    SERIES_FILE,
     RunInfo,
+    SeriesWriter,
     read_info,
     read_series,
+    series_file,
     write_metrics,
-    write_series,
 )
 from transport.errors import EncloseError
 
 log = logging.getLogger(__name__)
 MAX_CSV_RATE_HZ = 100.0
+# Samples drawn per figure at most: 240 s of the CSV's 100 Hz; a longer run's figures
+# take every k-th sample (marks are drawn at their own times).
+FIGURE_ROWS = 24_000
 PERFORMANCE_PNG = "performance.png"
 TRAJECTORY_PNG = "trajectory.png"
 
 
+class SeriesSource(Protocol):
+    """A run's series read in consecutive chunks (time order), its time column known first."""
+
+    t_s: FloatArray
+
+    def chunks(self) -> Iterator[RunSeries]: ...
+
+
+class ChunkSink(Protocol):
+    """Something more to compute from each chunk (e.g. the membership phases)."""
+
+    def add(self, series: RunSeries) -> None: ...
+
+
+class WholeSeries:
+    """A series in memory as a one-chunk source (lock-step runs)."""
+
+    def __init__(self, series: RunSeries) -> None:
+        self.t_s = series.t_s
+        self._series = series
+
+    def chunks(self) -> Iterator[RunSeries]:
+        yield self._series
+
+
 def write_run_outputs(
     run_dir: Path,
-    series: RunSeries,
+    series: RunSeries | SeriesSource,
     info: RunInfo,
-    extra: dict[str, Any] | None = None,
+    extra: Mapping[str, Any] | Callable[[], Mapping[str, Any]] | None = None,
     marks_s: list[float] | None = None,
+    sinks: Sequence[ChunkSink] = (),
 ) -> Metrics:
-    """Metrics from the full-rate series; CSV and figures from at most 100 Hz of it."""
+    """Metrics from the full-rate series; series.csv and series.parquet at most 100 Hz of
+    it; figures from series.parquet.  One pass over the chunks; `extra` (metrics.json's
+    other keys) may be a function, called once the pass (and `sinks`) are done."""
+    source = WholeSeries(series) if isinstance(series, RunSeries) else series
     run_dir.mkdir(parents=True, exist_ok=True)
     angles = np.asarray(info.angles_rad)
-    errors = error_series(series, info.successor, angles, info.rho_d_m)
-    metrics = compute_metrics(series, errors, info.steady_from_s, info.eps_rho_m, info.eps_delta)
-    write_metrics(run_dir, metrics, info, extra or {})
-    thin = series.decimate(_decimation(series.t_s))
-    thin_errors = error_series(thin, info.successor, angles, info.rho_d_m)
-    write_series(run_dir / SERIES_FILE, thin, thin_errors)
-    _figures(run_dir, thin, info, marks_s or [])
-    return metrics
+    every, total, offset = _decimation(source.t_s), len(source.t_s), 0
+    metrics = MetricsAccumulator(info.steady_from_s, info.eps_rho_m, info.eps_delta)
+    with SeriesWriter(run_dir, info.n, info.m) as writer:
+        for chunk in source.chunks():
+            metrics.add(chunk, error_series(chunk, info.successor, angles, info.rho_d_m))
+            for sink in sinks:
+                sink.add(chunk)
+            thin = chunk.take(decimated_rows(offset, len(chunk.t_s), every, total))
+            writer.add(thin, error_series(thin, info.successor, angles, info.rho_d_m))
+            offset += len(chunk.t_s)
+    result = metrics.result()
+    write_metrics(run_dir, result, info, dict(extra() if callable(extra) else extra or {}))
+    _figures(run_dir, info, marks_s or [])
+    return result
 
 
 def _decimation(t_s: np.ndarray) -> int:
@@ -60,9 +100,12 @@ def _decimation(t_s: np.ndarray) -> int:
     return max(1, round(1.0 / (MAX_CSV_RATE_HZ * dt))) if dt > 0 else 1
 
 
-def _figures(run_dir: Path, series: RunSeries, info: RunInfo, marks_s: list[float]) -> list[Path]:
-    """`marks_s`: membership changes; with the launcher's events (launch.json) they are
-    marks on every figure.  links.png only where links.csv exists (networked runs)."""
+def _figures(run_dir: Path, info: RunInfo, marks_s: list[float]) -> list[Path]:
+    """From the run's series (at most FIGURE_ROWS samples of it: a long run's figures stay
+    readable and quick); `marks_s`: membership changes; with the launcher's events
+    (launch.json) they are marks on every figure.  links.png only where links.csv exists
+    (networked runs)."""
+    series = read_series(series_file(run_dir), info.n, info.m, FIGURE_ROWS)
     angles = np.asarray(info.angles_rad)
     errors = error_series(series, info.successor, angles, info.rho_d_m)
     eps = (info.eps_rho_m, info.eps_delta)
@@ -86,12 +129,11 @@ def _marks(run_dir: Path) -> list[float]:
 
 
 def regenerate_figures(run_dir: Path) -> list[Path]:
-    """Figures again from a run directory's series.csv and run.json."""
+    """Figures again from a run directory's series (series.parquet, or series.csv where a
+    run has none) and run.json."""
     if not run_dir.is_dir():
         raise EncloseError(f"{run_dir} is not a run directory")
-    info = read_info(run_dir)
-    series = read_series(run_dir / SERIES_FILE, info.n, info.m)
-    return _figures(run_dir, series, info, _marks(run_dir))
+    return _figures(run_dir, read_info(run_dir), _marks(run_dir))
 
 
 def register(sub: Any) -> None:

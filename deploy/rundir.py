@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -11,11 +13,12 @@ from typing import Any
 import numpy as np
 
 from agents.core.metrics import ErrorSeries, Metrics
-from agents.core.timeseries import RunSeries
+from agents.core.timeseries import FloatArray, RunSeries, decimated_rows
 from agents.scenario.model import Scenario
 from transport.errors import EncloseError
 
 SERIES_FILE = "series.csv"
+SERIES_PARQUET = "series.parquet"
 METRICS_FILE = "metrics.json"
 RUN_FILE = "run.json"
 
@@ -62,33 +65,108 @@ def series_columns(n: int, m: int) -> list[str]:
     return cols
 
 
-def write_series(path: Path, series: RunSeries, errors: ErrorSeries) -> None:
+def series_rows(series: RunSeries, errors: ErrorSeries) -> FloatArray:
+    """The rows of series.csv (columns `series_columns`) as one (k, columns) array."""
     k = len(series.t_s)
     blocks = [series.t_s[:, None]]
     for arr in (series.follower_pos_m, series.estimate_m, series.command_m_s, series.target_pos_m):
         blocks.append(arr.reshape(k, -1))
     for err in (errors.z_m, errors.delta, errors.estimator_error_m, errors.e_rho_m, errors.e_delta):
         blocks.append(err)
-    n, m = series.follower_pos_m.shape[1], series.target_pos_m.shape[1]
-    header = ",".join(series_columns(n, m))
-    np.savetxt(path, np.hstack(blocks), delimiter=",", header=header, comments="", fmt="%.9g")
+    return np.hstack(blocks)
 
 
-def read_series(path: Path, n: int, m: int) -> RunSeries:
+class SeriesWriter:
+    """series.csv and series.parquet (the same rows, full precision in Parquet: what long
+    runs are read back from), written chunk by chunk."""
+
+    def __init__(self, run_dir: Path, n: int, m: int) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        self.columns = series_columns(n, m)
+        self._csv = open(run_dir / SERIES_FILE, "w")  # noqa: SIM115  # closed in close()
+        self._csv.write(",".join(self.columns) + "\n")
+        self._schema = pa.schema([(c, pa.float64()) for c in self.columns])
+        self._parquet = pq.ParquetWriter(run_dir / SERIES_PARQUET, self._schema)
+
+    def add(self, series: RunSeries, errors: ErrorSeries) -> None:
+        import pyarrow as pa
+
+        rows = series_rows(series, errors)
+        if not len(rows):
+            return
+        np.savetxt(self._csv, rows, delimiter=",", fmt="%.9g")
+        self._parquet.write_table(pa.Table.from_arrays(
+            [pa.array(rows[:, k]) for k in range(rows.shape[1])], schema=self._schema))
+
+    def close(self) -> None:
+        self._csv.close()
+        self._parquet.close()
+
+    def __enter__(self) -> SeriesWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def series_file(run_dir: Path) -> Path:
+    """The file a run directory's series is read from: Parquet where there is one."""
+    parquet = run_dir / SERIES_PARQUET
+    return parquet if parquet.exists() else run_dir / SERIES_FILE
+
+
+def read_series(path: Path, n: int, m: int, max_rows: int | None = None) -> RunSeries:
+    """series.csv or series.parquet (by its suffix) as a RunSeries; with `max_rows`, every
+    k-th row (and the last) such that at most about that many are kept."""
     try:
-        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        if path.suffix == ".parquet":
+            total, batches = _parquet_batches(path)
+        else:
+            total, batches = _csv_batches(path)
+        every = 1 if max_rows is None else max(1, math.ceil(total / max_rows))
+        kept, offset = [], 0
+        for data in batches:
+            if data.shape[1] != len(series_columns(n, m)):
+                raise EncloseError(f"{path}: expected {len(series_columns(n, m))} columns, "
+                                   f"found {data.shape[1]}")
+            kept.append(data[decimated_rows(offset, len(data), every, total)])
+            offset += len(data)
     except (OSError, ValueError) as exc:
         raise EncloseError(f"cannot read {path}: {exc}") from exc
-    if data.shape[1] != len(series_columns(n, m)):
-        raise EncloseError(
-            f"{path}: expected {len(series_columns(n, m))} columns, found {data.shape[1]}"
-        )
+    data = np.concatenate(kept) if kept else np.empty((0, len(series_columns(n, m))))
     k, col = data.shape[0], 1
     arrays = []
     for count in (n, n, n, m):
         arrays.append(data[:, col : col + 2 * count].reshape(k, count, 2))
         col += 2 * count
     return RunSeries(data[:, 0], *arrays)
+
+
+_READ_ROWS = 65536
+
+
+def _parquet_batches(path: Path) -> tuple[int, Iterator[FloatArray]]:
+    import pyarrow.parquet as pq
+
+    source = pq.ParquetFile(path)
+    batches = (np.column_stack([c.to_numpy() for c in b.columns])
+               for b in source.iter_batches(batch_size=_READ_ROWS))
+    return source.metadata.num_rows, batches
+
+
+def _csv_batches(path: Path) -> tuple[int, Iterator[FloatArray]]:
+    with open(path) as f:
+        total = sum(1 for _ in f) - 1
+
+    def read() -> Iterator[FloatArray]:
+        with open(path) as f:
+            f.readline()
+            while lines := list(itertools.islice(f, _READ_ROWS)):
+                yield np.loadtxt(lines, delimiter=",", ndmin=2)
+
+    return max(0, total), read()
 
 
 def write_metrics(run_dir: Path, metrics: Metrics, info: RunInfo, extra: dict[str, Any]) -> None:

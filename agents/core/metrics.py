@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -74,6 +75,107 @@ def worst(values: FloatArray) -> float:
     return float(finite.max()) if finite.size else float("nan")
 
 
+class _Maxima:
+    """The largest errors and command jump over the rows a selection keeps."""
+
+    def __init__(self) -> None:
+        self.estimator: float | None = None  # NaN ignored, as `worst`
+        self.radius = -math.inf  # NaN shows
+        self.angle = -math.inf
+        self.jump: float | None = None  # NaN ignored
+        self.jumps = 0
+
+    def add(self, errors: ErrorSeries, rows: BoolArray, jumps: FloatArray) -> None:
+        if np.any(rows):
+            self.estimator = _fold_worst(self.estimator, errors.estimator_error_m[rows])
+            self.radius = _fold_max(self.radius, np.abs(errors.e_rho_m[rows]).max())
+            self.angle = _fold_max(self.angle, np.abs(errors.e_delta[rows]).max())
+        if jumps.size:
+            self.jump = _fold_worst(self.jump, jumps)
+            self.jumps += jumps.size
+
+
+def _fold_worst(held: float | None, values: FloatArray) -> float | None:
+    v = worst(values)
+    if math.isnan(v):
+        return held
+    return v if held is None else max(held, v)
+
+
+def _fold_max(held: float, value: float) -> float:
+    return math.nan if math.isnan(held) or math.isnan(value) else max(held, float(value))
+
+
+class MetricsAccumulator:
+    """`compute_metrics` of a series fed in consecutive chunks (time order): the same
+    numbers, with memory for a chunk, not the run."""
+
+    def __init__(self, steady_from_s: float, eps_rho_m: float, eps_delta: float) -> None:
+        self.steady_from_s, self.eps_rho_m, self.eps_delta = steady_from_s, eps_rho_m, eps_delta
+        self._steady, self._all = _Maxima(), _Maxima()
+        self._last: tuple[FloatArray, bool] | None = None  # previous row's command, steady
+        self._t_first: float | None = None
+        self._t_last = math.nan
+        self._samples = 0
+        self._settle: float | None = None  # the sample after the last one outside
+        self._settle_next = False  # the last one outside ended the previous chunk
+        self._inside_last = False
+        self._any_steady = False
+
+    def add(self, series: RunSeries, errors: ErrorSeries) -> None:
+        t = series.t_s
+        if not len(t):
+            return
+        steady = t >= self.steady_from_s
+        self._any_steady |= bool(steady.any())
+        cmd = series.command_m_s
+        if self._last is not None:
+            cmd = np.concatenate([self._last[0][None], cmd])
+            steady_pairs = np.concatenate([[self._last[1]], steady])
+        else:
+            steady_pairs = steady
+        jumps = np.linalg.norm(np.diff(cmd, axis=0), axis=2)
+        self._steady.add(errors, steady, jumps[steady_pairs[1:] & steady_pairs[:-1]])
+        self._all.add(errors, np.ones_like(steady), jumps)
+        self._last = (series.command_m_s[-1], bool(steady[-1]))
+        self._track_settle(t, np.all((np.abs(errors.e_rho_m) < self.eps_rho_m)
+                                     & (np.abs(errors.e_delta) < self.eps_delta), axis=1))
+        if self._t_first is None:
+            self._t_first = float(t[0])
+        self._t_last = float(t[-1])
+        self._samples += len(t)
+
+    def _track_settle(self, t: FloatArray, inside: BoolArray) -> None:
+        if self._settle_next:
+            self._settle, self._settle_next = float(t[0]), False
+        outside = np.nonzero(~inside)[0]
+        if len(outside):
+            after = outside[-1] + 1
+            if after < len(t):
+                self._settle = float(t[after])
+            else:
+                self._settle_next = True
+        self._inside_last = bool(inside[-1])
+
+    def result(self) -> Metrics:
+        """Over the steady rows, or over all of them if none is steady."""
+        sel = self._steady if self._any_steady else self._all
+        settle = None
+        if self._samples and self._inside_last:
+            settle = self._t_first if self._settle is None else self._settle
+        return Metrics(
+            steady_from_s=float(self.steady_from_s),
+            estimator_error_m=math.nan if sel.estimator is None else sel.estimator,
+            # From true positions only: never NaN by design, so a NaN there must show.
+            radius_error_m=sel.radius,
+            angle_error=sel.angle,
+            settle_time_s=settle,
+            command_jump_m_s=(math.nan if sel.jump is None else sel.jump) if sel.jumps else 0.0,
+            duration_s=self._t_last - (math.nan if self._t_first is None else self._t_first),
+            samples=self._samples,
+        )
+
+
 def compute_metrics(
     series: RunSeries,
     errors: ErrorSeries,
@@ -81,22 +183,6 @@ def compute_metrics(
     eps_rho_m: float,
     eps_delta: float,
 ) -> Metrics:
-    steady = series.t_s >= steady_from_s
-    if not np.any(steady):
-        steady = np.ones_like(series.t_s, dtype=bool)
-    inside = np.all(
-        (np.abs(errors.e_rho_m) < eps_rho_m) & (np.abs(errors.e_delta) < eps_delta), axis=1
-    )
-    jumps = np.linalg.norm(np.diff(series.command_m_s, axis=0), axis=2)
-    steady_jumps = jumps[steady[1:] & steady[:-1]]
-    return Metrics(
-        steady_from_s=float(steady_from_s),
-        estimator_error_m=worst(errors.estimator_error_m[steady]),
-        # From true positions only: never NaN by design, so a NaN there must show.
-        radius_error_m=float(np.abs(errors.e_rho_m[steady]).max()),
-        angle_error=float(np.abs(errors.e_delta[steady]).max()),
-        settle_time_s=settle_time(series.t_s, inside),
-        command_jump_m_s=worst(steady_jumps) if steady_jumps.size else 0.0,
-        duration_s=float(series.t_s[-1] - series.t_s[0]),
-        samples=len(series.t_s),
-    )
+    acc = MetricsAccumulator(steady_from_s, eps_rho_m, eps_delta)
+    acc.add(series, errors)
+    return acc.result()

@@ -27,11 +27,25 @@ class RunSeries:
 
     def decimate(self, every: int) -> RunSeries:
         """Every `every`-th sample (and always the last one)."""
-        idx = np.unique(np.append(np.arange(0, len(self.t_s), max(1, every)), len(self.t_s) - 1))
+        return self.take(decimated_rows(0, len(self.t_s), every, len(self.t_s)))
+
+    def take(self, rows: NDArray[np.int64]) -> RunSeries:
+        """The samples at `rows` (indices, in order)."""
         return RunSeries(
-            self.t_s[idx],
-            self.follower_pos_m[idx],
-            self.estimate_m[idx],
-            self.command_m_s[idx],
-            self.target_pos_m[idx],
+            self.t_s[rows],
+            self.follower_pos_m[rows],
+            self.estimate_m[rows],
+            self.command_m_s[rows],
+            self.target_pos_m[rows],
         )
+
+
+def decimated_rows(offset: int, count: int, every: int, total: int) -> NDArray[np.int64]:
+    """Of the rows offset..offset+count-1 of a series of `total`, as indices from `offset`,
+    those `decimate(every)` keeps: every `every`-th and the last."""
+    every = max(1, every)
+    first = -offset % every
+    rows = np.arange(first, count, every, dtype=np.int64)
+    if offset <= total - 1 < offset + count and (total - 1) % every:
+        rows = np.append(rows, total - 1 - offset)
+    return rows

@@ -1,4 +1,4 @@
-"""Assemble decoded bus messages into the `RunSeries` every metric reads (pure, no I/O).
+"""Assemble decoded bus messages into the `RunSeries` every metric reads.
 
 The grid is the simulator's truth stream: one sample per `TruthSnapshot`, at experiment time
 `t = truth stamp - start_stamp_s`, kept when `0 <= t <= duration_s`.  Each follower's estimate
@@ -10,91 +10,83 @@ NaN estimates and commands: the run is kept, its metrics are over the others, an
 `Assembly.silent` names it so that the verdict cannot call the run inside the bounds.
 The age of the state used (truth stamp - state stamp) is what a benchmark reports as
 "neighbour-state age at use".
+
+Memory does not grow with the run: truth and states go to `RowSpill`s on disk as they
+arrive, and only the last seconds stay in memory for live progress (`recent_series`).
+`assemble()` aligns the run chunk by chunk of the truth grid (deploy.recording.chunks).
 """
 
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from agents.core.timeseries import RunSeries
+from deploy.recording.chunks import (
+    STATE_WIDTH,
+    Assembly,
+    FollowerStats,
+    StateTally,
+    align_latest,
+    follower_columns,
+    in_window,
+    truth_series,
+    whole,
+)
+from deploy.recording.spill import RowSpill
 from transport.errors import DeployError
 from transport.messages import FollowerState, Message, RunControl, TruthSnapshot
 
+__all__ = ["Assembly", "FollowerStats", "RunAssembler", "align_latest", "assembly_extra"]
+
 FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
-_EPS_S = 1e-9
+RECENT_TRUTH = 1024  # truth rows kept for live progress: 20 s at 50 Hz
+RECENT_STATES = 512  # states per follower kept for it
+MAX_SENDERS = 16  # sequence tallies per follower index (a restart may bring a new sender)
 
 
-@dataclass(frozen=True)
-class FollowerStats:
-    """What the recorder saw of one follower's state stream."""
+class _Ring:
+    """The newest `capacity` rows appended, oldest first."""
 
-    states: int
-    seq_gaps: int
-    stale: int
-    filled_samples: int  # truth samples taken before its first state (first state used)
-    age_p50_ms: float | None  # age of the state used at each (unfilled) truth sample
-    age_p99_ms: float | None
+    def __init__(self, capacity: int, width: int) -> None:
+        self._rows = np.empty((capacity, width))
+        self._next = 0
 
-    def as_dict(self) -> dict[str, Any]:
-        return dict(self.__dict__)
+    def append(self, row: FloatArray | tuple[float, ...]) -> None:
+        self._rows[self._next % len(self._rows)] = row
+        self._next += 1
 
-
-@dataclass(frozen=True)
-class Assembly:
-    """The assembled run: the series and the counters that qualify it."""
-
-    series: RunSeries
-    followers: tuple[FollowerStats, ...]
-    start_stamp_s: float
-    duration_s: float  # planned, from the RunControl
-    start_source: str  # "control", or "first_truth" when no start was heard
-    silent: tuple[int, ...] = ()  # 0-based followers that sent no state (NaN columns)
-
-    @property
-    def filled_samples(self) -> int:
-        return sum(f.filled_samples for f in self.followers)
-
-
-@dataclass
-class _StateLog:
-    stamps_s: list[float]
-    r_m: list[tuple[float, float]]
-    u_m_s: list[tuple[float, float]]
-    last_seq: dict[str, int]
-    dr_m_s: list[tuple[float, float]] = field(default_factory=list)
-    gaps: int = 0
-    stale: int = 0
-
-
-def align_latest(query_s: FloatArray, stamps_s: FloatArray) -> tuple[IntArray, NDArray[np.bool_]]:
-    """Index of the latest stamp <= each query (stamps sorted), and where none exists.
-
-    Where none exists the index is 0: the first state stands in, flagged as filled.
-    """
-    idx = np.searchsorted(stamps_s, query_s + _EPS_S, side="right").astype(np.int64) - 1
-    filled = idx < 0
-    idx[filled] = 0
-    return idx, filled
+    def last(self, k: int | None = None) -> FloatArray:
+        held = min(self._next, len(self._rows))
+        k = held if k is None else min(k, held)
+        return self._rows[np.arange(self._next - k, self._next) % len(self._rows)]
 
 
 class RunAssembler:
-    """Fed decoded messages in any order; `build()` gives the run on the truth grid."""
+    """Fed decoded messages in any order; `assemble()` gives the run on the truth grid.
 
-    def __init__(self, n: int, m: int) -> None:
+    `spill_dir`: where the spilled rows go (anonymous temporary files; the system's
+    temporary directory if None).
+    """
+
+    def __init__(self, n: int, m: int, spill_dir: Path | None = None) -> None:
         self.n, self.m = n, m
+        self.spill_dir = spill_dir
         self.drops: Counter[str] = Counter()  # messages unusable for the series, per reason
         self.start: RunControl | None = None
         self.stopped = False
-        self._truth_stamps_s: list[float] = []
-        self._truth_pos_m: list[FloatArray] = []  # (n, 2) follower xy
-        self._truth_tgt_m: list[FloatArray] = []  # (m, 2)
-        self._states = [_StateLog([], [], [], {}) for _ in range(n)]
+        self.truth = RowSpill(1 + 2 * n + 2 * m, spill_dir)  # stamp, xy per follower, targets
+        self.states = RowSpill(STATE_WIDTH + 1, spill_dir)  # stamp, index, r, dr, u
+        self.tallies = [StateTally() for _ in range(n)]
+        self._recent_truth = _Ring(RECENT_TRUTH, self.truth.width)
+        self._recent_states = [_Ring(RECENT_STATES, STATE_WIDTH) for _ in range(n)]
+        self._truth_min_s = np.inf
+        self._truth_max_s = -np.inf
+        self._truth_last_s: float | None = None  # of the last to arrive
 
     # ---- feeding -------------------------------------------------------------------------
     def add(self, msg: Message) -> None:
@@ -112,135 +104,122 @@ class RunAssembler:
         if len(msg.follower_pos_m) != self.n or len(msg.target_pos_m) != self.m:
             self.drops["truth_shape"] += 1
             return
-        self._truth_stamps_s.append(msg.header.stamp_s)
-        self._truth_pos_m.append(np.asarray(msg.follower_pos_m, dtype=np.float64)[:, :2])
-        self._truth_tgt_m.append(np.asarray(msg.target_pos_m, dtype=np.float64))
+        stamp = msg.header.stamp_s
+        row = np.empty(self.truth.width)
+        row[0] = stamp
+        row[1 : 1 + 2 * self.n] = np.asarray(msg.follower_pos_m, dtype=np.float64)[:, :2].ravel()
+        row[1 + 2 * self.n :] = np.asarray(msg.target_pos_m, dtype=np.float64).ravel()
+        self.truth.append(row)
+        self._recent_truth.append(row)
+        self._truth_min_s = min(self._truth_min_s, stamp)
+        self._truth_max_s = max(self._truth_max_s, stamp)
+        self._truth_last_s = stamp
 
     def _add_state(self, msg: FollowerState) -> None:
         if not 0 <= msg.index < self.n:
             self.drops["state_index"] += 1
             return
-        log = self._states[msg.index]
+        tally = self.tallies[msg.index]
         sender, seq = msg.header.sender_id, msg.header.seq
-        last = log.last_seq.get(sender)
+        last = tally.last_seq.get(sender)
         if last is not None and seq <= last:
-            log.stale += 1
+            tally.stale += 1
         else:
             if last is not None:
-                log.gaps += seq - last - 1
-            log.last_seq[sender] = seq
-        log.stamps_s.append(msg.header.stamp_s)
-        log.r_m.append(msg.r_m)
-        log.dr_m_s.append(msg.dr_m_s)
-        log.u_m_s.append(msg.u_m_s)
+                tally.gaps += seq - last - 1
+            elif len(tally.last_seq) >= MAX_SENDERS:
+                del tally.last_seq[next(iter(tally.last_seq))]
+            tally.last_seq[sender] = seq
+        stamp = msg.header.stamp_s
+        row = (stamp, *msg.r_m, *msg.dr_m_s, *msg.u_m_s)
+        self.states.append((stamp, float(msg.index), *row[1:]))
+        self._recent_states[msg.index].append(row)
+        tally.states += 1
+        if tally.first is None or stamp < tally.first[0]:
+            tally.first = np.asarray(row, dtype=np.float64)
 
     # ---- queries -------------------------------------------------------------------------
     @property
     def truth_count(self) -> int:
-        return len(self._truth_stamps_s)
+        return self.truth.rows
 
     def state_counts(self) -> list[int]:
-        return [len(log.stamps_s) for log in self._states]
+        return [t.states for t in self.tallies]
 
     def start_stamp_s(self) -> float | None:
         if self.start is not None:
             return self.start.start_stamp_s
-        return min(self._truth_stamps_s) if self._truth_stamps_s else None
+        return self._truth_min_s if self.truth.rows else None
 
     def latest_experiment_time_s(self) -> float | None:
         start = self.start_stamp_s()
-        if start is None or not self._truth_stamps_s:
+        if start is None or self._truth_last_s is None:
             return None
-        return self._truth_stamps_s[-1] - start
+        return self._truth_last_s - start
 
     def recent_series(self, window_s: float) -> RunSeries | None:
         """The last `window_s` of truth (by arrival) with states aligned: for live progress."""
         start = self.start_stamp_s()
-        if start is None or not self._truth_stamps_s or all(not s.stamps_s for s in self._states):
+        if start is None or not self.truth.rows or not any(self.state_counts()):
             return None
-        newest = self._truth_stamps_s[-1]
-        k = len(self._truth_stamps_s)
-        first = k - 1
-        while first > 0 and self._truth_stamps_s[first - 1] >= newest - window_s:
+        truth = self._recent_truth.last()
+        stamps = truth[:, 0]
+        newest, first = stamps[-1], len(stamps) - 1
+        while first > 0 and stamps[first - 1] >= newest - window_s:
             first -= 1
-        rows = np.arange(first, k)
-        series, _ = self._series(rows, start, tail_states=4 * (k - first) + 8, stats=False)
-        return series
+        truth, stamps = truth[first:], stamps[first:]
+        est = np.full((len(stamps), self.n, 2), np.nan)
+        cmd = np.full((len(stamps), self.n, 2), np.nan)
+        for i, ring in enumerate(self._recent_states):
+            if not self.tallies[i].states:
+                continue
+            tail = ring.last(4 * len(stamps) + 8)
+            tail = tail[np.argsort(tail[:, 0], kind="stable")]
+            est[:, i], cmd[:, i], _, _ = follower_columns(stamps, tail, tail[0])
+        return truth_series(truth, stamps - start, est, cmd, self.n)
 
     # ---- the result ----------------------------------------------------------------------
-    def build(self, duration_s: float | None = None) -> Assembly:
-        """The run between start and start + duration; DeployError says why if impossible."""
+    def assemble(self, duration_s: float | None = None,
+                 chunk_rows: int | None = None) -> Assembly:
+        """The run between start and start + duration, to be read chunk by chunk;
+        DeployError says why if impossible."""
         start = self.start_stamp_s()
-        if start is None or not self._truth_stamps_s:
+        if start is None or not self.truth.rows:
             raise DeployError("no truth samples were received: nothing to assemble")
         duration = duration_s if duration_s is not None else self._planned_duration_s()
-        stamps = np.asarray(self._truth_stamps_s)
-        t = stamps - start
-        inside = np.nonzero((t >= -_EPS_S) & (t <= duration + _EPS_S))[0]
-        # Sort by stamp and drop duplicated snapshots (a re-delivered message).
-        _, first_of_each = np.unique(stamps[inside], return_index=True)
-        rows = inside[first_of_each]
-        if len(rows) == 0:
+        inside = [k[in_window(k - start, duration)] for k in self.truth.key_blocks()]
+        # Sorted, and a re-delivered snapshot once.
+        stamps = np.unique(np.concatenate(inside))
+        if len(stamps) == 0:
             raise DeployError(
-                f"none of the {len(stamps)} truth samples lies in the experiment window "
+                f"none of the {self.truth.rows} truth samples lies in the experiment window "
                 f"[{start:.3f}, {start + duration:.3f}] (sender clock)"
             )
-        silent = tuple(i for i, log in enumerate(self._states) if not log.stamps_s)
+        silent = tuple(i for i, t in enumerate(self.tallies) if not t.states)
         if len(silent) == self.n:
             raise DeployError("no follower sent a state: nothing to judge")
-        series, stats = self._series(rows, start)
         source = "control" if self.start is not None else "first_truth"
-        return Assembly(series, stats, start, duration, source, silent)
+        return Assembly(self.truth, self.states, self.tallies, stamps, start, duration,
+                        source, silent, chunk_rows, self.spill_dir)
+
+    def build(self, duration_s: float | None = None) -> Assembly:
+        """`assemble()` read whole: for short runs and tests (`Assembly.series`)."""
+        return whole(self.assemble(duration_s))
 
     def _planned_duration_s(self) -> float:
         if self.start is not None:
             return self.start.duration_s
-        return max(self._truth_stamps_s) - min(self._truth_stamps_s)
+        return float(self._truth_max_s - self._truth_min_s)
 
-    def _series(
-        self, rows: IntArray, start_s: float, tail_states: int | None = None, stats: bool = True
-    ) -> tuple[RunSeries, tuple[FollowerStats, ...]]:
-        """The series on `rows` of the truth grid, and per follower its FollowerStats (empty
-        without `stats`: live progress, once a second, needs none of their percentiles)."""
-        stamps = np.asarray(self._truth_stamps_s)[rows]
-        est = np.empty((len(rows), self.n, 2))
-        cmd = np.empty((len(rows), self.n, 2))
-        found: list[FollowerStats] = []
-        for i, log in enumerate(self._states):
-            if not log.stamps_s:
-                est[:, i] = cmd[:, i] = np.nan
-                if stats:
-                    found.append(_stats(log, 0, np.empty(0)))
-                continue
-            lo = 0 if tail_states is None else max(0, len(log.stamps_s) - tail_states)
-            s_stamps = np.asarray(log.stamps_s[lo:])
-            order = np.argsort(s_stamps, kind="stable")
-            idx, filled = align_latest(stamps, s_stamps[order])
-            used = order[idx]
-            # Each r_i is evaluated at the truth's instant, to first order with its own
-            # rate: comparing a state up to one tick old with the present LAP would charge
-            # the estimator for the sampling age (20 ms at 1 m/s is 2 cm).
-            lag_s = np.where(filled, 0.0, stamps - s_stamps[used])[:, None]
-            est[:, i] = np.asarray(log.r_m[lo:])[used] + lag_s * np.asarray(log.dr_m_s[lo:])[used]
-            cmd[:, i] = np.asarray(log.u_m_s[lo:])[used]
-            if stats:
-                ages_ms = 1000.0 * (stamps - s_stamps[used])[~filled]
-                found.append(_stats(log, int(filled.sum()), ages_ms))
-        pos = np.stack([self._truth_pos_m[r] for r in rows])
-        tgt = np.stack([self._truth_tgt_m[r] for r in rows])
-        return RunSeries(stamps - start_s, pos, est, cmd, tgt), tuple(found)
-
-
-def _stats(log: _StateLog, filled: int, ages_ms: FloatArray) -> FollowerStats:
-    p50 = float(np.percentile(ages_ms, 50)) if ages_ms.size else None
-    p99 = float(np.percentile(ages_ms, 99)) if ages_ms.size else None
-    return FollowerStats(len(log.stamps_s), log.gaps, log.stale, filled, p50, p99)
+    def close(self) -> None:
+        self.truth.close()
+        self.states.close()
 
 
 def assembly_extra(asm: Assembly, drops: Counter[str]) -> dict[str, Any]:
-    """The assembler's share of metrics.json."""
+    """The assembler's share of metrics.json (once the assembly has been read through)."""
     return {
-        "truth_samples": len(asm.series.t_s),
+        "truth_samples": len(asm.t_s),
         "filled_samples": asm.filled_samples,
         "start_stamp_s": asm.start_stamp_s,
         "planned_duration_s": asm.duration_s,

@@ -65,7 +65,7 @@ class Recorder:
         self.mcap = McapLog(run_dir / MCAP_FILE, chunk_size=chunk_bytes,
                             metadata={"swarm": swarm, "scenario": scenario.name})
         self.decoder = Decoder(limits=RECORDER_LIMITS)  # implausible messages dropped, counted
-        self.asm = RunAssembler(scenario.n, scenario.m)
+        self.asm = RunAssembler(scenario.n, scenario.m, spill_dir=run_dir)  # rows on disk
         self.state = "starting"
         self.stop_reason = ""
         self._info = RunInfo.from_scenario(scenario, "networked", scenario.run.duration_s)
@@ -213,6 +213,8 @@ class Recorder:
         except Exception:
             log.exception("writing the run outputs failed")
             metrics = None
+        finally:
+            self.asm.close()
         self._set_state("done" if metrics is not None else "failed")
         write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
         return metrics is not None

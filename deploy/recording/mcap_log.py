@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import tempfile
 import types
 import typing
 from collections import Counter
@@ -22,7 +23,7 @@ from typing import IO, Any
 import msgspec
 from mcap.writer import CompressionType, Writer
 
-from deploy.recording.mcap_fast import MessageAppender
+from deploy.recording.mcap_fast import MessageAppender, spill_chunk_indices
 from transport.messages import Message
 
 MESSAGE_ENCODING = "json"
@@ -155,6 +156,11 @@ class McapLog:
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=_compression())
         self._writer.start(profile="", library="enclose-recorder")
         self._fast = MessageAppender.attach(self._writer)  # None: the library's own path
+        # Chunk indexes on disk until the summary: memory flat over hours (mcap_fast).
+        spool = tempfile.TemporaryFile(dir=path.parent)  # noqa: SIM115  # closed in close()
+        self._indices = spill_chunk_indices(self._writer, spool)
+        if self._indices is None:
+            spool.close()
         self._schemas: dict[type, int] = {}
         self._channels: dict[str, int] = {}
         self._raw_schemas: dict[RawSchema, int] = {}
@@ -210,4 +216,6 @@ class McapLog:
             self._writer.finish()
         finally:
             self._stream.close()
+            if self._indices is not None:
+                self._indices.close()
 

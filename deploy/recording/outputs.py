@@ -1,14 +1,16 @@
-"""The end of a recorded run: the same metrics.json, run.json, series.csv and figures as
-`enclose simulate`, through the same `deploy.report.write_run_outputs`."""
+"""The end of a recorded run: the same metrics.json, run.json, series files and figures as
+`enclose simulate`, through the same `deploy.report.write_run_outputs`, read chunk by chunk
+from the assembler's spills (deploy.recording.chunks): memory does not grow with the run."""
 
 from __future__ import annotations
 
 import logging
+import time
 from pathlib import Path
 from typing import Any
 
 from agents.core.metrics import Metrics
-from agents.membership_metrics import membership_phases, phase_report
+from agents.membership_metrics import PhaseReport, membership_phases
 from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import Assembly, RunAssembler, assembly_extra
@@ -26,7 +28,7 @@ _EARLY_STOP_FRACTION = 0.95
 
 def judged_duration_s(asm: Assembly) -> float:
     """The duration the run is judged over (steady state = its second half by default)."""
-    t_last = float(asm.series.t_s[-1])
+    t_last = float(asm.t_s[-1])
     return asm.duration_s if t_last >= _EARLY_STOP_FRACTION * asm.duration_s else t_last
 
 
@@ -38,9 +40,11 @@ def write_final_outputs(
     membership: list[tuple[float, frozenset[int]]] | None = None,
     link_history: LinkHistory | None = None,
 ) -> Metrics | None:
-    """Metrics, CSV and figures of the run; None (and metrics.json with "error") if none."""
+    """Metrics, series files and figures of the run; None (and metrics.json with "error")
+    if none."""
+    began = time.monotonic()
     try:
-        assembly = asm.build()
+        assembly = asm.assemble()
     except DeployError as exc:
         log.error("no metrics: %s", exc)
         write_error_metrics(run_dir, str(exc), {**recorder_extra,
@@ -50,16 +54,25 @@ def write_final_outputs(
         link_history.write_csv(run_dir / LINKS_CSV, assembly.start_stamp_s)
     duration = judged_duration_s(assembly)
     info = RunInfo.from_scenario(scenario, RUN_KIND, duration)
-    extra = {**assembly_extra(assembly, asm.drops), **recorder_extra,
-             "stopped_early": duration != assembly.duration_s}
     marks: list[float] = []
+    phases = None
     if membership:
         changes = [(t - assembly.start_stamp_s, m) for t, m in membership]
-        phases = membership_phases(changes, float(assembly.series.t_s[-1]))
-        marks = [p[0] for p in phases[1:]]
-        extra["membership"] = {"changes_s": marks,
-                               "phases": phase_report(assembly.series, scenario, phases)}
-    return write_run_outputs(run_dir, assembly.series, info, extra, marks)
+        found = membership_phases(changes, float(assembly.t_s[-1]))
+        marks = [p[0] for p in found[1:]]
+        phases = PhaseReport(scenario, found)
+
+    def extra() -> dict[str, Any]:  # once the series has been read through
+        out = {**assembly_extra(assembly, asm.drops), **recorder_extra,
+               "stopped_early": duration != assembly.duration_s}
+        if phases is not None:
+            out["membership"] = {"changes_s": marks, "phases": phases.result()}
+        return out
+
+    metrics = write_run_outputs(run_dir, assembly, info, extra, marks,
+                                () if phases is None else (phases,))
+    log.info("run outputs written in %.2f s", time.monotonic() - began)
+    return metrics
 
 
 def write_error_metrics(run_dir: Path, reason: str, extra: dict[str, Any]) -> None:

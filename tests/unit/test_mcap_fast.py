@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import random
+import tempfile
 
 import pytest
 from hypothesis import given, settings
@@ -11,15 +12,17 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from deploy.recording.mcap_fast import MessageAppender
+from deploy.recording.mcap_fast import MessageAppender, spill_chunk_indices
 
 Row = tuple[int, int, bytes, int, int]  # channel, log time, data, publish time, sequence
 
 
 def _write(rows: list[Row], fast: bool, chunk_size: int,
-           compression: CompressionType = CompressionType.NONE) -> bytes:
+           compression: CompressionType = CompressionType.NONE, spill: bool = False) -> bytes:
     out = io.BytesIO()
     writer = Writer(out, chunk_size=chunk_size, compression=compression)
+    if spill:
+        assert spill_chunk_indices(writer, tempfile.TemporaryFile()) is not None
     writer.start(profile="", library="test")
     schema = writer.register_schema("s", "jsonschema", b"{}")
     channels = [writer.register_channel(f"k/{i}", "json", schema) for i in range(3)]
@@ -67,3 +70,16 @@ def test_unchunked_writer_keeps_the_library_path() -> None:
     writer = Writer(io.BytesIO(), use_chunking=False)
     writer.start(profile="", library="test")
     assert MessageAppender.attach(writer) is None
+
+
+@pytest.mark.timeout(60)
+def test_chunk_indexes_kept_on_disk_give_the_same_file() -> None:
+    rng = random.Random(3)
+    rows = [(rng.randrange(3), 10**9 + k, rng.randbytes(rng.randrange(200)), k, k)
+            for k in range(2000)]
+    data = _write(rows, True, 512, spill=True)
+    assert data == _write(rows, True, 512)
+    summary = make_reader(io.BytesIO(data)).get_summary()
+    assert summary is not None and len(summary.chunk_indexes) > 100
+    assert [m.sequence for _, _, m in make_reader(io.BytesIO(data)).iter_messages()] == list(
+        range(2000))

@@ -114,7 +114,7 @@ def test_sequence_gaps_and_stale_states_counted_per_follower(paper: Scenario) ->
 
     for seq in (0, 1, 2, 5, 6, 6, 4, 10):  # gaps 3-4 (2) and 7-9 (3); 6 again and 4: stale
         asm.add(state(seq, START_S + 0.01 * seq))
-    log = asm._states[1]
+    log = asm.tallies[1]
     assert (log.gaps, log.stale) == (5, 2)
     assert asm.state_counts()[1] == 8
 

@@ -1,0 +1,298 @@
+"""A long run, watched: every process's memory and CPU over time, late ticks and errors per
+window (issue "Hours, not minutes").
+
+Runs `enclose run CASE --duration MINUTES*60` and, each `--sample-s` (default 60 s), reads
+every child's VmRSS and CPU time (/proc; the PIDs of logs/pids.json, plus the launcher's
+own).  At the end:
+- per process: RSS at the first sample after `--settle-min` (default 5 min), at the last
+  sample of the flight, the growth between them in %, and the least-squares slope over
+  those samples in MB per hour; mean CPU in % of one core; the recorder's peak (VmHWM),
+  which includes writing the outputs;
+- per window of `--window-min` of experiment time: the followers' late ticks (their
+  `overruns` / `ticks` counters from the statuses in recording.mcap) and the simulator's,
+  and the worst errors (|e_rho|, |e_delta|, |r - LAP| from series.parquet);
+- whether the last window is no worse than the first steady one (the first window that
+  starts after `--settle-min`): late-tick rate at most its double plus 0.1 % of ticks,
+  each error at most 1.25 times its value or inside the paper's bound;
+- how long the recorder took to write the end-of-run outputs (its log says).
+The raw samples go to OUT/soak.json.
+
+Run: python bench/bench_soak.py [--case paper] [--minutes 10] [--window-min 2]
+     [--out runs/soak-paper] [--insecure]
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import math
+import re
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from deploy.cpu_load import process_cpu_s, process_status_kb
+
+_OUTPUTS = re.compile(r"run outputs written in ([0-9.]+) s")
+ERROR_COLUMNS = ("e_rho_m", "e_delta", "est_err_m")
+
+
+def read_pids(out: Path) -> dict[str, int]:
+    try:
+        raw = json.loads((out / "logs" / "pids.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return {k: v for k, v in raw.items() if isinstance(v, int)}
+
+
+def recorder_state(out: Path) -> str:
+    try:
+        return str(json.loads((out / "progress.json").read_text()).get("state", ""))
+    except (OSError, ValueError):
+        return ""
+
+
+def sample(out: Path, launcher_pid: int, t_s: float) -> list[dict[str, Any]]:
+    """One reading of every process: name, pid, RSS and HWM (MB), CPU seconds."""
+    rows = []
+    for name, pid in {"launcher": launcher_pid, **read_pids(out)}.items():
+        rss, hwm, cpu = (process_status_kb(pid, "VmRSS"), process_status_kb(pid, "VmHWM"),
+                         process_cpu_s(pid))
+        if rss is None or hwm is None or cpu is None:
+            continue
+        rows.append({"t_s": round(t_s, 2), "name": name, "pid": pid, "rss_mb": rss / 1024,
+                     "hwm_mb": hwm / 1024, "cpu_s": cpu})
+    return rows
+
+
+def watch(proc: subprocess.Popen[bytes], out: Path, period_s: float) -> list[dict[str, Any]]:
+    """Samples each period while the recorder runs, then each second until the end (the
+    peak of writing the outputs)."""
+    t0, samples, next_s = time.monotonic(), [], 0.0
+    while proc.poll() is None:
+        now = time.monotonic() - t0
+        flying = recorder_state(out) in ("", "starting", "linked", "running")
+        if now >= next_s or not flying:
+            for row in sample(out, proc.pid, now):
+                samples.append({**row, "flying": flying})
+            next_s = now + period_s
+            (out / "soak.json").write_text(json.dumps({"samples": samples}) + "\n")
+        time.sleep(1.0)
+    return samples
+
+
+def slope_mb_h(t_s: list[float], rss_mb: list[float]) -> float | None:
+    if len(t_s) < 3:
+        return None
+    return float(np.polyfit(np.asarray(t_s) / 3600.0, np.asarray(rss_mb), 1)[0])
+
+
+def memory_table(samples: list[dict[str, Any]], settle_s: float) -> list[dict[str, Any]]:
+    """Per process (its latest pid): growth after `settle_s`, slope, mean CPU, peak."""
+    out = []
+    for name in sorted({s["name"] for s in samples}, key=_order):
+        mine = [s for s in samples if s["name"] == name]
+        pid = mine[-1]["pid"]
+        mine = [s for s in mine if s["pid"] == pid]
+        flying = [s for s in mine if s["flying"] and s["t_s"] >= settle_s]
+        row: dict[str, Any] = {"name": name, "restarted": len({s["pid"] for s in samples
+                                                               if s["name"] == name}) > 1,
+                               "peak_mb": round(max(s["hwm_mb"] for s in mine), 1)}
+        if len(flying) >= 2:
+            first, last = flying[0], flying[-1]
+            row.update(
+                rss_start_mb=round(first["rss_mb"], 1), rss_end_mb=round(last["rss_mb"], 1),
+                growth_pct=round(100 * (last["rss_mb"] - first["rss_mb"]) / first["rss_mb"], 2),
+                slope_mb_h=_round(slope_mb_h([s["t_s"] for s in flying],
+                                             [s["rss_mb"] for s in flying]), 2),
+                cpu_pct=round(100 * (last["cpu_s"] - first["cpu_s"])
+                              / max(1e-9, last["t_s"] - first["t_s"]), 1))
+        out.append(row)
+    return out
+
+
+def _order(name: str) -> tuple[str, int]:
+    role, _, idx = name.rpartition("-")
+    return (role, int(idx)) if idx.isdigit() else (name, -1)
+
+
+def _round(v: float | None, digits: int) -> float | None:
+    return None if v is None else round(v, digits)
+
+
+def late_ticks(out: Path, start_stamp_s: float, window_s: float) -> dict[str, list[list[int]]]:
+    """Per role ("follower", "sim"): per window, [late, ticks] summed over its processes,
+    from the differences of each process's counters between windows."""
+    from mcap.reader import make_reader
+
+    last: dict[str, dict[int, tuple[int, int]]] = {}  # process -> window -> counters
+    with open(out / "recording.mcap", "rb") as f:
+        for _schema, channel, message in make_reader(f).iter_messages():
+            if "/status/" not in channel.topic:
+                continue
+            body = json.loads(message.data)
+            if body.get("role") not in ("follower", "sim"):
+                continue
+            c = body.get("counters", {})
+            if "ticks" not in c or "overruns" not in c:
+                continue
+            w = math.floor((body["header"]["stamp_s"] - start_stamp_s) / window_s)
+            key = f"{body['role']}-{body['index']}"
+            last.setdefault(key, {})[w] = (int(c["overruns"]), int(c["ticks"]))
+    windows: dict[str, dict[int, list[int]]] = {}
+    for key, per in last.items():
+        before = (0, 0)
+        for w in sorted(per):
+            late, ticks = per[w]
+            if ticks < before[1]:  # a restarted process counts from zero again
+                before = (0, 0)
+            acc = windows.setdefault(key.rpartition("-")[0], {}).setdefault(w, [0, 0])
+            acc[0] += late - before[0]
+            acc[1] += ticks - before[1]
+            before = (late, ticks)
+    return {role: [per.get(w, [0, 0]) for w in range(max(per) + 1)]
+            for role, per in windows.items()}
+
+
+def series_batches(out: Path, rows: int = 65536) -> Iterator[dict[str, np.ndarray]]:
+    """series.parquet in batches of columns; series.csv where there is no Parquet file."""
+    parquet = out / "series.parquet"
+    if parquet.exists():
+        import pyarrow.parquet as pq
+
+        for batch in pq.ParquetFile(parquet).iter_batches(batch_size=rows):
+            yield {c: batch.column(c).to_numpy() for c in batch.schema.names}
+        return
+    with open(out / "series.csv") as f:
+        names = f.readline().strip().split(",")
+        while lines := list(itertools.islice(f, rows)):
+            data = np.loadtxt(lines, delimiter=",", ndmin=2)
+            yield {c: data[:, k] for k, c in enumerate(names)}
+
+
+def error_windows(out: Path, window_s: float) -> list[dict[str, float]]:
+    """Per window: max over followers and samples of |e_rho|, |e_delta|, |r - LAP|."""
+    found: dict[int, dict[str, float]] = {}
+    for batch in series_batches(out):
+        w = np.floor(batch["t_s"] / window_s).astype(int)
+        for kind in ERROR_COLUMNS:
+            names = [c for c in batch if re.fullmatch(rf"[a-z]+\d+_{kind}", c)]
+            values = np.nanmax(np.abs(np.column_stack([batch[c] for c in names])), axis=1)
+            for k in np.unique(w):
+                cur = found.setdefault(int(k), {})
+                cur[kind] = max(cur.get(kind, 0.0), float(np.nanmax(values[w == k])))
+    return [found.get(k, {}) for k in range(max(found) + 1)] if found else []
+
+
+def outputs_s(out: Path) -> float | None:
+    log = out / "logs" / "recorder-0.log"
+    try:
+        found = _OUTPUTS.findall(log.read_text(errors="replace"))
+    except OSError:
+        return None
+    return float(found[-1]) if found else None
+
+
+def verdict(first: dict[str, float], last: dict[str, float], bounds: dict[str, float]) -> bool:
+    return all(last.get(k, 0.0) <= max(1.25 * first.get(k, 0.0), bounds[k])
+               for k in ERROR_COLUMNS)
+
+
+def late_ok(first: list[int], last: list[int]) -> bool:
+    rate = [late / ticks if ticks else 0.0 for late, ticks in (first, last)]
+    return rate[1] <= 2 * rate[0] + 0.001
+
+
+def report(out: Path, args: argparse.Namespace, samples: list[dict[str, Any]]) -> dict[str, Any]:
+    metrics = json.loads((out / "metrics.json").read_text())
+    info = json.loads((out / "run.json").read_text())
+    window_s, settle_s = 60 * args.window_min, 60 * args.settle_min
+    late = late_ticks(out, metrics["start_stamp_s"], window_s)
+    errors = error_windows(out, window_s)
+    first_w = math.ceil(settle_s / window_s)
+    last_w = int(args.minutes * 60 // window_s) - 1
+    bounds = {"e_rho_m": info["eps_rho_m"], "e_delta": info["eps_delta"],
+              "est_err_m": info["eps_rho_m"]}
+    summary: dict[str, Any] = {
+        "case": args.case, "minutes": args.minutes, "window_min": args.window_min,
+        "memory": memory_table(samples, settle_s), "late_ticks": late, "errors": errors,
+        "outputs_s": outputs_s(out), "metrics": {k: metrics.get(k) for k in (
+            "estimator_error_m", "radius_error_m", "angle_error", "settle_time_s", "samples")},
+    }
+    if 0 <= first_w < last_w < len(errors):
+        summary["errors_no_worse"] = verdict(errors[first_w], errors[last_w], bounds)
+    fol = late.get("follower", [])
+    if 0 <= first_w < last_w < len(fol):
+        summary["late_no_worse"] = late_ok(fol[first_w], fol[last_w])
+    summary["windows_compared"] = [first_w, last_w]
+    return summary
+
+
+def show(summary: dict[str, Any]) -> None:
+    print(f"soak {summary['case']}, {summary['minutes']:g} min "
+          f"(windows of {summary['window_min']:g} min)")
+    print(f"{'process':<14}{'RSS@5min':>10}{'RSS end':>10}{'growth':>9}{'MB/h':>9}"
+          f"{'CPU %':>8}{'peak':>8}")
+    for r in summary["memory"]:
+        if "rss_start_mb" not in r:
+            continue
+        print(f"{r['name']:<14}{r['rss_start_mb']:>10.1f}{r['rss_end_mb']:>10.1f}"
+              f"{r['growth_pct']:>8.2f}%{_fmt(r['slope_mb_h']):>9}{r['cpu_pct']:>8.1f}"
+              f"{r['peak_mb']:>8.1f}")
+    for role, rows in summary["late_ticks"].items():
+        cells = " ".join(f"{late}/{ticks}" for late, ticks in rows)
+        print(f"late ticks per window, {role}: {cells}")
+    for kind in ERROR_COLUMNS:
+        cells = " ".join(f"{w.get(kind, math.nan):.4g}" for w in summary["errors"])
+        print(f"max |{kind}| per window: {cells}")
+    first, last = summary["windows_compared"]
+    print(f"window {last} against window {first}: errors no worse "
+          f"{summary.get('errors_no_worse')}, late ticks no worse {summary.get('late_no_worse')}")
+    print(f"end-of-run outputs written in {summary['outputs_s']} s; metrics {summary['metrics']}")
+
+
+def _fmt(v: float | None) -> str:
+    return "-" if v is None else f"{v:+.2f}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--case", default="paper")
+    parser.add_argument("--minutes", type=float, default=10.0)
+    parser.add_argument("--sample-s", type=float, default=60.0)
+    parser.add_argument("--window-min", type=float, default=None,
+                        help="window of late ticks and errors (default: 10 min from 40-min "
+                        "runs, else a fifth of the run)")
+    parser.add_argument("--settle-min", type=float, default=5.0)
+    parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--insecure", action="store_true")
+    args = parser.parse_args()
+    if args.window_min is None:
+        args.window_min = 10.0 if args.minutes >= 40 else args.minutes / 5
+    out = (args.out or Path(f"runs/soak-{args.case}")).resolve()
+    argv = [sys.executable, "-m", "deploy.cli", "run", args.case, "--duration",
+            str(60 * args.minutes), "--out", str(out), *(["--insecure"] if args.insecure else [])]
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "launcher.out", "wb") as log:
+        proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
+        try:
+            samples = watch(proc, out, args.sample_s)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    summary = report(out, args, samples)
+    (out / "soak.json").write_text(json.dumps({"summary": summary, "samples": samples}) + "\n")
+    show(summary)
+
+
+if __name__ == "__main__":
+    main()
