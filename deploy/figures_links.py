@@ -14,12 +14,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from deploy.marks import MAX_LEGEND, Mark, draw_marks, legend_handles
+from deploy.recording.link_history import LinkColumns
 
 LINKS_PNG = "links.png"
 
 
 def link_health_figure(
-    links: dict[str, dict[str, list[float]]], path: Path, marks: Sequence[Mark] = ()
+    links: dict[str, LinkColumns], path: Path, marks: Sequence[Mark] = ()
 ) -> list[Mark]:
     """Per link: delivered ratio and mean age at delivery over each status interval (about
     1 s); `marks` on both panels.  The marks drawn."""

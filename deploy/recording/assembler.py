@@ -37,7 +37,7 @@ from deploy.recording.chunks import (
     truth_series,
     whole,
 )
-from deploy.recording.spill import RowSpill
+from deploy.recording.spill import BLOCK_ROWS, RowSpill
 from transport.errors import DeployError
 from transport.messages import FollowerState, Message, RunControl, TruthSnapshot
 
@@ -73,14 +73,16 @@ class RunAssembler:
     temporary directory if None).
     """
 
-    def __init__(self, n: int, m: int, spill_dir: Path | None = None) -> None:
+    def __init__(self, n: int, m: int, spill_dir: Path | None = None,
+                 block_rows: int = BLOCK_ROWS) -> None:
         self.n, self.m = n, m
         self.spill_dir = spill_dir
         self.drops: Counter[str] = Counter()  # messages unusable for the series, per reason
         self.start: RunControl | None = None
         self.stopped = False
-        self.truth = RowSpill(1 + 2 * n + 2 * m, spill_dir)  # stamp, xy per follower, targets
-        self.states = RowSpill(STATE_WIDTH + 1, spill_dir)  # stamp, index, r, dr, u
+        # stamp, xy per follower, xy per target; and stamp, index, r, dr, u
+        self.truth = RowSpill(1 + 2 * n + 2 * m, spill_dir, block_rows)
+        self.states = RowSpill(STATE_WIDTH + 1, spill_dir, block_rows)
         self.tallies = [StateTally() for _ in range(n)]
         self._recent_truth = _Ring(RECENT_TRUTH, self.truth.width)
         self._recent_states = [_Ring(RECENT_STATES, STATE_WIDTH) for _ in range(n)]

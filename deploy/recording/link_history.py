@@ -14,16 +14,26 @@ A link is silent when its receiver's latest status is SILENT_AFTER_S older than 
 follower status seen: judged against the stream, not the wall clock, so a recorder that
 drains seconds behind the bus does not call every link silent (its lag is reported apart,
 `recorder_behind_s` in progress.json).
+
+The samples go to a temporary file as they come (a ring of 64 followers makes ~250 a
+second); memory keeps each link's latest.  `read_links_csv` reads a long run's links.csv
+back as at most `LINK_POINTS` points in all: a link's intervals in bins, each bin its worst
+(lowest delivered ratio, highest age), so that a dip shows however long the run.
 """
 
 from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
+import tempfile
+from collections import Counter
+from collections.abc import Iterator, Mapping
+from dataclasses import astuple, dataclass
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
+
+import numpy as np
+from numpy.typing import NDArray
 
 from transport.messages import ProcessStatus
 
@@ -31,6 +41,7 @@ LINKS_CSV = "links.csv"
 COLUMNS = ("t_s", "link", "rx", "offered", "delivered", "age_mean_ms", "age_p50_ms",
            "age_p99_ms")
 SILENT_AFTER_S = 3.0  # a receiver this far behind the newest follower status is silent
+LINK_POINTS = 400_000  # points of links.png in all (7 columns each): ~22 MB at most
 
 
 @dataclass(frozen=True)
@@ -54,10 +65,10 @@ def _ms(us: int | None) -> float | None:
 
 
 class LinkHistory:
-    """Every follower status's link counters, as interval samples per link."""
+    """Every follower status's link counters, as interval samples per link (on disk)."""
 
-    def __init__(self) -> None:
-        self.samples: list[LinkSample] = []
+    def __init__(self, spill_dir: Path | None = None) -> None:
+        self._spool: IO[str] = tempfile.TemporaryFile("w+", dir=spill_dir)  # noqa: SIM115
         self._last: dict[str, Mapping[str, int]] = {}  # link -> counters of its last sample
         self._latest: dict[str, LinkSample] = {}
         # Newest follower status stamp, with or without link counters: the reference
@@ -84,7 +95,19 @@ class LinkHistory:
                                 _ms(c.get(f"age_p99_us_{name}")))
             self._last[link] = now
             self._latest[link] = sample
-            self.samples.append(sample)
+            self._spool.write(",".join(map(_exact, astuple(sample))) + "\n")
+
+    def samples(self) -> Iterator[LinkSample]:
+        """Every sample so far, in arrival order."""
+        self._spool.seek(0)
+        for line in self._spool:
+            stamp, link, rx, offered, *rest = line.rstrip("\n").split(",")
+            yield LinkSample(float(stamp), link, int(rx), None if offered == "" else int(offered),
+                             *(None if v == "" else float(v) for v in rest))
+        self._spool.seek(0, 2)
+
+    def close(self) -> None:
+        self._spool.close()
 
     @staticmethod
     def _counters(c: Mapping[str, int], name: str) -> dict[str, int]:
@@ -118,7 +141,7 @@ class LinkHistory:
         with open(path, "w", newline="") as f:
             out = csv.writer(f)
             out.writerow(COLUMNS)
-            for s in self.samples:
+            for s in self.samples():
                 out.writerow([f"{s.stamp_s - start_stamp_s:.3f}", s.link, s.rx,
                               _cell(s.offered), _cell(s.delivered), _cell(s.age_mean_ms),
                               _cell(s.age_p50_ms), _cell(s.age_p99_ms)])
@@ -128,15 +151,46 @@ def _cell(v: float | int | None) -> str:
     return "" if v is None else f"{v:.6g}"
 
 
-def read_links_csv(path: Path) -> dict[str, dict[str, list[float]]]:
-    """links.csv as link -> column -> values (NaN where empty); {} if there is none."""
-    out: dict[str, dict[str, list[float]]] = {}
+def _exact(v: float | int | str | None) -> str:
+    return "" if v is None else repr(v) if isinstance(v, float) else str(v)
+
+
+LinkColumns = dict[str, NDArray[np.float64]]
+
+
+def read_links_csv(path: Path, max_points: int = LINK_POINTS) -> dict[str, LinkColumns]:
+    """links.csv as link -> column -> values (NaN where empty); {} if there is none.  Past
+    `max_points` rows in all, each link's rows are taken in bins: the bin's last time,
+    lowest delivered ratio and highest ages."""
     try:
         with open(path, newline="") as f:
-            for row in csv.DictReader(f):
-                cols = out.setdefault(row["link"], {k: [] for k in COLUMNS if k != "link"})
-                for k, values in cols.items():
-                    values.append(float(row[k]) if row.get(k) else math.nan)
+            per_link = Counter(row["link"] for row in csv.DictReader(f))
+        if not per_link:
+            return {}
+        cap = max(1, max_points // len(per_link))
+        bins = {link: math.ceil(count / cap) for link, count in per_link.items()}
+        with open(path, newline="") as f:
+            return _binned(csv.DictReader(f), per_link, bins)
     except (OSError, ValueError, KeyError):
         return {}
+
+
+_WORST = {"delivered": np.fmin, "age_mean_ms": np.fmax, "age_p50_ms": np.fmax,
+          "age_p99_ms": np.fmax}
+
+
+def _binned(rows: Iterator[dict[str, str]], counts: Mapping[str, int],
+            bins: Mapping[str, int]) -> dict[str, LinkColumns]:
+    names = [k for k in COLUMNS if k != "link"]
+    out = {link: {k: np.full(math.ceil(n / bins[link]), np.nan) for k in names}
+           for link, n in counts.items()}
+    seen: Counter[str] = Counter()
+    for row in rows:
+        link = row["link"]
+        at, cols = seen[link] // bins[link], out[link]
+        seen[link] += 1
+        for k in names:
+            v = float(row[k]) if row.get(k) else math.nan
+            worst = _WORST.get(k)
+            cols[k][at] = v if worst is None else worst(cols[k][at], v)
     return out

@@ -54,14 +54,14 @@ class Recorder:
                  chunk_bytes: int = DEFAULT_CHUNK_BYTES, live: LiveServer | None = None,
                  scene_hz: float | None = DEFAULT_SCENE_HZ, record_sensor: bool = True) -> None:
         self.bus, self.scenario, self.run_dir = bus, scenario, run_dir
+        run_dir.mkdir(parents=True, exist_ok=True)
         self.keys = SwarmKeys(swarm)
         self.index = index
         self.period_s = period_s
         self.final_status_wait_s = final_status_wait_s
         self.follower_status: dict[int, ProcessStatus] = {}  # latest, per follower index
-        self.link_history = LinkHistory()  # links.csv, links.png, progress.json "links"
+        self.link_history = LinkHistory(run_dir)  # links.csv, links.png, progress.json "links"
         self.newest_stamp_s = -math.inf  # newest sender stamp processed: how far behind we are
-        run_dir.mkdir(parents=True, exist_ok=True)
         self.mcap = McapLog(run_dir / MCAP_FILE, chunk_size=chunk_bytes,
                             metadata={"swarm": swarm, "scenario": scenario.name})
         self.decoder = Decoder(limits=RECORDER_LIMITS)  # implausible messages dropped, counted
@@ -215,6 +215,7 @@ class Recorder:
             metrics = None
         finally:
             self.asm.close()
+            self.link_history.close()
         self._set_state("done" if metrics is not None else "failed")
         write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
         return metrics is not None

@@ -52,7 +52,7 @@ def test_link_history_gives_loss_and_age_per_interval_and_survives_a_restart() -
                  age_sum_us_f0=1_300_000, age_p99_us_f0=25_000))
     h.add(status(1, 102.0, rx_f0=10, seq_first_f0=120, seq_last_f0=129, age_n_f0=10,
                  age_sum_us_f0=100_000))  # follower 1 restarted: its counters begin again
-    first, second, third = h.samples
+    first, second, third = h.samples()
     assert first.link == "f0->f1" and first.delivered is None  # no interval yet
     assert second.delivered == pytest.approx(40 / 50)  # 40 of 50 sequence numbers arrived
     assert second.age_mean_ms == pytest.approx(800_000 / 40 / 1000)  # 20 ms
@@ -99,7 +99,7 @@ def test_links_csv_round_trip(tmp_path: Path) -> None:
     h.write_csv(tmp_path / "links.csv", start_stamp_s=99.0)
     links = read_links_csv(tmp_path / "links.csv")
     cols = links["sensor->f0"]
-    assert cols["t_s"] == [1.0, 2.0, 3.0]
+    assert list(cols["t_s"]) == [1.0, 2.0, 3.0]
     assert math.isnan(cols["delivered"][0]) and cols["delivered"][1] == 1.0
     assert cols["age_mean_ms"][2] == pytest.approx(3.0)
     assert read_links_csv(tmp_path / "missing.csv") == {}
