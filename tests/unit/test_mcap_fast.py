@@ -22,7 +22,7 @@ def _write(rows: list[Row], fast: bool, chunk_size: int,
     out = io.BytesIO()
     writer = Writer(out, chunk_size=chunk_size, compression=compression)
     if spill:
-        assert spill_chunk_indices(writer, tempfile.TemporaryFile()) is not None
+        assert spill_chunk_indices(writer, tempfile.TemporaryFile()) is not None  # noqa: SIM115
     writer.start(profile="", library="test")
     schema = writer.register_schema("s", "jsonschema", b"{}")
     channels = [writer.register_channel(f"k/{i}", "json", schema) for i in range(3)]

@@ -1,0 +1,96 @@
+"""The recorder process's memory stays flat over a run: it does not keep the run in memory.
+
+A real recorder on loopback records a synthetic run at 250 Hz (truth and four follower
+states a tick: five times the paper's message rate, so that a minute shows what five would).
+Its resident memory, sampled twice a second from the 30th second to the last, must not
+trend up: keeping every decoded message cost ~0.6 kB each, ~45 MB a minute here.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agents.scenario.file import load_scenario
+from deploy.cpu_load import process_status_kb
+from tests.integration.test_recorder_process import publish_paced, start_recorder, stop, wait_for
+from tests.integration.test_transport_zenoh import free_port
+from tests.recorder_synth import SynthRun
+from transport.bus import wait_until_alive
+from transport.codec import encode
+from transport.keys import SwarmKeys
+from transport.messages import Stamper
+from transport.zenoh_bus import ZenohBus
+from transport.zenoh_config import ZenohConfig, loopback_endpoint
+
+pytestmark = pytest.mark.integration
+RATE_HZ = 250.0
+RUN_S = 90.0
+FROM_S = 30.0  # after start-up
+# Zenoh's buffers grow to the largest backlog seen (a few MB over the first minutes on a
+# loaded machine, then flat): a quarter of what keeping the messages cost.
+MAX_SLOPE_MB_MIN = 10.0
+
+
+class RssSampler:
+    """VmRSS of one process every `period_s`, stamped from the sampler's start."""
+
+    def __init__(self, pid: int, period_s: float = 0.5) -> None:
+        self.pid, self.period_s = pid, period_s
+        self.samples: list[tuple[float, float]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> RssSampler:
+        self._t0 = time.monotonic()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(5)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.period_s):
+            kb = process_status_kb(self.pid, "VmRSS")
+            if kb is not None:
+                self.samples.append((time.monotonic() - self._t0, kb / 1024))
+
+
+@pytest.mark.timeout(240)
+def test_recorder_rss_does_not_grow_with_the_run(tmp_path: Path) -> None:
+    swarm, endpoint = f"mem{os.getpid()}", loopback_endpoint(free_port())
+    keys, out = SwarmKeys(swarm), tmp_path / "run"
+    scenario = load_scenario("paper")
+    proc = start_recorder(swarm, out, endpoint)
+    try:
+        with ZenohBus(ZenohConfig(connect=(endpoint,))) as bus:
+            wait_until_alive(bus.watch_alive(keys.all_alive()), {keys.alive("recorder", 0)}, 20)
+            pubs = [bus.declare_publisher(k) for k in
+                    (keys.control(), keys.truth(), *map(keys.follower_state, range(scenario.n)))]
+            wait_for(lambda: all(p.matched() for p in pubs), 10, "recorder subscription")
+            run = SynthRun(scenario, keys, time.time() + 0.5, duration_s=RUN_S, rate_hz=RATE_HZ,
+                           pre_s=0.0, post_s=0.0)
+            control = Stamper("launcher-0")
+            bus.publish(keys.control(), encode(run.control(control, "start")))
+            with RssSampler(proc.pid) as rss:
+                publish_paced(bus, run, garbage_at=-1, silent=None)
+            bus.publish(keys.control(), encode(run.control(control, "stop")))
+            wait_for(lambda: proc.poll() is not None, 90, "recorder to exit")
+        assert proc.returncode == 0
+    finally:
+        stop(proc)
+    t, mb = np.array(rss.samples).T
+    flying = t >= FROM_S
+    slope = float(np.polyfit(t[flying] / 60.0, mb[flying], 1)[0])
+    print(f"recorder RSS {mb[flying][0]:.1f} MB at {FROM_S:.0f} s, {mb[flying][-1]:.1f} MB at "
+          f"{t[-1]:.0f} s: {slope:+.2f} MB a minute")
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["samples"] >= 0.95 * RUN_S * RATE_HZ  # it kept up: all of it was recorded
+    assert slope < MAX_SLOPE_MB_MIN
