@@ -2,16 +2,18 @@
 
 A `Decoder` belongs to one process loop.  Every payload that fails to decode
 is dropped and counted under its `CodecError.reason`; a message whose type is
-not expected on that subscription, or whose index disagrees with its key, is
-dropped too, and so, given `limits`, is an implausible one (transport.checks).
+not expected on that subscription, or that does not belong on its key (its type, the
+index it carries: transport.checks.key_reason), is dropped too, and so, given `limits`,
+is an implausible one (transport.checks).
 Given `senders` -- the scenario's processes (transport.access.sender_ids) -- a message
 from any other sender is dropped (`unknown_sender`), and so is one on a key that is not
 the swarm's or names another process (`unknown_key`): every table kept per sender or key
 (its streams, gaps, the links of transport.link_stats, a recorder's channels) is then
-bounded by the scenario, whatever names arrive.  Every drop is also counted per kind of key (`statuses_rejected`,
-`observations_rejected`, ...) and, where the key names a known process, per sender (the
-key's owner: with access control on, the process that put it, whatever it claims), and
-logged at most once every ten seconds per reason (transport.ratelog).
+bounded by the scenario, whatever names arrive.
+Every drop is also counted per kind of key (`statuses_rejected`, `observations_rejected`,
+...) and, where the key names a known process, per sender (the key's owner: with access
+control on, the process that put it, whatever it claims), and logged at most once every
+ten seconds per reason (transport.ratelog).
 Per stream -- (sender id, key), since a sender numbers each
 key it publishes on separately -- it counts sequence gaps (messages never seen) and
 stale messages (sequence number not above the last one: duplicated or

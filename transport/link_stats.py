@@ -8,7 +8,8 @@ A link is (sender, this receiver).  The sender of a sample comes from its key:
 
 `LinkDecoder` is a `transport.decoder.Decoder` that also tallies, per link, the messages
 that reach the agent (one tally per key it hears, and per link one for the processes
-gone from it: bounded by the scenario's senders when the decoder is given them).  Its `counters()` add, for each link L seen:
+gone from it: bounded by the scenario's senders when the decoder is given them).  Its
+`counters()` add, for each link L seen:
 - `rx_L`: unique messages (by sequence number) received;
 - `rx_dup_L`: further copies of a sequence number already received (duplicates);
 - `seq_first_L`, `seq_last_L`: lowest and highest sequence number received, so that the
