@@ -22,7 +22,9 @@ from agents.mavlink.adapter import MavlinkAdapter
 from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, process_main
 from agents.scenario import Scenario
 from agents.vehicle_loop import add_vehicle_arguments, fly
+from transport.access import sender_ids
 from transport.bus import Bus
+from transport.checks import DEFAULT_LIMITS
 from transport.decoder import Decoder
 from transport.keys import SwarmKeys
 from transport.messages import RunControl
@@ -66,7 +68,8 @@ class TargetNode:
         self.speed_max_m_s = scenario.vehicle.max_speed_xy_m_s
         self.keys = SwarmKeys(swarm)
         self.control = bus.subscribe(self.keys.control())
-        self.decoder = Decoder(expect=(RunControl,))
+        self.decoder = Decoder(expect=(RunControl,), limits=DEFAULT_LIMITS,
+                               senders=sender_ids(scenario.n, scenario.m))
         self.status = StatusReporter(bus, self.keys, "target", index)
         self.start_s: float | None = None
         self.stop_s = math.inf

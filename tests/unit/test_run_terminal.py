@@ -197,7 +197,7 @@ def test_process_health_and_state_as_the_board_shows_them(tmp_path: Path) -> Non
     kids = [Child(n, [], tmp_path / f"{n}.log") for n in ("sim", "follower-0", "follower-1",
                                                          "follower-2", "target-0")]
     kids[2].exit_code, kids[3].exit_code, kids[4].exit_code = -9, 0, -9
-    board = StatusBoard()
+    board = StatusBoard(frozenset())
     for role, i, state in (("sim", 0, "running"), ("follower", 0, "running")):
         board.latest[f"{role}-{i}"] = ProcessStatus(Header(role, 0, 1.0), role, i, state, {})
     views = process_views(kids, board, paused={"follower-0"}, pending={"target-0"})
