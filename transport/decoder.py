@@ -133,7 +133,9 @@ class Decoder:
         owner = None if rule is None else rule.owner
         if owner is not None and self.senders is not None and owner in self.senders:
             self.rejected_from[owner] += 1
-        claims = "" if msg is None else f" claiming {msg.header.sender_id[:64]!r}"
+        claims = "" if msg is None else f" from {msg.header.sender_id[:64]!r}"
+        if isinstance(msg, ProcessStatus):
+            claims += f" for {f'{msg.role[:64]}-{msg.index}'!r}"
         self.log.warning(reason, f"dropped a message on {key[:160]!r} ({reason}), "
                                  f"key of {owner or 'no known process'}{claims}")
 
