@@ -28,10 +28,10 @@ from collections import Counter
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 
-from agents.errors import CodecError
 from transport.bus import Received, Subscription
 from transport.checks import Limits, check, key_reason, key_rule
 from transport.codec import decode
+from transport.errors import CodecError
 from transport.fastbuild import build
 from transport.messages import (
     ClockProbe,

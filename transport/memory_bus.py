@@ -15,7 +15,6 @@ import threading
 import time
 from collections import deque
 
-from agents.errors import TransportError
 from transport.bus import (
     DEFAULT_CAPACITY,
     AliveEvent,
@@ -25,6 +24,7 @@ from transport.bus import (
     Received,
     apply_alive,
 )
+from transport.errors import TransportError
 from transport.keys import key_matches, validate_concrete
 
 

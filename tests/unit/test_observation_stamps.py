@@ -11,7 +11,7 @@ import pytest
 
 from agents.follower import FollowerNode
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from transport.checks import DEFAULT_LIMITS, check
 from transport.codec import encode
 from transport.keys import SwarmKeys

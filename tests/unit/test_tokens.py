@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from agents.follower import FollowerNode
 from agents.liveness import FLAP_MAX_CHANGES, FLAP_WINDOW_S, MembershipWatch, TokenSet
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from transport.bus import MAX_ALIVE_KEYS, AliveEvent, Received
 from transport.codec import encode
 from transport.keys import SwarmKeys
