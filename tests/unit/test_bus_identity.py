@@ -10,9 +10,9 @@ from hypothesis import strategies as st
 
 from deploy.refusals import launch_refusals, refusal_text, refusals
 from deploy.run_monitor import StatusBoard
-from transport.access import sender_ids
+from transport.access import own_keys, process_names, sender_id, sender_ids
 from transport.bus import Received
-from transport.checks import key_reason
+from transport.checks import key_reason, key_rule
 from transport.codec import encode
 from transport.decoder import Decoder
 from transport.keys import KeyInfo, SwarmKeys, parse_key
@@ -206,3 +206,17 @@ def test_a_follower_state_index_must_be_its_keys() -> None:
     assert key_reason(msg, KEYS.follower_state(2)) == "key_mismatch"
     assert key_reason(msg, KEYS.sensor_targets(1)) == "wrong_key"
     assert key_reason(msg, "elsewhere/x") is None  # not a swarm key: not ours to judge
+
+
+def test_the_access_control_and_the_checks_name_the_same_owner_for_every_key() -> None:
+    """With mTLS + ACL a key is put only by the identity the ACL gives it (transport.access);
+    the checks' owner of that key must be the same process, or a forgery on its own key
+    could pass for another."""
+    for name in process_names(N, M):
+        for key in own_keys(KEYS, name, N):
+            info = parse_key(key)
+            assert info is not None
+            owner = key_rule(key).owner  # type: ignore[union-attr]
+            assert owner == sender_id(name), (name, key)
+            if info.kind in ("status", "alive"):
+                assert f"{info.role}-{info.index}" == sender_id(name)

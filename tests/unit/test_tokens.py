@@ -153,3 +153,20 @@ def test_alive_sets_and_link_tallies_stay_bounded() -> None:
     assert len(dec.tallies) + len(dec.retired) == 1
     assert dec.counters()["rx_f3"] == 400 and dec.counters()["rx_dup_f3"] == 0
 
+
+
+def test_the_simulators_sensor_model_ignores_out_of_range_tokens() -> None:
+    from deploy.swarm_sim import SensorPublisher
+
+    hub = MemoryHub()
+    scenario = load_scenario("paper")
+    sensor = SensorPublisher(scenario, MemoryBus(hub, "sim"), KEYS, 1)
+    rogue = MemoryBus(hub, "rogue")
+    for i in (0, 1, 3):
+        rogue.declare_token(KEYS.alive("follower", i))
+    for tail in ("4", "77", "²"):
+        rogue.declare_token(f"{KEYS.prefix}/alive/follower/{tail}")
+    sensor._follow_membership(0.0)  # raised on index 4 (agents.membership)
+    assert sensor.members == {0, 1, 3}
+    assert sensor.liveness.counters() == {"tokens_rejected": 3, "tokens_held": 0}
+    sensor.close()
