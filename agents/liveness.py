@@ -141,8 +141,8 @@ class MembershipWatch:
                 self.tracker.note(index, ev.alive)
             elif ev.alive:
                 self.tracker.rejected += 1
-                self.log.warning("token", f"ignored a liveliness token on {ev.key[:160]!r}: "
-                                          "no follower of this swarm")
+                self.log.warning("token", "ignored a liveliness token on %r: no follower of "
+                                          "this swarm", ev.key[:160])
         self.tracker.settle(now_s)
         if self.tracker.due_refresh(now_s):
             self.refreshes += 1

@@ -67,6 +67,23 @@ class Inbound:
         return self.received.recv_stamp_s - self.message.header.stamp_s
 
 
+class _Claims:
+    """Who a dropped message says it is from (and, for a status, for): formatted only if
+    logged."""
+
+    def __init__(self, msg: Message | None) -> None:
+        self.msg = msg
+
+    def __str__(self) -> str:
+        msg = self.msg
+        if msg is None:
+            return ""
+        text = f"; it claims to be from {msg.header.sender_id[:64]!r}"
+        if isinstance(msg, ProcessStatus):
+            text += f" for {f'{msg.role[:64]}-{msg.index}'!r}"
+        return text
+
+
 class Decoder:
     """Decodes, validates and counts; `expect` limits the accepted message types."""
 
@@ -133,11 +150,8 @@ class Decoder:
         owner = None if rule is None else rule.owner
         if owner is not None and self.senders is not None and owner in self.senders:
             self.rejected_from[owner] += 1
-        claims = "" if msg is None else f" from {msg.header.sender_id[:64]!r}"
-        if isinstance(msg, ProcessStatus):
-            claims += f" for {f'{msg.role[:64]}-{msg.index}'!r}"
-        self.log.warning(reason, f"dropped a message on {key[:160]!r} ({reason}), "
-                                 f"key of {owner or 'no known process'}{claims}")
+        self.log.warning(reason, "dropped a message on %r (%s), the key of %s%s", key[:160],
+                         reason, owner or "no known process", _Claims(msg))
 
     def _track(self, sender: str, key: str, seq: int) -> bool:
         last = self._last_seq.get((sender, key))

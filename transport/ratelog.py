@@ -24,8 +24,9 @@ class RateLimitedLog:
         self._quiet: dict[str, int] = {}  # per topic, occurrences not logged since its last line
         self.lines = 0
 
-    def warning(self, topic: str, text: str) -> None:
-        """Log `text` unless `topic` was logged less than `period_s` ago."""
+    def warning(self, topic: str, fmt: str, *args: object) -> None:
+        """Log `fmt % args` unless `topic` was logged less than `period_s` ago (the text
+        is formatted only then: a flood costs a lookup per occurrence)."""
         if topic not in self._next_s and len(self._next_s) >= MAX_TOPICS:
             topic = "other"
         now = self.clock()
@@ -35,5 +36,5 @@ class RateLimitedLog:
         self._next_s[topic] = now + self.period_s
         quiet = self._quiet.pop(topic, 0)
         more = f" (and {quiet} more since the last such line)" if quiet else ""
-        self.logger.warning("%s%s", text, more)
+        self.logger.warning(fmt + "%s", *args, more)
         self.lines += 1
