@@ -119,12 +119,12 @@ def key_reason(msg: Message, key: str) -> str | None:
         return None
     if type(msg) is not rule.kind:
         return "wrong_key"
-    if rule.index is None:
-        return None
-    if isinstance(msg, FollowerState | ProcessStatus):
+    if isinstance(msg, TargetObservation):
+        carried = msg.observer_index
+    elif isinstance(msg, FollowerState | ProcessStatus):
         carried = msg.index
-    else:
-        carried = msg.observer_index if isinstance(msg, TargetObservation) else -1
+    else:  # truth, control, clock: no index in the message
+        return None
     if carried != rule.index or (isinstance(msg, ProcessStatus) and msg.role != rule.role):
         return "key_mismatch"
     return None
