@@ -23,11 +23,12 @@ from agents.phases import mark
 from agents.scenario import NetworkConfig, Scenario
 from agents.scenario_file import load_scenario
 from transport.bus import Bus
-from transport.clock_sync import parse_clock_hosts
+from transport.clock_sync import clock_hosts_count, parse_clock_hosts
 from transport.codec import encode
 from transport.credentials import Identity
 from transport.keys import SwarmKeys
 from transport.messages import ProcessStatus, Stamper
+from transport.peer_clock import PROCESS_BOOK, ClockBook
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
@@ -105,6 +106,7 @@ def open_bus(args: argparse.Namespace, arrival_stamps: bool = False) -> Bus:
     mark("bus_open")  # the session is up: its first link (TLS handshake included) is made
     if getattr(args, "clock_host", None) is not None:
         bus.start_clock_sync(SwarmKeys(args.swarm), f"router-{args.clock_host}",
+                             clock_hosts_count(args.clock_hosts),
                              clock_of=parse_clock_hosts(args.clock_hosts))
     return bus
 
@@ -243,6 +245,7 @@ class StatusReporter:
     period_s: float = 1.0
     counters: Counter[str] = field(default_factory=Counter)
     state: str = "starting"
+    clocks: ClockBook = PROCESS_BOOK
     _stamper: Stamper | None = None
     _last_s: float = -1e18
 
@@ -264,7 +267,8 @@ class StatusReporter:
         self._last_s = now
         if self._stamper is None:
             self._stamper = Stamper(f"{self.role}-{self.index}", self.bus.now_s)
-        counters = {**self.counters, **(extra or {})}
+        # Dropped clock probes (transport.peer_clock): non-zero only across hosts.
+        counters = {**self.counters, **(extra or {}), **self.clocks.counters()}
         msg = ProcessStatus(
             self._stamper.header(),
             self.role,

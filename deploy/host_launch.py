@@ -90,7 +90,7 @@ class HostLaunch(Launch):
             argv = [*self.dep.router_argv(k, secure=not self.args.insecure),
                     "--swarm", self.keys.swarm, *self.secrets.args_for(f"router-{k}")]
             if self.clocks_differ():
-                argv += ["--clock-id", f"router-{k}"]
+                argv += ["--clock-id", f"router-{k}", "--clock-routers", str(len(self.dep.hosts))]
             self.sup.start(f"router-{k}", "deploy.router", argv, prefix=self.prefix(k))
         mav = ["--mav-local-base", str(self.adapter_base),
                "--mav-vehicle-base", str(self.vehicle_base)]
@@ -123,7 +123,7 @@ class HostLaunch(Launch):
             identity=self.secrets.identity("launcher"),
             runtime=self.scenario.network.zenoh_runtime))
         if self.clocks_differ():
-            bus.start_clock_sync(self.keys, f"router-{k}",
+            bus.start_clock_sync(self.keys, f"router-{k}", len(self.dep.hosts),
                                  clock_of=parse_clock_hosts(self.clock_hosts()))
         return bus
 

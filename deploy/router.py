@@ -42,6 +42,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--clock-id", default=None, metavar="router-K",
                         help="probe the other routers' clocks as this host's clock "
                         "(transport.clock_sync): for hosts whose clocks differ")
+    parser.add_argument("--clock-routers", type=int, default=1, metavar="K",
+                        help="with --clock-id: the swarm's routers are router-0..router-K-1 "
+                        "(probes from any other name are dropped)")
     return parser.parse_args(argv)
 
 
@@ -58,7 +61,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             log.info("router %s of swarm %s: listen %s, connect %s", bus.zid, args.swarm,
                      args.listen, args.connect)
             if args.clock_id is not None:
-                bus.start_clock_sync(SwarmKeys(args.swarm), args.clock_id, probe=True)
+                bus.start_clock_sync(SwarmKeys(args.swarm), args.clock_id, args.clock_routers,
+                                     probe=True)
             idle = threading.Event()
             while not stop.raised:
                 idle.wait(0.2)
