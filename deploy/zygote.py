@@ -34,6 +34,7 @@ from pathlib import Path
 
 from agents.errors import DeployError
 from deploy.forked import ForkedProcess, fork_pid, trim_heap
+from deploy.pids import identify
 
 PR_SET_PDEATHSIG, PR_SET_CHILD_SUBREAPER = 1, 36  # linux/prctl.h
 
@@ -65,6 +66,7 @@ class Zygote:
                 env={**os.environ, "PYTHONUNBUFFERED": "1"},
             )
         self._ready = False
+        self.ident = identify(self.proc.pid)
 
     def _answer(self) -> str:
         assert self.proc.stdout is not None
