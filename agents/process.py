@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from types import FrameType
 
 from agents.errors import EncloseError
+from agents.lifeline import die_with_launcher
 from agents.network_args import add_network_arguments, apply_network_arguments
 from agents.phases import mark
 from agents.scenario import NetworkConfig, Scenario
@@ -131,7 +132,9 @@ def process_main(
     run: Callable[[argparse.Namespace], int],
     name: Callable[[argparse.Namespace], str],
 ) -> int:
-    """Parse, set up logging, run; a named error becomes a logged line and exit code 2."""
+    """Parse, set up logging, run; a named error becomes a logged line and exit code 2.
+    First of all, die with the launcher that started us, if one did (agents.lifeline)."""
+    die_with_launcher()
     mark("main")  # the entry point's imports are done
     args = parser.parse_args(argv)
     setup_logging(args.log_level, name(args))

@@ -9,6 +9,7 @@ import sys
 from collections.abc import Sequence
 
 from agents.errors import EncloseError
+from agents.lifeline import die_with_launcher
 from agents.phases import mark
 
 # Each module exposes `register(subparsers)`, which adds its subparser and sets `func(args) -> int`.
@@ -41,6 +42,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()  # an inner launcher (deploy.netns_run) dies with the outer one
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser(argv).parse_args(argv)
     mark("imports")  # the subcommand's module is imported

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from agents.errors import EncloseError
+from agents.lifeline import die_with_launcher
 from agents.phases import log_phases, mark
 from agents.process import (
     add_bus_arguments,
@@ -74,6 +75,7 @@ def start_live(args: argparse.Namespace) -> LiveServer | None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()  # agents.lifeline
     mark("main")
     args = parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,

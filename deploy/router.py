@@ -20,6 +20,7 @@ import threading
 from collections.abc import Sequence
 
 from agents.errors import EncloseError
+from agents.lifeline import die_with_launcher
 from agents.process import stop_on_signals
 from transport.credentials import Identity
 from transport.keys import SwarmKeys
@@ -49,6 +50,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()  # agents.lifeline
     args = parse_args(argv)
     logging.basicConfig(level=logging.INFO,
                         format="%(asctime)s %(levelname)s router: %(message)s")

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agents.errors import DeployError
+from agents.lifeline import launcher_env
 from deploy.forked import ForkedProcess, fork_is_safe, fork_main, trim_heap
 from deploy.pids import ProcessId, identify, write_pids
 from deploy.zygote import Zygote
@@ -138,7 +139,7 @@ class Supervisor:
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
                 start_new_session=True,
-                env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                env={**os.environ, "PYTHONUNBUFFERED": "1", **launcher_env()},
             )
 
     def _write_pids(self) -> None:
