@@ -12,7 +12,7 @@ thread (deploy.supervisor), whose end is the process's end.  How each kind of ch
 here:
 - started as `python -m ...` by the supervisor: the launcher's PID in the environment
   (LAUNCHER_PID_ENV, `launcher_env`), read by `die_with_launcher` first thing in the
-  process's main (an inner launcher in a namespace too: deploy.netns_run);
+  process's main (an inner launcher in a namespace too: deploy.netns.run);
 - forked by the launcher (deploy.forked): `die_with` in the child, before anything else;
 - forked by the fork server (deploy.zygote), which double-forks so that its children
   are reparented to the launcher: the request would fire when the middle process exits,

@@ -27,8 +27,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from agents import phases
-from agents.errors import DeployError
 from agents.lifeline import die_with
+from transport.errors import DeployError
 
 
 def trim_heap() -> None:

@@ -19,10 +19,10 @@ import sys
 import threading
 from collections.abc import Sequence
 
-from agents.errors import EncloseError
 from agents.lifeline import die_with_launcher
 from agents.process import stop_on_signals
 from transport.credentials import Identity
+from transport.errors import EncloseError
 from transport.keys import SwarmKeys
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig

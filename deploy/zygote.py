@@ -30,10 +30,10 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from agents.errors import DeployError
 from agents.lifeline import die_with, set_subreaper
 from deploy.forked import ForkedProcess, fork_pid, trim_heap
 from deploy.pids import identify
+from transport.errors import DeployError
 
 
 class Zygote:

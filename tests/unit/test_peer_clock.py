@@ -12,7 +12,6 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from agents.errors import ConfigError
 from agents.process import StatusReporter
 from transport.bus import Received
 from transport.checks import DEFAULT_LIMITS
@@ -25,6 +24,7 @@ from transport.clock_sync import (
 )
 from transport.codec import decode, encode
 from transport.decoder import Decoder
+from transport.errors import ConfigError
 from transport.keys import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import ClockProbe, FollowerState, Header, ProcessStatus, RunControl
