@@ -21,7 +21,7 @@ COMMANDS: dict[str, str] = {
     "report": "deploy.report",
     "sim": "deploy.commands.sim",
     "sweep": "deploy.sweep.command",
-    "keys": "deploy.run_secrets",
+    "keys": "deploy.commands.keys",
     "host": "deploy.commands.host",
 }
 COMMAND_MODULES: tuple[str, ...] = tuple(COMMANDS.values())

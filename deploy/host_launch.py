@@ -23,6 +23,7 @@ from pathlib import Path
 from agents.scenario.file import load_scenario, shipped_text
 from agents.scenario.model import Scenario
 from deploy.deployment import Deployment
+from deploy.host_keys import HostSecrets, write_swarm_keys
 from deploy.launch import Launch
 from deploy.run_secrets import RunSecrets
 from transport.clock import clock_env
@@ -56,11 +57,22 @@ class HostLaunch(Launch):
         self.sim_address = dep.hosts[dep.host_of("sim")].address
 
     def make_secrets(self) -> RunSecrets:
-        if self.args.credentials_dir is not None:
-            return RunSecrets(Path(self.args.credentials_dir).resolve())
-        s = self.scenario
-        return RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure,
-                               n_routers=len(self.dep.hosts))
+        """Each local host's folder of `enclose keys` (deploy.host_keys): with --host, the
+        one given; with --all, the folders of the `enclose keys` output given, or of one
+        made fresh in the run directory (without the CA key: nobody adds hosts to it)."""
+        if self.args.insecure:
+            return RunSecrets.make(self.out, self.keys, 0, 0, insecure=True)
+        given = self.args.credentials_dir
+        if given is None:
+            s = self.scenario
+            root = write_swarm_keys(self.out / "credentials", self.dep, s.n, s.m,
+                                    keep_ca_key=False)
+            folders = {k: root[self.dep.hosts[k].name] for k in self.local}
+        elif getattr(self.args, "all", False):
+            folders = {k: Path(given) / self.dep.hosts[k].name for k in self.local}
+        else:
+            folders = {self.local[0]: Path(given)}
+        return HostSecrets.of(self.dep, self.local, folders)
 
     def prefix(self, k: int) -> list[str]:
         host = self.dep.hosts[k]

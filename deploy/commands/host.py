@@ -31,8 +31,9 @@ def register(sub: Any) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds after the start")
     p.add_argument("--out", type=Path, default=Path("runs/host"), help="run directory")
     p.add_argument("--credentials", dest="credentials_dir", default=None, metavar="DIR",
-                   help="this host's copy of `enclose keys DIR --routers K` (default: fresh "
-                   "per run, which works only with --all)")
+                   help="this host's folder of `enclose keys OUT_DIR --deployment FILE` "
+                   "(OUT_DIR/<host>; with --all, OUT_DIR itself; default: fresh per run, "
+                   "which works only with --all)")
     p.add_argument("--noise-std-m", type=float, default=0.0, help="noise on target observations")
     p.add_argument("--zenoh-config", default=None, metavar="JSON5", help="your Zenoh config")
     p.add_argument("--link-timeout", type=float, default=120.0,
@@ -49,7 +50,7 @@ def _main(args: argparse.Namespace) -> int:
     local = tuple(range(len(dep.hosts))) if args.all else (dep.index_of(args.host),)
     if not args.all and args.credentials_dir is None and not args.insecure:
         raise DeployError("--credentials DIR: hosts of one swarm must share its CA "
-                          "(`enclose keys DIR SCENARIO --swarm NAME --routers K`)")
+                          "(`enclose keys OUT_DIR --deployment FILE`, then OUT_DIR/<host>)")
     args.scenario = dep.scenario
     launch = HostLaunch(dep, local, args, args.out.resolve(), 1.0)
     launch.duration_s = (launch.scenario.run.duration_s if args.duration is None
