@@ -35,6 +35,7 @@ log = logging.getLogger("enclose.keys")
 OPERATOR = "operator"
 CA_KEY = "ca.key"
 IDENTITY_FILES = ("ca", "cert", "key", "acl")  # the files an identity file names
+SHOW_MISSING = 6  # missing files named in the error
 
 
 def host_names(dep: Deployment, k: int) -> list[str]:
@@ -101,13 +102,19 @@ def check_folder(folder: Path, names: Iterable[str], host: str) -> Path:
                           f"({CA_KEY}): it stays with the operator (`enclose keys OUT_DIR` "
                           f"keeps it in OUT_DIR/{OPERATOR}/); give host {host} only "
                           f"OUT_DIR/{host}/")
-    missing = [f"{f} ({name})" for name in names for f in needed_files(folder, name)
-               if not (folder / f).is_file()]
+    missing: dict[str, str] = {}  # file -> the first process that needs it
+    for name in names:
+        for f in needed_files(folder, name):
+            if not (folder / f).is_file():
+                missing.setdefault(f, name)
     if missing:
+        shown = [f"{f} ({name})" for f, name in list(missing.items())[:SHOW_MISSING]]
+        more = len(missing) - len(shown)
         hint = (f"; {folder / host} looks like this host's folder"
                 if (folder / host).is_dir() else "")
         raise ConfigError("--credentials", f"{folder} is not host {host}'s credentials: "
-                          f"missing {', '.join(missing)}{hint}")
+                          f"missing {', '.join(shown)}{f' and {more} more' if more else ''}"
+                          f"{hint}")
     return folder
 
 

@@ -110,3 +110,19 @@ def test_enclose_keys_command_from_a_deployment_file_or_a_host_count(tmp_path: P
     assert hosts == ["h0", "h1", "h2"]  # `enclose run --hosts 3`'s split and names
     assert (tmp_path / "c" / "h0" / "sim.json").is_file()
     assert not (tmp_path / "c" / "h1" / "sim.json").exists()
+
+
+def test_enclose_host_refuses_a_folder_with_the_ca_key_before_starting_anything(
+        keys: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    dep_file = tmp_path / "dep.toml"
+    dep_file.write_text(dump_deployment(DEP))
+    leaky = tmp_path / "drone-b"
+    shutil.copytree(keys / "drone-b", leaky)
+    shutil.copy(keys / OPERATOR / CA_KEY, leaky / CA_KEY)
+    run = tmp_path / "run"
+    argv = ["host", str(dep_file), "--host", "drone-b", "--out", str(run), "--credentials"]
+    assert main([*argv, str(leaky)]) == 2
+    assert "holds the swarm CA's private key" in caplog.text
+    assert main([*argv, str(keys)]) == 2  # the whole output, not the host's folder
+    assert "drone-b looks like this host's folder" in caplog.text
+    assert not (run / "logs").exists()  # nothing was started
