@@ -185,6 +185,9 @@ class Supervisor:
 
 
 def _signal(child: Child, signum: int) -> None:
+    """Through the child's own handle, which polls first: a child is ours until we reap
+    it, so its PID cannot name another process here (restarts and faults signal the
+    same way; a cleanup from outside goes by PID and start time: deploy.pids)."""
     if child.proc is None:
         return
     with contextlib.suppress(ProcessLookupError):
