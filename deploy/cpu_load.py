@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from itertools import pairwise
 from pathlib import Path
 
 PROC = Path("/proc")
@@ -70,58 +69,94 @@ def load_1min(proc: Path = PROC) -> float | None:
 
 
 @dataclass
+class _Window:
+    """Running sums over the samples at or after `from_s` (nothing per sample is kept: the
+    launcher samples every second for as long as the run lasts)."""
+
+    from_s: float
+    cpu: dict[str, list[float]] = field(default_factory=dict)  # name -> [cpu s, wall s]
+    machine_first: tuple[int, int] | None = None  # busy, total ticks
+    machine_last: tuple[int, int] | None = None
+    machine_samples: int = 0
+    loads: list[float] = field(default_factory=lambda: [0.0, 0.0])  # sum, count
+
+    def add_cpu(self, name: str, before: tuple[float, int, float], t_s: float, pid: int,
+                cpu_s: float) -> None:
+        t0, pid0, c0 = before
+        if t0 >= self.from_s and pid0 == pid and t_s > t0 and cpu_s >= c0:
+            sums = self.cpu.setdefault(name, [0.0, 0.0])
+            sums[0] += cpu_s - c0
+            sums[1] += t_s - t0
+
+    def add_machine(self, t_s: float, busy: int, total: int, load: float | None) -> None:
+        if t_s < self.from_s:
+            return
+        self.machine_first = self.machine_first or (busy, total)
+        self.machine_last = (busy, total)
+        self.machine_samples += 1
+        if load is not None:
+            self.loads[0] += load
+            self.loads[1] += 1
+
+
+@dataclass
 class CpuSampler:
-    """Readings over time; `sample` is cheap (a few /proc reads per process)."""
+    """Readings over time; `sample` is cheap (a few /proc reads per process).  `summary`
+    answers for the windows named here (`windows_from_s`), kept as running sums."""
 
     proc: Path = PROC
-    # name -> [(t_s, pid, cpu_s)]; a restart shows as a new pid (its CPU starts from 0)
-    processes: dict[str, list[tuple[float, int, float]]] = field(default_factory=dict)
-    machine: list[tuple[float, int, int, float | None]] = field(default_factory=list)
+    windows_from_s: tuple[float, ...] = (0.0,)
     peak_rss_mb: dict[str, float] = field(default_factory=dict)  # name -> max over its pids
+    # name -> its latest (t_s, pid, cpu_s); a restart shows as a new pid (CPU from 0)
+    latest: dict[str, tuple[float, int, float]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self._windows = {t: _Window(t) for t in self.windows_from_s}
 
     def sample(self, t_s: float, pids: dict[str, int | None]) -> None:
         for name, pid in pids.items():
             cpu = None if pid is None else process_cpu_s(pid, self.proc)
             if pid is not None and cpu is not None:
-                self.processes.setdefault(name, []).append((t_s, pid, cpu))
+                self.add_cpu(name, t_s, pid, cpu)
             peak = None if pid is None else process_peak_rss_mb(pid, self.proc)
             if peak is not None:
                 self.peak_rss_mb[name] = max(peak, self.peak_rss_mb.get(name, 0.0))
         ticks = machine_ticks(self.proc)
         if ticks is not None:
-            self.machine.append((t_s, ticks[0], ticks[1], load_1min(self.proc)))
+            load = load_1min(self.proc)
+            for w in self._windows.values():
+                w.add_machine(t_s, ticks[0], ticks[1], load)
+
+    def add_cpu(self, name: str, t_s: float, pid: int, cpu_s: float) -> None:
+        """One reading of process `name`: CPU seconds `cpu_s` of `pid` at `t_s`."""
+        before = self.latest.get(name)
+        self.latest[name] = (t_s, pid, cpu_s)
+        if before is not None:
+            for w in self._windows.values():
+                w.add_cpu(name, before, t_s, pid, cpu_s)
 
     def summary(self, from_s: float, cores: int | None = None) -> dict[str, object]:
         """{"process_cpu_pct": {name: % of a core}, "machine_busy_pct", "load_1min", "cores"}
-        over the samples at or after `from_s` (only what was sampled twice or more), and
-        "process_peak_rss_mb" {name: MB} over the whole run."""
+        over the samples at or after `from_s` (one of `windows_from_s`; only what was
+        sampled twice or more), and "process_peak_rss_mb" {name: MB} over the whole run."""
+        w = self._windows.get(from_s)
+        if w is None:
+            raise ValueError(f"no CPU window from {from_s}: windows {sorted(self._windows)}")
         out: dict[str, object] = {}
-        per = {name: pct for name, rows in sorted(self.processes.items())
-               if (pct := _mean_pct(rows, from_s)) is not None}
+        per = {name: round(100.0 * c / wall, 1) for name, (c, wall) in sorted(w.cpu.items())
+               if wall > 0}
         if per:
             out["process_cpu_pct"] = per
         if self.peak_rss_mb:
             out["process_peak_rss_mb"] = {k: round(v, 1)
                                           for k, v in sorted(self.peak_rss_mb.items())}
-        rows = [m for m in self.machine if m[0] >= from_s]
-        if len(rows) >= 2 and rows[-1][2] > rows[0][2]:
-            busy = rows[-1][1] - rows[0][1]
-            out["machine_busy_pct"] = round(100.0 * busy / (rows[-1][2] - rows[0][2]), 1)
-            loads = [m[3] for m in rows if m[3] is not None]
-            if loads:
-                out["load_1min"] = round(sum(loads) / len(loads), 2)
+        first, last = w.machine_first, w.machine_last
+        if w.machine_samples >= 2 and first and last and last[1] > first[1]:
+            out["machine_busy_pct"] = round(100.0 * (last[0] - first[0]) / (last[1] - first[1]), 1)
+            if w.loads[1]:
+                out["load_1min"] = round(w.loads[0] / w.loads[1], 2)
             out["cores"] = cores or os.cpu_count() or 1
         return out
-
-
-def _mean_pct(rows: list[tuple[float, int, float]], from_s: float) -> float | None:
-    """CPU % of one core over the window, summed over the pid's stretches (restarts)."""
-    cpu_s = wall_s = 0.0
-    window = [r for r in rows if r[0] >= from_s]
-    for (t0, pid0, c0), (t1, pid1, c1) in pairwise(window):
-        if pid0 == pid1 and t1 > t0 and c1 >= c0:
-            cpu_s, wall_s = cpu_s + c1 - c0, wall_s + t1 - t0
-    return round(100.0 * cpu_s / wall_s, 1) if wall_s > 0 else None
 
 
 # A machine this busy queues every process for a core: latencies, late ticks and the

@@ -74,7 +74,7 @@ class Launch:
         self.live_url: str | None = None
         self.started_s = time.monotonic()
         self.t0_s = float("inf")  # monotonic time of the experiment's start, once known
-        self.cpu = CpuSampler()  # what each process cost, sampled while flying
+        self.cpu = CpuSampler()  # what each process cost, sampled while flying (see fly)
 
     def common(self) -> list[str]:
         extra = ["--zenoh-config", self.opts.zenoh_config] if self.opts.zenoh_config else []
@@ -261,6 +261,8 @@ class Launch:
             return encode(RunControl(stamper.header(), "start", start, self.duration_s))
 
         t0 = self.t0_s = time.monotonic() + START_DELAY_S
+        # Over the whole flight and its steady half: deploy.launch_end.load_report.
+        self.cpu = CpuSampler(windows_from_s=(t0, t0 + 0.5 * self.duration_s))
         if self.watchdog is None:
             self.watchdog = Watchdog(self.sup, self.policy, t0, self._before_restart)
         else:  # the one that watched the start-up: its events and restarts carry over

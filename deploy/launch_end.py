@@ -9,6 +9,7 @@ before the flight is over.  These are functions of a `Launch`, as
 from __future__ import annotations
 
 import logging
+import math
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -73,6 +74,8 @@ def load_report(launch: Launch) -> dict[str, Any]:
     """CPU per process and machine busy over the steady half (deploy.cpu_load), and the
     followers' late ticks: the load an accuracy figure was measured under."""
     steady_from = launch.t0_s + 0.5 * launch.duration_s
+    if not math.isfinite(launch.t0_s):  # it never flew: nothing was sampled
+        return {"ticks": overrun_summary(launch.board.as_dict())}
     cpu = launch.cpu.summary(steady_from if steady_from < time.monotonic() else launch.t0_s)
     return {**cpu, "ticks": overrun_summary(launch.board.as_dict())}
 

@@ -28,8 +28,8 @@ BOUNDED = (
     ("angle_error", "angle error |e_delta|", "", "eps_delta"),
 )
 PAPER_BOUNDS = {"eps_rho_m": 0.0999, "eps_delta": 0.0199}  # agents.scenario.model defaults
-FILES = ("metrics.json", "series.csv", "performance.png", "trajectory.png", "links.png",
-         "recording.mcap", "launch.json", "logs")
+FILES = ("metrics.json", "series.csv", "series.parquet", "performance.png", "trajectory.png",
+         "links.png", "recording.mcap", "launch.json", "logs")
 
 
 @dataclass(frozen=True)

@@ -1,14 +1,22 @@
 """The recorder's parts; `python -m deploy.recorder` wires them into one process.
 
-- `assembler.RunAssembler`: pure; decoded messages in, a `RunSeries` on the truth grid out,
-  plus per-follower counters (states, sequence gaps, state age at use, first-state fills).
+Nothing the recorder keeps in memory grows with the length of the run: what it needs at
+the end goes to disk as it arrives, and the end reads it back chunk by chunk.
+
+- `assembler.RunAssembler`: decoded messages in; truth and states spilled to disk
+  (`spill.RowSpill`), per-follower counters (states, sequence gaps) and the last seconds
+  in memory for live progress.
+- `chunks.Assembly`: the run on the truth grid, one chunk of samples at a time, with the
+  counters that qualify it (state age at use, first-state fills).
 - `mcap_log.McapLog`: streaming, chunked MCAP file, one JSON channel per key, JSON schemas
-  generated from the message dataclasses (opens in Foxglove and PlotJuggler).
+  generated from the message dataclasses (opens in Foxglove and PlotJuggler); its chunk
+  indexes wait on disk for the summary (`mcap_fast`).
 - `progress`: the live `progress.json` for the launcher (atomic writes).
-- `outputs`: the end of a run: `metrics.json`, `run.json`, `series.csv` and figures through
-  `deploy.report.write_run_outputs` -- the code `enclose simulate` uses.
+- `outputs`: the end of a run: `metrics.json`, `run.json`, `series.csv`, `series.parquet`
+  and figures through `deploy.report.write_run_outputs` -- the code `enclose simulate` uses.
 - `links`: metrics.json "links" -- per link (`"f0->f2"`, `"sensor->f2"`, 0-based) the
   delivered ratio and age at delivery, from the followers' final ("done") counters, which
   the loop waits for (at most ~2 s) after the stop.
+- `link_history`: links.csv, streamed to disk as the followers' counters arrive.
 - `loop.Recorder`: the process's single loop over a `Bus`.
 """

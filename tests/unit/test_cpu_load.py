@@ -29,9 +29,9 @@ def _burn(seconds: float) -> None:
 
 
 def test_a_busy_process_reads_as_busy_and_a_gone_one_as_nothing() -> None:
-    sampler = CpuSampler()
-    pid = os.getpid()
     t0 = time.monotonic()
+    sampler = CpuSampler(windows_from_s=(t0,))
+    pid = os.getpid()
     sampler.sample(t0, {"me": pid, "gone": 2**22 + 12345, "unstarted": None})
     _burn(0.3)
     sampler.sample(time.monotonic(), {"me": pid})
@@ -44,11 +44,14 @@ def test_a_busy_process_reads_as_busy_and_a_gone_one_as_nothing() -> None:
 
 
 def test_a_restart_is_a_new_stretch_not_a_negative_cpu() -> None:
-    sampler = CpuSampler()
-    sampler.processes["follower-1"] = [(0.0, 10, 5.0), (1.0, 10, 5.5), (2.0, 11, 0.0),
-                                       (3.0, 11, 0.1)]
+    sampler = CpuSampler(windows_from_s=(0.0, 1.0))
+    for t_s, pid, cpu_s in [(0.0, 10, 5.0), (1.0, 10, 5.5), (2.0, 11, 0.0), (3.0, 11, 0.1)]:
+        sampler.add_cpu("follower-1", t_s, pid, cpu_s)
     per = sampler.summary(0.0)["process_cpu_pct"]
     assert per == {"follower-1": 30.0}  # (0.5 + 0.1) s of CPU over 2 s sampled in one pid
+    assert sampler.summary(1.0)["process_cpu_pct"] == {"follower-1": 10.0}  # from 1 s on
+    with pytest.raises(ValueError, match="no CPU window"):
+        sampler.summary(0.5)
 
 
 def test_readers_of_proc() -> None:
