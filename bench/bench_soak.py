@@ -49,7 +49,12 @@ def read_pids(out: Path) -> dict[str, int]:
         raw = json.loads((out / "logs" / "pids.json").read_text())
     except (OSError, ValueError):
         return {}
-    return {k: v for k, v in raw.items() if isinstance(v, int)}
+    out = {}
+    for name, v in raw.items():  # {name: pid} or {name: {"pid": pid, ...}}
+        pid = v.get("pid") if isinstance(v, dict) else v
+        if isinstance(pid, int):
+            out[name] = pid
+    return out
 
 
 def recorder_state(out: Path) -> str:
@@ -161,7 +166,7 @@ def late_ticks(out: Path, start_stamp_s: float, window_s: float) -> dict[str, li
             for role, per in windows.items()}
 
 
-def series_batches(out: Path, rows: int = 65536) -> Iterator[dict[str, np.ndarray]]:
+def series_batches(out: Path, rows: int = 4096) -> Iterator[dict[str, np.ndarray]]:
     """series.parquet in batches of columns; series.csv where there is no Parquet file."""
     parquet = out / "series.parquet"
     if parquet.exists():
@@ -192,11 +197,9 @@ def error_windows(out: Path, window_s: float) -> list[dict[str, float]]:
 
 
 def outputs_s(out: Path) -> float | None:
-    log = out / "logs" / "recorder-0.log"
-    try:
-        found = _OUTPUTS.findall(log.read_text(errors="replace"))
-    except OSError:
-        return None
+    found = []
+    for log in sorted((out / "logs").glob("recorder*.log")):
+        found += _OUTPUTS.findall(log.read_text(errors="replace"))
     return float(found[-1]) if found else None
 
 

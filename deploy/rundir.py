@@ -121,10 +121,11 @@ def read_series(path: Path, n: int, m: int, max_rows: int | None = None) -> RunS
     """series.csv or series.parquet (by its suffix) as a RunSeries; with `max_rows`, every
     k-th row (and the last) such that at most about that many are kept."""
     try:
+        rows = max(256, _READ_VALUES // len(series_columns(n, m)))
         if path.suffix == ".parquet":
-            total, batches = _parquet_batches(path)
+            total, batches = _parquet_batches(path, rows)
         else:
-            total, batches = _csv_batches(path)
+            total, batches = _csv_batches(path, rows)
         every = 1 if max_rows is None else max(1, math.ceil(total / max_rows))
         kept, offset = [], 0
         for data in batches:
@@ -144,26 +145,26 @@ def read_series(path: Path, n: int, m: int, max_rows: int | None = None) -> RunS
     return RunSeries(data[:, 0], *arrays)
 
 
-_READ_ROWS = 65536
+_READ_VALUES = 1 << 21  # per batch read: 16 MB
 
 
-def _parquet_batches(path: Path) -> tuple[int, Iterator[FloatArray]]:
+def _parquet_batches(path: Path, rows: int) -> tuple[int, Iterator[FloatArray]]:
     import pyarrow.parquet as pq
 
     source = pq.ParquetFile(path)
     batches = (np.column_stack([c.to_numpy() for c in b.columns])
-               for b in source.iter_batches(batch_size=_READ_ROWS))
+               for b in source.iter_batches(batch_size=rows))
     return source.metadata.num_rows, batches
 
 
-def _csv_batches(path: Path) -> tuple[int, Iterator[FloatArray]]:
+def _csv_batches(path: Path, rows: int) -> tuple[int, Iterator[FloatArray]]:
     with open(path) as f:
         total = sum(1 for _ in f) - 1
 
     def read() -> Iterator[FloatArray]:
         with open(path) as f:
             f.readline()
-            while lines := list(itertools.islice(f, _READ_ROWS)):
+            while lines := list(itertools.islice(f, rows)):
                 yield np.loadtxt(lines, delimiter=",", ndmin=2)
 
     return max(0, total), read()

@@ -146,6 +146,17 @@ def test_report_redraws_the_link_health_figure(short_run: Path) -> None:
     assert (short_run / "links.png").stat().st_size > 10_000
 
 
+def test_report_reads_series_csv_where_a_run_has_no_parquet(short_run: Path,
+                                                            tmp_path: Path) -> None:
+    old = tmp_path / "old"
+    old.mkdir()
+    for name in ("run.json", "metrics.json", "series.csv"):
+        (old / name).write_bytes((short_run / name).read_bytes())
+    paths = regenerate_figures(old)
+    assert [p.name for p in paths] == ["performance.png", "trajectory.png"]
+    assert all(p.stat().st_size > 10_000 for p in paths)
+
+
 @pytest.mark.timeout(120)
 def test_a_large_swarm_gets_a_colour_bar_not_a_legend_that_squeezes_the_panels(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
