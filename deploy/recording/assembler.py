@@ -109,8 +109,13 @@ class RunAssembler:
         stamp = msg.header.stamp_s
         row = np.empty(self.truth.width)
         row[0] = stamp
-        row[1 : 1 + 2 * self.n] = np.asarray(msg.follower_pos_m, dtype=np.float64)[:, :2].ravel()
-        row[1 + 2 * self.n :] = np.asarray(msg.target_pos_m, dtype=np.float64).ravel()
+        try:
+            row[1 : 1 + 2 * self.n] = np.asarray(msg.follower_pos_m,
+                                                 dtype=np.float64)[:, :2].ravel()
+            row[1 + 2 * self.n :] = np.asarray(msg.target_pos_m, dtype=np.float64).ravel()
+        except (ValueError, TypeError, IndexError):  # not vectors of the expected sizes
+            self.drops["truth_shape"] += 1
+            return
         self.truth.append(row)
         self._recent_truth.append(row)
         self._truth_min_s = min(self._truth_min_s, stamp)
@@ -120,6 +125,9 @@ class RunAssembler:
     def _add_state(self, msg: FollowerState) -> None:
         if not 0 <= msg.index < self.n:
             self.drops["state_index"] += 1
+            return
+        if not len(msg.r_m) == len(msg.dr_m_s) == len(msg.u_m_s) == 2:
+            self.drops["state_shape"] += 1
             return
         tally = self.tallies[msg.index]
         sender, seq = msg.header.sender_id, msg.header.seq

@@ -125,8 +125,13 @@ def test_truth_of_the_wrong_shape_and_bad_index_dropped(paper: Scenario) -> None
     zero = (0.0, 0.0)
     asm.add(FollowerState(Header("follower-9", 0, START_S), 9, zero, zero, zero, zero, zero,
                           zero, START_S))
-    assert asm.drops == {"truth_shape": 1, "state_index": 1}
-    assert asm.truth_count == 0
+    asm.add(FollowerState(Header("follower-1", 0, START_S), 1, (0.0, 0.0, 0.0), zero, zero,
+                          zero, zero, zero, START_S))
+    ragged = ((0.0, 0.0, 0.0), (0.0,), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    asm.add(TruthSnapshot(Header("sim-0", 1, START_S), 0.0, ragged, ragged,
+                          ((0.0, 0.0), (0.0, 0.0)), ((0.0, 0.0), (0.0, 0.0))))
+    assert asm.drops == {"truth_shape": 2, "state_index": 1, "state_shape": 1}
+    assert asm.truth_count == 0 and asm.state_counts() == [0] * 4
 
 
 def test_no_truth_no_state_at_all_or_no_sample_in_window_is_a_named_error(

@@ -143,7 +143,8 @@ def test_recent_series_keeps_a_bounded_window(paper: Scenario) -> None:
     recent = asm.recent_series(1.0)
     assert recent is not None and len(recent.t_s) == 51
     assert recent.t_s[0] == pytest.approx(39.0) and recent.t_s[-1] == pytest.approx(40.0)
-    assert np.allclose(recent.estimate_m, asm.build().series.estimate_m[-51:])  # type: ignore
+    whole = asm.build().series
+    assert whole is not None and np.allclose(recent.estimate_m, whole.estimate_m[-51:])
     assert asm.truth_count == 2001 and asm.state_counts() == [2001] * 4
 
 
