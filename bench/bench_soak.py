@@ -72,8 +72,10 @@ def sample(out: Path, launcher_pid: int, t_s: float) -> list[dict[str, Any]]:
                          process_cpu_s(pid))
         if rss is None or hwm is None or cpu is None:
             continue
+        anon = process_status_kb(pid, "RssAnon")  # the heaps, without mapped files
         rows.append({"t_s": round(t_s, 2), "name": name, "pid": pid, "rss_mb": rss / 1024,
-                     "hwm_mb": hwm / 1024, "cpu_s": cpu})
+                     "anon_mb": None if anon is None else anon / 1024, "hwm_mb": hwm / 1024,
+                     "cpu_s": cpu})
     return rows
 
 
