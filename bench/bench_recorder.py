@@ -38,7 +38,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp, MemoryBus(MemoryHub(), "rec") as rbus:
         sbus = MemoryBus(rbus.hub, "swarm")
         recorder = Recorder(rbus, "bench", scenario, Path(tmp), period_s=1e9)
-        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "start")))
+        sbus.publish(keys.control(), encode(run.control(Stamper("launcher-0"), "start")))
         per_batch = round(run.rate_hz) * (1 + scenario.n)
         batch: list[tuple[str, bytes]] = []
         handled, wall, cpu = 0, 0.0, 0.0
@@ -62,7 +62,7 @@ def main() -> None:
         live = live_errors(recorder.asm, dataclasses.replace(
             recorder._info, steady_from_s=args.duration / 2))
         tick_ms = 1000 * (time.perf_counter() - t0)
-        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "stop")))
+        sbus.publish(keys.control(), encode(run.control(Stamper("launcher-0"), "stop")))
         recorder.step()
         t0 = time.perf_counter()
         ok = recorder.finish()

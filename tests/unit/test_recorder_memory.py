@@ -43,7 +43,7 @@ def test_recorder_heap_is_flat_over_the_run(tmp_path: Path) -> None:
     readings: dict[float, int] = {}
     with MemoryBus(hub, "recorder") as rbus, MemoryBus(hub, "swarm") as sbus:
         recorder = Recorder(rbus, "mem", paper, tmp_path, period_s=1e9)
-        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "start")))
+        sbus.publish(keys.control(), encode(run.control(Stamper("launcher-0"), "start")))
         tracemalloc.start()
         truths = 0
         try:
@@ -62,7 +62,7 @@ def test_recorder_heap_is_flat_over_the_run(tmp_path: Path) -> None:
         finally:
             tracemalloc.stop()
         assert recorder.asm.truth_count == 4001
-        sbus.publish(keys.control(), encode(run.control(Stamper("l"), "stop")))
+        sbus.publish(keys.control(), encode(run.control(Stamper("launcher-0"), "stop")))
         recorder.step()
         assert recorder.finish()
     grown = readings[80] - readings[20]
