@@ -6,7 +6,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import fields
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -31,9 +33,12 @@ from transport.errors import EncloseError
 
 log = logging.getLogger(__name__)
 MAX_CSV_RATE_HZ = 100.0
-# Samples drawn per figure at most: 240 s of the CSV's 100 Hz; a longer run's figures
-# take every k-th sample (marks are drawn at their own times).
+# Samples drawn per figure at most: 240 s of the CSV's 100 Hz, and 400 000 follower-samples
+# (ring64: 6 250); a longer run's figures take every k-th sample (marks are drawn at their
+# own times).  Drawing costs memory per point: a 20-minute ring64 run read whole went
+# to ~700 MB.
 FIGURE_ROWS = 24_000
+FIGURE_VALUES = 400_000
 PERFORMANCE_PNG = "performance.png"
 TRAJECTORY_PNG = "trajectory.png"
 
@@ -72,12 +77,16 @@ def write_run_outputs(
     sinks: Sequence[ChunkSink] = (),
 ) -> Metrics:
     """Metrics from the full-rate series; series.csv and series.parquet at most 100 Hz of
-    it; figures from series.parquet.  One pass over the chunks; `extra` (metrics.json's
-    other keys) may be a function, called once the pass (and `sinks`) are done."""
+    it; figures from the rows of series.parquet that `enclose report` draws (taken on the
+    way: reading a wide Parquet file back costs ~75 kB a column a row group).  One pass
+    over the chunks; `extra` (metrics.json's other keys) may be a function, called once the
+    pass (and `sinks`) are done."""
     source = WholeSeries(series) if isinstance(series, RunSeries) else series
     run_dir.mkdir(parents=True, exist_ok=True)
     angles = np.asarray(info.angles_rad)
     every, total, offset = _decimation(source.t_s), len(source.t_s), 0
+    thin_total = len(decimated_rows(0, total, every, total))
+    drawn = _Drawn(thin_total, figure_rows(info.n))
     metrics = MetricsAccumulator(info.steady_from_s, info.eps_rho_m, info.eps_delta)
     with SeriesWriter(run_dir, info.n, info.m) as writer:
         for chunk in source.chunks():
@@ -86,11 +95,34 @@ def write_run_outputs(
                 sink.add(chunk)
             thin = chunk.take(decimated_rows(offset, len(chunk.t_s), every, total))
             writer.add(thin, error_series(thin, info.successor, angles, info.rho_d_m))
+            drawn.add(thin)
             offset += len(chunk.t_s)
     result = metrics.result()
     write_metrics(run_dir, result, info, dict(extra() if callable(extra) else extra or {}))
-    _figures(run_dir, info, marks_s or [])
+    _figures(run_dir, info, marks_s or [], drawn.series())
     return result
+
+
+def figure_rows(n: int) -> int:
+    return min(FIGURE_ROWS, FIGURE_VALUES // max(1, n))
+
+
+class _Drawn:
+    """The rows of the series file that `read_series(..., figure_rows(n))` gives back."""
+
+    def __init__(self, total: int, max_rows: int) -> None:
+        self.total, self.every = total, max(1, math.ceil(total / max_rows))
+        self.offset = 0
+        self.parts: list[RunSeries] = []
+
+    def add(self, thin: RunSeries) -> None:
+        self.parts.append(thin.take(decimated_rows(self.offset, len(thin.t_s), self.every,
+                                                   self.total)))
+        self.offset += len(thin.t_s)
+
+    def series(self) -> RunSeries:
+        return RunSeries(*(np.concatenate([getattr(p, f.name) for p in self.parts])
+                           for f in fields(RunSeries)))
 
 
 def _decimation(t_s: np.ndarray) -> int:
@@ -100,12 +132,14 @@ def _decimation(t_s: np.ndarray) -> int:
     return max(1, round(1.0 / (MAX_CSV_RATE_HZ * dt))) if dt > 0 else 1
 
 
-def _figures(run_dir: Path, info: RunInfo, marks_s: list[float]) -> list[Path]:
-    """From the run's series (at most FIGURE_ROWS samples of it: a long run's figures stay
-    readable and quick); `marks_s`: membership changes; with the launcher's events
-    (launch.json) they are marks on every figure.  links.png only where links.csv exists
-    (networked runs)."""
-    series = read_series(series_file(run_dir), info.n, info.m, FIGURE_ROWS)
+def _figures(run_dir: Path, info: RunInfo, marks_s: list[float],
+             series: RunSeries | None = None) -> list[Path]:
+    """From the run's series (`figure_rows` samples of it at most, read from the run's
+    series file unless given: a long run's figures stay readable, quick and small);
+    `marks_s`: membership changes; with the launcher's events (launch.json) they are marks
+    on every figure.  links.png only where links.csv exists (networked runs)."""
+    if series is None:
+        series = read_series(series_file(run_dir), info.n, info.m, figure_rows(info.n))
     angles = np.asarray(info.angles_rad)
     errors = error_series(series, info.successor, angles, info.rho_d_m)
     eps = (info.eps_rho_m, info.eps_delta)

@@ -120,23 +120,18 @@ def series_file(run_dir: Path) -> Path:
 def read_series(path: Path, n: int, m: int, max_rows: int | None = None) -> RunSeries:
     """series.csv or series.parquet (by its suffix) as a RunSeries; with `max_rows`, every
     k-th row (and the last) such that at most about that many are kept."""
+    width = 1 + 6 * n + 2 * m  # the series' columns; the errors after them are recomputed
     try:
-        rows = max(256, _READ_VALUES // len(series_columns(n, m)))
-        if path.suffix == ".parquet":
-            total, batches = _parquet_batches(path, rows)
-        else:
-            total, batches = _csv_batches(path, rows)
+        reader = _parquet_batches if path.suffix == ".parquet" else _csv_batches
+        total, batches = reader(path, series_columns(n, m), width)
         every = 1 if max_rows is None else max(1, math.ceil(total / max_rows))
-        kept, offset = [], 0
+        kept, offset = [np.empty((0, width))], 0
         for data in batches:
-            if data.shape[1] != len(series_columns(n, m)):
-                raise EncloseError(f"{path}: expected {len(series_columns(n, m))} columns, "
-                                   f"found {data.shape[1]}")
             kept.append(data[decimated_rows(offset, len(data), every, total)])
             offset += len(data)
     except (OSError, ValueError) as exc:
         raise EncloseError(f"cannot read {path}: {exc}") from exc
-    data = np.concatenate(kept) if kept else np.empty((0, len(series_columns(n, m))))
+    data = np.concatenate(kept)
     k, col = data.shape[0], 1
     arrays = []
     for count in (n, n, n, m):
@@ -145,27 +140,43 @@ def read_series(path: Path, n: int, m: int, max_rows: int | None = None) -> RunS
     return RunSeries(data[:, 0], *arrays)
 
 
-_READ_VALUES = 1 << 21  # per batch read: 16 MB
+_READ_VALUES = 1 << 21  # per batch read from a CSV: 16 MB
 
 
-def _parquet_batches(path: Path, rows: int) -> tuple[int, Iterator[FloatArray]]:
+def _parquet_batches(path: Path, names: list[str],
+                     width: int) -> tuple[int, Iterator[FloatArray]]:
+    """A row group at a time (the writer's chunks), without threads: reading ahead holds
+    several at once."""
     import pyarrow.parquet as pq
 
     source = pq.ParquetFile(path)
-    batches = (np.column_stack([c.to_numpy() for c in b.columns])
-               for b in source.iter_batches(batch_size=rows))
-    return source.metadata.num_rows, batches
+    if source.schema_arrow.names != names:
+        raise ValueError(f"its columns are not those of this run ({len(names)})")
+    wanted = names[:width]
+
+    def read() -> Iterator[FloatArray]:
+        for g in range(source.num_row_groups):
+            table = source.read_row_group(g, columns=wanted, use_threads=False)
+            yield np.column_stack([c.to_numpy() for c in table.columns])
+
+    return source.metadata.num_rows, read()
 
 
-def _csv_batches(path: Path, rows: int) -> tuple[int, Iterator[FloatArray]]:
+def _csv_batches(path: Path, names: list[str],
+                 width: int) -> tuple[int, Iterator[FloatArray]]:
     with open(path) as f:
         total = sum(1 for _ in f) - 1
+    rows = max(256, _READ_VALUES // len(names))
 
     def read() -> Iterator[FloatArray]:
         with open(path) as f:
             f.readline()
             while lines := list(itertools.islice(f, rows)):
-                yield np.loadtxt(lines, delimiter=",", ndmin=2)
+                data = np.loadtxt(lines, delimiter=",", ndmin=2)
+                if data.shape[1] != len(names):
+                    raise EncloseError(f"{path}: expected {len(names)} columns, found "
+                                       f"{data.shape[1]}")
+                yield data[:, :width]
 
     return max(0, total), read()
 

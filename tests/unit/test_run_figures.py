@@ -141,9 +141,13 @@ def test_every_figure_draws_the_marks_of_the_run(short_run: Path, tmp_path: Path
 
 def test_report_redraws_the_link_health_figure(short_run: Path) -> None:
     (short_run / "links.png").unlink()
+    drawn = {name: (short_run / name).read_bytes() for name in ("performance.png",
+                                                                "trajectory.png")}
     paths = regenerate_figures(short_run)
     assert short_run / "links.png" in paths
     assert (short_run / "links.png").stat().st_size > 10_000
+    # The run drew from the rows the report reads back from series.parquet: the same.
+    assert all((short_run / name).read_bytes() == data for name, data in drawn.items())
 
 
 def test_report_reads_series_csv_where_a_run_has_no_parquet(short_run: Path,
