@@ -18,7 +18,7 @@ arrive, and only the last seconds stay in memory for live progress (`recent_seri
 
 from __future__ import annotations
 
-from collections import Counter
+from collections import Counter, deque
 from pathlib import Path
 from typing import Any
 
@@ -44,26 +44,9 @@ from transport.messages import FollowerState, Message, RunControl, TruthSnapshot
 __all__ = ["Assembly", "FollowerStats", "RunAssembler", "align_latest", "assembly_extra"]
 
 FloatArray = NDArray[np.float64]
-RECENT_TRUTH = 1024  # truth rows kept for live progress: 20 s at 50 Hz
-RECENT_STATES = 512  # states per follower kept for it
+RECENT_TRUTH = 512  # truth rows kept for live progress: 10 s at 50 Hz
+RECENT_STATES = 512  # states per follower kept for it: its 1-s window needs 4 per row
 MAX_SENDERS = 16  # sequence tallies per follower index (a restart may bring a new sender)
-
-
-class _Ring:
-    """The newest `capacity` rows appended, oldest first."""
-
-    def __init__(self, capacity: int, width: int) -> None:
-        self._rows = np.empty((capacity, width))
-        self._next = 0
-
-    def append(self, row: FloatArray | tuple[float, ...]) -> None:
-        self._rows[self._next % len(self._rows)] = row
-        self._next += 1
-
-    def last(self, k: int | None = None) -> FloatArray:
-        held = min(self._next, len(self._rows))
-        k = held if k is None else min(k, held)
-        return self._rows[np.arange(self._next - k, self._next) % len(self._rows)]
 
 
 class RunAssembler:
@@ -84,8 +67,9 @@ class RunAssembler:
         self.truth = RowSpill(1 + 2 * n + 2 * m, spill_dir, block_rows)
         self.states = RowSpill(STATE_WIDTH + 1, spill_dir, block_rows)
         self.tallies = [StateTally() for _ in range(n)]
-        self._recent_truth = _Ring(RECENT_TRUTH, self.truth.width)
-        self._recent_states = [_Ring(RECENT_STATES, STATE_WIDTH) for _ in range(n)]
+        self._recent_truth: deque[FloatArray] = deque(maxlen=RECENT_TRUTH)
+        self._recent_states: list[deque[tuple[float, ...]]] = [
+            deque(maxlen=RECENT_STATES) for _ in range(n)]
         self._truth_min_s = np.inf
         self._truth_max_s = -np.inf
         self._truth_last_s: float | None = None  # of the last to arrive
@@ -141,8 +125,9 @@ class RunAssembler:
                 del tally.last_seq[next(iter(tally.last_seq))]
             tally.last_seq[sender] = seq
         stamp = msg.header.stamp_s
-        row = (stamp, *msg.r_m, *msg.dr_m_s, *msg.u_m_s)
-        self.states.append((stamp, float(msg.index), *row[1:]))
+        (rx, ry), (dx, dy), (ux, uy) = msg.r_m, msg.dr_m_s, msg.u_m_s
+        self.states.append((stamp, msg.index, rx, ry, dx, dy, ux, uy))
+        row = (stamp, rx, ry, dx, dy, ux, uy)
         self._recent_states[msg.index].append(row)
         tally.states += 1
         if tally.first is None or stamp < tally.first[0]:
@@ -172,7 +157,7 @@ class RunAssembler:
         start = self.start_stamp_s()
         if start is None or not self.truth.rows or not any(self.state_counts()):
             return None
-        truth = self._recent_truth.last()
+        truth = np.asarray(self._recent_truth)
         stamps = truth[:, 0]
         newest, first = stamps[-1], len(stamps) - 1
         while first > 0 and stamps[first - 1] >= newest - window_s:
@@ -183,7 +168,7 @@ class RunAssembler:
         for i, ring in enumerate(self._recent_states):
             if not self.tallies[i].states:
                 continue
-            tail = ring.last(4 * len(stamps) + 8)
+            tail = np.asarray(list(ring)[-(4 * len(stamps) + 8) :])
             tail = tail[np.argsort(tail[:, 0], kind="stable")]
             est[:, i], cmd[:, i], _, _ = follower_columns(stamps, tail, tail[0])
         return truth_series(truth, stamps - start, est, cmd, self.n)
