@@ -18,7 +18,7 @@ own).  At the end:
 The raw samples go to OUT/soak.json.
 
 Run: python bench/bench_soak.py [--case paper] [--minutes 10] [--window-min 2]
-     [--out runs/soak-paper] [--insecure]
+     [--out runs/soak-paper] [--insecure] [-- MORE ENCLOSE RUN OPTIONS]
 """
 
 from __future__ import annotations
@@ -279,12 +279,14 @@ def main() -> None:
     parser.add_argument("--settle-min", type=float, default=5.0)
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--insecure", action="store_true")
+    parser.add_argument("run_args", nargs="*", help="more `enclose run` options, after --")
     args = parser.parse_args()
     if args.window_min is None:
         args.window_min = 10.0 if args.minutes >= 40 else args.minutes / 5
     out = (args.out or Path(f"runs/soak-{args.case}")).resolve()
     argv = [sys.executable, "-m", "deploy.cli", "run", args.case, "--duration",
-            str(60 * args.minutes), "--out", str(out), *(["--insecure"] if args.insecure else [])]
+            str(60 * args.minutes), "--out", str(out), *(["--insecure"] if args.insecure else []),
+            *args.run_args]
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "launcher.out", "wb") as log:
         proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
