@@ -57,11 +57,16 @@ def read_pids(out: Path) -> dict[str, int]:
     return out
 
 
-def recorder_state(out: Path) -> str:
+def flying(out: Path) -> bool:
+    """True until the flight's end: the recorder has not stopped and its last truth is
+    before the planned end (after it come the stop and the end-of-run outputs)."""
     try:
-        return str(json.loads((out / "progress.json").read_text()).get("state", ""))
+        progress = json.loads((out / "progress.json").read_text())
     except (OSError, ValueError):
-        return ""
+        return True
+    t_s, duration_s = progress.get("t_s"), progress.get("duration_s")
+    early = t_s is None or duration_s is None or t_s < duration_s - 2.0
+    return progress.get("state", "") in ("starting", "linked", "running") and early
 
 
 def sample(out: Path, launcher_pid: int, t_s: float) -> list[dict[str, Any]]:
@@ -85,10 +90,10 @@ def watch(proc: subprocess.Popen[bytes], out: Path, period_s: float) -> list[dic
     t0, samples, next_s = time.monotonic(), [], 0.0
     while proc.poll() is None:
         now = time.monotonic() - t0
-        flying = recorder_state(out) in ("", "starting", "linked", "running")
-        if now >= next_s or not flying:
+        in_flight = flying(out)
+        if now >= next_s or not in_flight:
             for row in sample(out, proc.pid, now):
-                samples.append({**row, "flying": flying})
+                samples.append({**row, "flying": in_flight})
             next_s = now + period_s
             (out / "soak.json").write_text(json.dumps({"samples": samples}) + "\n")
         time.sleep(1.0)
