@@ -71,7 +71,7 @@ from transport.law_fields import FieldSpec, check_specs
 if TYPE_CHECKING:
     from agents.scenario import Scenario
 
-__all__ = ["FieldSpec", "Inputs", "Law", "Output", "Peer", "Sample", "Setup", "Value"]
+__all__ = ["FieldSpec", "Inputs", "Law", "Output", "Peer", "Sample", "Setup", "Value", "reference"]
 
 S = TypeVar("S")
 
@@ -190,3 +190,18 @@ class Law(Generic[S]):
             return check_specs(self.fields)
         except ValueError as exc:
             raise ScenarioError("law", f"{self.name or type(self).__name__}: {exc}") from None
+
+
+def reference(setup: Setup, targets: Mapping[int, Sample], now_s: float,
+              ) -> tuple[complex, complex]:
+    """This follower's weighted target position p~_i = sum of weight * target, each held
+    to `now_s` (a target not heard yet counts as zero), and its rate (zero past the hold)."""
+    p, rate, hold = 0j, 0j, setup.hold_s
+    for j, w in setup.weights:
+        track = targets.get(j)
+        if track is not None:
+            value, track_rate, stamp = track
+            p += w * (value + track_rate * (min(now_s, stamp + hold) - stamp))
+            if now_s - stamp <= hold:
+                rate += w * track_rate
+    return p, rate
