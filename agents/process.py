@@ -82,7 +82,7 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
 def load_run_scenario(args: argparse.Namespace) -> Scenario:
     """The scenario named on the command line, with the command line's network overrides;
     checked over the whole run unless the entry point set `whole_run_checks=False`
-    (agents.follower: see agents.scenario.checks.check_admissible)."""
+    (agents.follower.main: see agents.scenario.checks.check_admissible)."""
     whole_run = getattr(args, "whole_run_checks", True)
     return apply_network_arguments(load_scenario(args.scenario, whole_run), args)
 

@@ -8,9 +8,8 @@ process holding the right key could still send wrong -- or what arrives with `--
 - time: a stamp more than `future_s` ahead of the receiver's clock, or more than
   `max_age_s` behind it, is refused -- a forged future stamp must not win "newest";
 - values: every number finite, positions within `max_pos_m` of the origin, speeds below
-  `max_speed_m_s` (no vehicle flies faster: a value beyond is a forgery or a fault),
-  accelerations (the rates of the second-order estimator's velocity flows) below
-  `max_accel_m_s2`.
+  `max_speed_m_s` (no vehicle flies faster: a value beyond is a forgery or a fault); a
+  law's own fields within the bounds it declared (transport.law_fields, by the decoder).
 A refusal is a short reason string, counted by the decoder as `drop_rejected_<reason>`.
 
 Every message a process accepts passes here, so the common case is cheap: the numbers of
@@ -28,6 +27,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 from transport.keys import parse_key
+from transport.law_fields import law_finite, law_sum
 from transport.messages import (
     FollowerState,
     Message,
@@ -44,10 +44,6 @@ class Limits:
     max_age_s: float = 60.0
     max_pos_m: float = 1e5
     max_speed_m_s: float = 1e3
-    # Rates of the second-order estimator's velocity-stage flows (FollowerState.rv_flows):
-    # finite-time consensus drives them hard for a moment, so the bound only catches a
-    # forgery or a fault, as the others do (no vehicle or target accelerates at 1000 g).
-    max_accel_m_s2: float = 1e4
 
 
 DEFAULT_LIMITS = Limits()
@@ -135,60 +131,40 @@ def _observation_reason(msg: TargetObservation, lim: Limits) -> str | None:
 
 
 def _follower_reason(msg: FollowerState, now_s: float, lim: Limits) -> str | None:
-    """As _follower_reason_exact, in straight-line code when every number is finite."""
+    """As _follower_reason_exact, in straight-line code when every number is finite.  The
+    law's fields are held to their declared bounds by a receiver that knows the law
+    (transport.law_fields.reason, in transport.decoder); here only to being finite."""
     try:
         r0, r1 = msg.r_m
-        p0, p1 = msg.phi_m
         x0, x1 = msg.pos_m
         d0, d1 = msg.dr_m_s
         v0, v1 = msg.vel_m_s
         u0, u1 = msg.u_m_s
-        w0, w1 = msg.rv_m_s
         vst = msg.vehicle_stamp_s
-        s = r0 + r1 + p0 + p1 + x0 + x1 + d0 + d1 + v0 + v1 + u0 + u1 + w0 + w1 + vst
-        for _, fx, fy, rx, ry in msg.link_flows:
-            s += fx + fy + rx + ry
-        for _, fx, fy, rx, ry in msg.rv_flows:
-            s += fx + fy + rx + ry
-    except (TypeError, ValueError, OverflowError):  # not numbers, or not pairs
+        s = r0 + r1 + x0 + x1 + d0 + d1 + v0 + v1 + u0 + u1 + vst + law_sum(msg.law)
+    except (TypeError, ValueError, OverflowError, AttributeError):  # not numbers, or not pairs
         return _follower_reason_exact(msg, now_s, lim)
     if not (type(s) is float and s - s == 0.0):
         return _follower_reason_exact(msg, now_s, lim)
     if vst > now_s + lim.future_s:
         return "future_stamp"
     hypot, pos_max, speed_max = math.hypot, lim.max_pos_m, lim.max_speed_m_s
-    if not (hypot(r0, r1) <= pos_max and hypot(p0, p1) <= pos_max and hypot(x0, x1) <= pos_max
+    if not (hypot(r0, r1) <= pos_max and hypot(x0, x1) <= pos_max
             and hypot(d0, d1) <= speed_max and hypot(v0, v1) <= speed_max
-            and hypot(u0, u1) <= speed_max and hypot(w0, w1) <= speed_max):
+            and hypot(u0, u1) <= speed_max):
         return "impossible"
-    for _, fx, fy, rx, ry in msg.link_flows:
-        if not (hypot(fx, fy) <= pos_max and hypot(rx, ry) <= speed_max):
-            return "impossible"
-    accel_max = lim.max_accel_m_s2
-    for _, fx, fy, rx, ry in msg.rv_flows:
-        if not (hypot(fx, fy) <= speed_max and hypot(rx, ry) <= accel_max):
-            return "impossible"
     return None
 
 
 def _follower_reason_exact(msg: FollowerState, now_s: float, lim: Limits) -> str | None:
-    positions = [msg.r_m, msg.phi_m, msg.pos_m]
-    speeds = [msg.dr_m_s, msg.vel_m_s, msg.u_m_s, msg.rv_m_s]
-    flows = [f[1:] for f in msg.link_flows]
-    rv_flows = [f[1:] for f in msg.rv_flows]
-    numbers = [*(x for v in positions + speeds + flows + rv_flows for x in v),
-               msg.vehicle_stamp_s]
-    if not _finite(numbers):
+    positions = [msg.r_m, msg.pos_m]
+    speeds = [msg.dr_m_s, msg.vel_m_s, msg.u_m_s]
+    numbers = [*(x for v in positions + speeds for x in v), msg.vehicle_stamp_s]
+    if not (_finite(numbers) and law_finite(msg.law)):
         return "nonfinite"
     if msg.vehicle_stamp_s > now_s + lim.future_s:
         return "future_stamp"
     if not (_bounded(positions, lim.max_pos_m) and _bounded(speeds, lim.max_speed_m_s)):
-        return "impossible"
-    if not _bounded([f[:2] for f in flows], lim.max_pos_m) or not _bounded(
-            [f[2:] for f in flows], lim.max_speed_m_s):
-        return "impossible"
-    if not _bounded([f[:2] for f in rv_flows], lim.max_speed_m_s) or not _bounded(
-            [f[2:] for f in rv_flows], lim.max_accel_m_s2):
         return "impossible"
     return None
 

@@ -3,7 +3,9 @@
 A `Decoder` belongs to one process loop.  Every payload that fails to decode
 is dropped and counted under its `CodecError.reason`; a message whose type is
 not expected on that subscription, or whose index disagrees with its key, is
-dropped too, and so, given `limits`, is an implausible one (transport.checks).
+dropped too, and so, given `limits`, is an implausible one (transport.checks), and,
+given `law_fields`, a FollowerState whose law fields are not the declared ones
+(transport.law_fields: `drop_rejected_law_<why>`).
 Per stream -- (sender id, key), since a sender numbers each
 key it publishes on separately -- it counts sequence gaps (messages never seen) and
 stale messages (sequence number not above the last one: duplicated or
@@ -14,7 +16,7 @@ consumer knows whether "latest by seq" matters.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 from transport.bus import Received, Subscription
@@ -23,6 +25,8 @@ from transport.codec import decode
 from transport.errors import CodecError
 from transport.fastbuild import build
 from transport.keys import parse_key
+from transport.law_fields import FieldSpec
+from transport.law_fields import reason as law_reason
 from transport.messages import FollowerState, Message, TargetObservation
 from transport.peer_clock import PROCESS_BOOK, ClockBook
 
@@ -56,8 +60,10 @@ class Decoder:
     """Decodes, validates and counts; `expect` limits the accepted message types."""
 
     def __init__(self, expect: tuple[type, ...] | None = None,
-                 limits: Limits | None = None, clocks: ClockBook = PROCESS_BOOK) -> None:
+                 limits: Limits | None = None, clocks: ClockBook = PROCESS_BOOK,
+                 law_fields: Mapping[str, FieldSpec] | None = None) -> None:
         self.expect = expect
+        self.law_fields = law_fields
         self.clocks = clocks  # stamps are mapped onto our clock (transport.peer_clock)
         self.limits = limits  # with limits, implausible messages are dropped (transport.checks)
         self.dropped: Counter[str] = Counter()
@@ -87,6 +93,9 @@ class Decoder:
         msg = self.clocks.to_local(msg)
         if self.limits is not None:
             reason = check(msg, rec.key, rec.recv_stamp_s, self.limits)
+            if reason is None and self.law_fields is not None and type(msg) is FollowerState \
+                    and msg.law:
+                reason = law_reason(msg.law, self.law_fields)
             if reason is not None:
                 self.dropped[f"rejected_{reason}"] += 1
                 return None

@@ -29,6 +29,7 @@ that reach the agent.  Its `counters()` add, for each link L seen:
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -36,6 +37,7 @@ from transport.bus import Received
 from transport.checks import Limits
 from transport.decoder import Decoder, Inbound
 from transport.keys import parse_key
+from transport.law_fields import FieldSpec
 from transport.messages import RunControl
 
 SENSOR = "sensor"
@@ -206,8 +208,9 @@ class LinkDecoder(Decoder):
     """A Decoder that also tallies, per link, unique deliveries and their age."""
 
     def __init__(self, expect: tuple[type, ...] | None = None,
-                 limits: Limits | None = None) -> None:
-        super().__init__(expect, limits)
+                 limits: Limits | None = None,
+                 law_fields: Mapping[str, FieldSpec] | None = None) -> None:
+        super().__init__(expect, limits, law_fields=law_fields)
         self.tallies: dict[str, LinkTally] = {}  # per key
         self.ages_from_s = -float("inf")
 

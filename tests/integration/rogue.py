@@ -43,7 +43,7 @@ PARTS = os.environ.get("ROGUE_PARTS", "mav,plain,insider")
 
 
 def forged_state(i: int, seq: int, **kw: object) -> FollowerState:
-    f: dict[str, object] = dict(r_m=(500.0, -500.0), dr_m_s=(0.0, 0.0), phi_m=(0.0, 0.0),
+    f: dict[str, object] = dict(r_m=(500.0, -500.0), dr_m_s=(0.0, 0.0),
                                 pos_m=(500.0, -500.0), vel_m_s=(0.0, 0.0), u_m_s=(0.0, 0.0),
                                 vehicle_stamp_s=time.time())
     f.update(kw)

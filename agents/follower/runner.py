@@ -1,0 +1,138 @@
+"""One follower's law and what the platform does around each of its steps.
+
+`LawRunner` keeps the law's state (opaque here), the time of its last step (dt), its last
+estimate (continuity across a change of members or a join: `Inputs.rebase_to`), and
+calls the law guarded: a step that raises, returns a non-finite estimate or command, or
+a field the law did not declare (or of the wrong kind, or beyond its bound) is a failure:
+counted, its traceback logged once (then at most every `LOG_EVERY_S`), and the vehicle
+holds; the law's next good output is taken as if nothing happened.  Pure apart from the
+log: the follower process (agents.follower.node) and the lock-step harness both run it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import traceback
+from collections.abc import Mapping
+from typing import Any
+
+from agents.follower.membership import joined_estimate
+from agents.law.interface import Inputs, Law, Output, Peer, Sample, Setup, reference
+from transport.law_fields import FieldSpec, LawFields, LawValue, reason
+
+log = logging.getLogger("enclose.follower")
+LOG_EVERY_S = 10.0
+_new = tuple.__new__
+
+
+class LawRunner:
+    """Law `law` flown by follower `setup.index`."""
+
+    def __init__(self, law: Law[Any], setup: Setup) -> None:
+        self.law = law
+        self.declared: dict[str, FieldSpec] = law.declared()
+        self._kinds = tuple((name, spec.kind) for name, spec in self.declared.items())
+        self.setup = setup
+        self.state: Any = law.start(setup)
+        self.last_r: Sample | None = None  # the estimate of its last good step
+        self.last_step_s: float | None = None
+        self.rebase = False  # continue from last_r (a change of members, a join)
+        self.failures = 0
+        self._next_log_s = -math.inf
+
+    def step(self, now_s: float, command: bool, own: Sample, targets: Mapping[int, Sample],
+             peers: Mapping[int, Peer], heard_all_targets: bool,
+             ) -> tuple[Output, LawFields] | None:
+        """One step of the law: its output and its fields as published; None if it failed
+        (counted and logged: the caller holds the vehicle and publishes nothing)."""
+        setup, last = self.setup, self.last_step_s
+        dt = 0.0 if last is None else min(max(now_s - last, 0.0), setup.max_gap_s)
+        rebase_to = None
+        if self.rebase and self.last_r is not None:
+            rebase_to = self.last_r.held(now_s, setup.hold_s)
+        inputs = _new(Inputs, (now_s, dt, command, setup, own, targets, peers, rebase_to))
+        try:
+            state, out = self.law.step(self.state, inputs)
+            wire = self._wire(out)
+            u = complex(out.u_m_s) if command else 0j
+        except Exception:  # the law's own bug: the vehicle holds, the follower goes on
+            self._failed(traceback.format_exc())
+            return None
+        self.state, self.last_step_s = state, now_s
+        self.last_r = _new(Sample, (out.r_m, out.dr_m_s, now_s))
+        # A target newly ours is not heard yet: the law's reference lacks it, so the
+        # estimate stays carried until it is.
+        self.rebase = self.rebase and not heard_all_targets
+        if not _finite(u):  # its estimate and fields are good: they are published
+            self._failed(f"non-finite command {u!r}")
+            u = 0j
+        return _new(Output, (u, out.r_m, out.dr_m_s, out.fields)), wire
+
+    def _wire(self, out: Output) -> LawFields:
+        """`out` checked and its fields as FollowerState.law carries them; ValueError if
+        the estimate is not finite or a field is undeclared, of the wrong kind or too big."""
+        if not (type(out.r_m) is complex and type(out.dr_m_s) is complex
+                and _finite(out.r_m) and _finite(out.dr_m_s)):
+            raise ValueError(f"non-finite estimate r = {out.r_m!r}, dr = {out.dr_m_s!r}")
+        fields = out.fields
+        extra = fields.keys() - self.declared.keys()
+        if extra:
+            raise ValueError(f"fields not declared: {sorted(extra)}")
+        wire: dict[str, LawValue] = {}
+        for name, kind in self._kinds:
+            value = fields.get(name)
+            if value is None:
+                continue
+            if kind == "vec2":
+                wire[name] = (float(value.real), float(value.imag))
+            elif kind == "per_link":
+                wire[name] = tuple([(j, float(v.real), float(v.imag)) for j, v in value.items()])
+            else:
+                wire[name] = float(value)
+        why = reason(wire, self.declared)
+        if why is not None:
+            raise ValueError(f"{why}: {wire}")
+        return wire
+
+    def _failed(self, detail: str) -> None:
+        self.failures += 1
+        now = time.monotonic()
+        if self.failures == 1 or now >= self._next_log_s:
+            self._next_log_s = now + LOG_EVERY_S
+            log.error("law %r failed (%d so far), the vehicle holds: %s",
+                      self.law.name, self.failures, detail)
+
+    def regroup(self, new: Setup) -> None:
+        """The member set changed: the law's state carried (its `regroup`; starting afresh
+        if that fails), and the estimate continued from the last one."""
+        try:
+            self.state = self.law.regroup(self.state, self.setup, new)
+        except Exception:
+            self._failed(traceback.format_exc())
+            try:
+                self.state = self.law.start(new)
+            except Exception:
+                self._failed(traceback.format_exc())
+        self.setup = new
+        self.rebase = True
+
+    def join(self, peers: Mapping[int, Peer], now_s: float) -> None:
+        """Joining a running swarm: continue from the neighbours' mean estimate."""
+        if self.last_r is not None:
+            return
+        joined = joined_estimate(peers, self.setup, now_s)
+        if joined is not None:
+            self.last_r, self.rebase = joined, True
+
+    def standing_estimate(self, targets: Mapping[int, Sample], now_s: float) -> complex:
+        """What a follower publishes as its estimate while its law is not running: its
+        last one held, or, before the first, its weighted target position."""
+        if self.last_r is None:
+            return reference(self.setup, targets, now_s)[0]
+        return self.last_r.held(now_s, self.setup.hold_s)
+
+
+def _finite(v: complex) -> bool:
+    return math.isfinite(v.real) and math.isfinite(v.imag)
