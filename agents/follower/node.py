@@ -19,7 +19,7 @@ from agents.follower.inputs import Latest
 from agents.follower.membership import setup_for, stand_ins
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Output, Sample
-from agents.law.paper import PaperLaw
+from agents.law.loader import make_law
 from agents.liveness import MembershipWatch
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.process import StatusReporter
@@ -59,7 +59,7 @@ class FollowerNode:
     ) -> None:
         self.scenario = scenario
         self.members = frozenset(range(scenario.n))
-        self.runner = LawRunner(law or PaperLaw.from_params({}, scenario),
+        self.runner = LawRunner(law or make_law(scenario),  # the scenario's [law]
                                 setup_for(scenario, index))
         self.latest = Latest(index, self.runner.declared)
         self.index, self.bus, self.vehicle = index, bus, vehicle
