@@ -155,11 +155,13 @@ def law_line(info: dict[str, Any], metrics: dict[str, Any],
     law = info.get("law")
     if not isinstance(law, str):
         return None
-    status = _dict(launch.get("status_at_stop") or launch.get("status"))
-    failed = {name: int(n) for name, c in status.items() if name.startswith("follower-")
-              and isinstance(n := _dict(c).get("law_failures"), int) and n > 0}
-    if not launch and isinstance(metrics.get("law_failures"), int):
-        failed = {"lock-step": metrics["law_failures"]} if metrics["law_failures"] else {}
+    if launch:
+        status = _dict(launch.get("status_at_stop") or launch.get("status"))
+        counts = {name: _dict(c).get("law_failures") for name, c in status.items()
+                  if name.startswith("follower-")}
+    else:
+        counts = {"lock-step": metrics.get("law_failures")}
+    failed = {name: n for name, n in counts.items() if isinstance(n, int) and n > 0}
     if not failed:
         return f"{law} (no failure)" if launch or "law_failures" in metrics else law
     worst = max(failed, key=lambda k: failed[k])

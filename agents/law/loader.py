@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+from pathlib import Path
 from typing import Any
 
 from agents.law.interface import Law
@@ -70,8 +71,27 @@ def _import(module_name: str, folder: str | None) -> Any:
     if folder is not None and folder not in sys.path:
         sys.path.insert(0, folder)
     try:
-        return importlib.import_module(module_name)
+        module = importlib.import_module(module_name)
     except (Exception, SystemExit) as exc:  # whatever the user's module does on import
         where = f" from {folder}" if folder else ""
         raise ScenarioError("law.module", f"cannot import {module_name!r}{where}: "
                             f"{type(exc).__name__}: {exc}") from None
+    _check_not_shadowed(module_name, folder)
+    return module
+
+
+def _check_not_shadowed(module_name: str, folder: str | None) -> None:
+    """A module imported once stays imported: a law module in `folder` named as one
+    imported before from elsewhere (the standard library's, another law's) is not the one
+    the process runs, so say so rather than run the other."""
+    top = module_name.partition(".")[0]
+    if folder is None:
+        return
+    here = Path(folder)
+    ours = here / f"{top}.py" if (here / f"{top}.py").exists() else here / top
+    if not ours.exists():
+        return  # not in the folder: an installed package, found on sys.path
+    loaded = getattr(sys.modules.get(top), "__file__", None)
+    if loaded is None or not Path(loaded).resolve().is_relative_to(ours.resolve()):
+        raise ScenarioError("law.module", f"{top!r} in {folder} is shadowed by the module of "
+                            f"that name imported before ({loaded or 'built in'}): rename yours")
