@@ -29,9 +29,9 @@ from agents.follower.membership import setup_for, stand_ins
 from agents.follower.runner import LawRunner
 from agents.law.interface import Sample
 from agents.law.paper import PaperLaw
-from agents.scenario import NetworkConfig
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from transport.messages import FollowerState, Header
+from transport.network_schema import NetworkConfig
 
 
 def _per_call_us(fn: Callable[[], Any], calls: int, repeat: int) -> float:

@@ -22,9 +22,10 @@ from agents.follower.membership import setup_for, stand_ins
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Sample
 from agents.law.paper import PaperLaw
-from agents.scenario import NetworkConfig, Scenario
+from agents.scenario.model import Scenario
 from transport.law_fields import NO_FIELDS
 from transport.messages import FollowerState, Header
+from transport.network_schema import NetworkConfig
 
 
 def with_estimator(scenario: Scenario, estimator: str) -> Scenario:

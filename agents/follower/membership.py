@@ -14,7 +14,7 @@ from collections.abc import Iterable, Mapping
 
 from agents.law.interface import Peer, Sample, Setup
 from agents.membership import membership
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 # An input older than this is missing (no flow on its link, no spacing to it): the
 # vehicle link's timeout.

@@ -15,7 +15,6 @@ import math
 import time
 from typing import Any
 
-from agents.errors import CodecError
 from agents.follower.inputs import Latest
 from agents.follower.membership import setup_for, stand_ins
 from agents.follower.runner import LawRunner
@@ -24,11 +23,12 @@ from agents.law.paper import PaperLaw
 from agents.liveness import MembershipWatch
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.process import StatusReporter
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 from transport.bus import Bus, Subscription
 from transport.checks import DEFAULT_LIMITS
 from transport.codec import encode
 from transport.decoder import Decoder
+from transport.errors import CodecError
 from transport.impairment import ImpairedBus
 from transport.keys import SwarmKeys
 from transport.law_fields import NO_FIELDS, LawFields

@@ -65,11 +65,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, NamedTuple, TypeVar
 
-from agents.errors import ScenarioError
+from transport.errors import ScenarioError
 from transport.law_fields import FieldSpec, check_specs
 
 if TYPE_CHECKING:
-    from agents.scenario import Scenario
+    from agents.scenario.model import Scenario
 
 __all__ = ["FieldSpec", "Inputs", "Law", "Output", "Peer", "Sample", "Setup", "Value", "reference"]
 

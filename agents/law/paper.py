@@ -27,12 +27,12 @@ from typing import TYPE_CHECKING, NamedTuple
 from agents.core.controller_one import ControlGains, enclosing_control_one
 from agents.core.estimator_one import EstimatorParams, consensus_flows_c, link_balance_c
 from agents.core.params import control_gains, estimator_params
-from agents.errors import ScenarioError
 from agents.law.carry import REBASE_TAU_S, next_carry
 from agents.law.interface import FieldSpec, Inputs, Law, Output, Peer, Setup, reference
+from transport.errors import ScenarioError
 
 if TYPE_CHECKING:
-    from agents.scenario import Scenario
+    from agents.scenario.model import Scenario
 
 # The bounds a receiver holds these fields to: those of the platform's own positions,
 # speeds and accelerations (transport.checks.Limits): beyond them, a forgery or a fault.

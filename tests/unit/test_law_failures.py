@@ -17,7 +17,7 @@ from agents.follower.node import FollowerNode
 from agents.law.interface import Inputs, Output
 from agents.law.paper import PaperLaw, PaperState
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from transport.codec import decode, encode
 from transport.keys import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub

@@ -19,9 +19,9 @@ from agents.follower.membership import setup_for, stand_ins
 from agents.follower.runner import LawRunner
 from agents.law.interface import Peer, Sample
 from agents.law.paper import PaperLaw
-from agents.scenario import NetworkConfig
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from transport.messages import FollowerState, Header
+from transport.network_schema import NetworkConfig
 
 DT = 0.02
 TARGETS = (0j, 6 + 4j)  # still: the LAP is their mean

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from agents.core.estimator_one import finite_difference_velocity, lag_free_velocity
 from agents.follower.inputs import Latest
 from agents.follower.membership import setup_for
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 
 PERIOD_S = 0.05
 TAU_S, ACCEL_TAU_S = 0.1, 0.5
