@@ -2,8 +2,9 @@
 
     python bench/bench_codec.py [--calls 20000] [--repeats 7]
 
-For FollowerState (a robust ring follower: phi and 2 links of link sums and rates; "FollowerState rv": the same
-with the second-order estimator's rv_m_s and 2 links of velocity-stage sums and rates),
+For FollowerState (a robust ring follower: its law's phi, and link sums and rates on 2
+links; "FollowerState rv": the same with the second-order estimator's rv_m_s and
+velocity-stage sums and rates),
 TargetObservation and TruthSnapshot (16 followers, 2 targets), prints the time per call of
 - `encode(msg)`;
 - `decode(payload)`;

@@ -25,6 +25,7 @@ KINDS = ("scalar", "vec2", "per_link")
 MAX_FIELDS = 16
 MAX_NAME = 64
 MAX_LINKS = 256
+MAX_BOUND = 1e150  # squared, still a finite float: magnitudes are compared squared
 
 LinkValue = tuple[int, float, float]  # (neighbour index, x, y)
 LawValue = float | tuple[float, float] | tuple[LinkValue, ...]
@@ -35,10 +36,11 @@ NO_FIELDS: LawFields = {}
 @dataclass(frozen=True)
 class FieldSpec:
     """One field a law publishes.  `bound`: the largest magnitude (|value|, or |(x, y)|)
-    a receiver accepts; beyond it the message is a forgery or a fault and is dropped, as
-    the platform's own positions beyond 100 km are.  `rate`: the name of the field that
-    is this one's time derivative (same kind): a receiver extrapolates this field by it
-    from the message's stamp, held after the hold limit, as it does the estimate r."""
+    a receiver accepts (at most MAX_BOUND); beyond it the message is a forgery or a fault
+    and is dropped, as the platform's own positions beyond 100 km are.  `rate`: the name
+    of the field that is this one's time derivative (same kind): a receiver extrapolates
+    this field by it from the message's stamp, held after the hold limit, as it does the
+    estimate r."""
 
     name: str
     kind: str
@@ -50,8 +52,8 @@ class FieldSpec:
             raise ValueError(f"field {self.name!r}: kind {self.kind!r} not in {KINDS}")
         if not (0 < len(self.name) <= MAX_NAME and self.name.isidentifier()):
             raise ValueError(f"field name {self.name!r}: an identifier of <= {MAX_NAME} chars")
-        if not (self.bound > 0.0 and math.isfinite(self.bound)):
-            raise ValueError(f"field {self.name!r}: bound must be a positive finite number")
+        if not 0.0 < self.bound <= MAX_BOUND:
+            raise ValueError(f"field {self.name!r}: bound must be in (0, {MAX_BOUND:g}]")
 
 
 def check_specs(specs: Iterable[FieldSpec]) -> dict[str, FieldSpec]:
@@ -73,26 +75,32 @@ def check_specs(specs: Iterable[FieldSpec]) -> dict[str, FieldSpec]:
     return out
 
 
-def _magnitude(kind: str, value: LawValue) -> float:
-    """The largest magnitude in `value` if it is of `kind` and finite, else NaN."""
+def _magnitude2(kind: str, value: Any) -> float:
+    """The largest squared magnitude in `value` if it is of `kind` and finite, else NaN."""
     if kind == "scalar":
-        return abs(value) if type(value) is float else math.nan
+        ok = type(value) is float and value - value == 0.0
+        return float(value * value) if ok else math.nan
+    if type(value) is not tuple:
+        return math.nan
     if kind == "vec2":
-        if type(value) is not tuple or len(value) != 2:
+        if len(value) != 2:
             return math.nan
         x, y = value
-        return math.hypot(x, y) if type(x) is float and type(y) is float else math.nan
-    if type(value) is not tuple or len(value) > MAX_LINKS:
+        if type(x) is not float or type(y) is not float or x - x + y - y != 0.0:
+            return math.nan
+        return x * x + y * y
+    if len(value) > MAX_LINKS:
         return math.nan
-    top = 0.0
+    top, finite = 0.0, 0.0
     for link in value:
         if type(link) is not tuple or len(link) != 3:
             return math.nan
         j, x, y = link
         if type(j) is not int or j < 0 or type(x) is not float or type(y) is not float:
             return math.nan
-        top = max(top, math.hypot(x, y))
-    return top
+        finite += x - x + y - y
+        top = max(top, x * x + y * y)
+    return top if finite == 0.0 else math.nan
 
 
 def reason(fields: LawFields, specs: Mapping[str, FieldSpec]) -> str | None:
@@ -102,10 +110,10 @@ def reason(fields: LawFields, specs: Mapping[str, FieldSpec]) -> str | None:
         spec = specs.get(name)
         if spec is None:
             return "law_undeclared"
-        mag = _magnitude(spec.kind, value)
-        if mag != mag or mag == math.inf:  # NaN: wrong shape; inf: not finite
+        mag2 = _magnitude2(spec.kind, value)
+        if mag2 != mag2:  # wrong shape, or not finite
             return "law_kind"
-        if mag > spec.bound:
+        if not mag2 <= spec.bound * spec.bound:  # beyond (or, overflowed, far beyond)
             return "law_bound"
     return None
 

@@ -20,7 +20,7 @@ from typing import Any
 
 from agents.follower.membership import joined_estimate
 from agents.law.interface import Inputs, Law, Output, Peer, Sample, Setup, reference
-from transport.law_fields import FieldSpec, LawFields, LawValue, reason
+from transport.law_fields import FieldSpec, LawFields, LawValue
 
 log = logging.getLogger("enclose.follower")
 LOG_EVERY_S = 10.0
@@ -33,7 +33,8 @@ class LawRunner:
     def __init__(self, law: Law[Any], setup: Setup) -> None:
         self.law = law
         self.declared: dict[str, FieldSpec] = law.declared()
-        self._kinds = tuple((name, spec.kind) for name, spec in self.declared.items())
+        self._plan = {name: (spec.kind, spec.bound * spec.bound)
+                      for name, spec in self.declared.items()}
         self.setup = setup
         self.state: Any = law.start(setup)
         self.last_r: Sample | None = None  # the estimate of its last good step
@@ -46,7 +47,9 @@ class LawRunner:
              peers: Mapping[int, Peer], heard_all_targets: bool,
              ) -> tuple[Output, LawFields] | None:
         """One step of the law: its output and its fields as published; None if it failed
-        (counted and logged: the caller holds the vehicle and publishes nothing)."""
+        (counted and logged: the caller holds the vehicle and publishes nothing).  The
+        output's command is the law's on a control tick (0 if it was not finite), and
+        meaningless otherwise."""
         setup, last = self.setup, self.last_step_s
         dt = 0.0 if last is None else min(max(now_s - last, 0.0), setup.max_gap_s)
         rebase_to = None
@@ -56,7 +59,7 @@ class LawRunner:
         try:
             state, out = self.law.step(self.state, inputs)
             wire = self._wire(out)
-            u = complex(out.u_m_s) if command else 0j
+            u = out.u_m_s
         except Exception:  # the law's own bug: the vehicle holds, the follower goes on
             self._failed(traceback.format_exc())
             return None
@@ -65,35 +68,48 @@ class LawRunner:
         # A target newly ours is not heard yet: the law's reference lacks it, so the
         # estimate stays carried until it is.
         self.rebase = self.rebase and not heard_all_targets
-        if not _finite(u):  # its estimate and fields are good: they are published
+        if command and not (type(u) is complex and u.real - u.real + u.imag - u.imag == 0.0):
+            # its estimate and fields are good: they are published, the vehicle holds
             self._failed(f"non-finite command {u!r}")
-            u = 0j
-        return _new(Output, (u, out.r_m, out.dr_m_s, out.fields)), wire
+            return _new(Output, (0j, out.r_m, out.dr_m_s, out.fields)), wire
+        return out, wire
 
     def _wire(self, out: Output) -> LawFields:
-        """`out` checked and its fields as FollowerState.law carries them; ValueError if
-        the estimate is not finite or a field is undeclared, of the wrong kind or too big."""
-        if not (type(out.r_m) is complex and type(out.dr_m_s) is complex
-                and _finite(out.r_m) and _finite(out.dr_m_s)):
-            raise ValueError(f"non-finite estimate r = {out.r_m!r}, dr = {out.dr_m_s!r}")
-        fields = out.fields
-        extra = fields.keys() - self.declared.keys()
-        if extra:
-            raise ValueError(f"fields not declared: {sorted(extra)}")
+        """`out`'s fields as FollowerState.law carries them; ValueError if its estimate is
+        not a finite complex, or a field is undeclared, of the wrong kind, not finite or
+        beyond its bound (transport.law_fields, the check its receivers make)."""
+        r, dr, fields = out.r_m, out.dr_m_s, out.fields
+        if not (type(r) is complex and type(dr) is complex
+                and r.real - r.real + r.imag - r.imag + dr.real - dr.real + dr.imag
+                - dr.imag == 0.0):
+            raise ValueError(f"the estimate must be finite complex numbers: r = {r!r}, "
+                             f"dr = {dr!r}")
+        plan: Mapping[str, tuple[str | None, float]] = self._plan
+        nbrs = self.setup.neighbours
         wire: dict[str, LawValue] = {}
-        for name, kind in self._kinds:
-            value = fields.get(name)
-            if value is None:
+        for name, value in fields.items():
+            kind, bound2 = plan.get(name, (None, 0.0))
+            if kind == "per_link" and len(value) == len(nbrs):
+                links = []
+                for j, v in zip(nbrs, value, strict=True):
+                    x, y = v.real, v.imag
+                    if not x * x + y * y <= bound2:  # NaN too
+                        raise ValueError(f"field {name!r} towards {j} is not finite or "
+                                         f"beyond its bound: {v!r}")
+                    links.append((j, x, y))
+                wire[name] = tuple(links)
                 continue
-            if kind == "vec2":
-                wire[name] = (float(value.real), float(value.imag))
-            elif kind == "per_link":
-                wire[name] = tuple([(j, float(v.real), float(v.imag)) for j, v in value.items()])
+            if kind == "vec2" and type(value) is complex:
+                x, y = value.real, value.imag
+                wire[name], top = (x, y), x * x + y * y
+            elif kind == "scalar" and type(value) in (float, int):
+                x = float(value)
+                wire[name], top = x, x * x
             else:
-                wire[name] = float(value)
-        why = reason(wire, self.declared)
-        if why is not None:
-            raise ValueError(f"{why}: {wire}")
+                raise ValueError(f"field {name!r}: {'not declared' if kind is None else kind} "
+                                 f"is not {value!r}")
+            if not top <= bound2:  # NaN too
+                raise ValueError(f"field {name!r} is not finite or beyond its bound: {value!r}")
         return wire
 
     def _failed(self, detail: str) -> None:
@@ -132,7 +148,3 @@ class LawRunner:
         if self.last_r is None:
             return reference(self.setup, targets, now_s)[0]
         return self.last_r.held(now_s, self.setup.hold_s)
-
-
-def _finite(v: complex) -> bool:
-    return math.isfinite(v.real) and math.isfinite(v.imag)

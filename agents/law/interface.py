@@ -78,8 +78,9 @@ __all__ = ["FieldSpec", "Inputs", "Law", "Output", "Peer", "Sample", "ScenarioEr
 S = TypeVar("S")
 
 # A declared field's value as a law sees it: "scalar" a float, "vec2" a complex, "per_link"
-# a complex (the entry addressed to this follower; a law publishes {neighbour: complex});
-# a field with a `rate` is received as a Sample of value and rate.
+# a complex (the entry addressed to this follower; a law publishes one complex per
+# `setup.neighbours`, in that order); a field with a `rate` is received as a Sample of
+# value and rate.
 Value = Any
 
 
@@ -154,7 +155,9 @@ class Output(NamedTuple):
     u_m_s: complex
     r_m: complex
     dr_m_s: complex
-    fields: Mapping[str, Value]  # declared names only; per_link: {neighbour: complex}
+    # Declared names only (any may be left out): "scalar" a float, "vec2" a complex,
+    # "per_link" a sequence of complex, one per setup.neighbours in that order.
+    fields: Mapping[str, Value]
 
 
 class Law(Generic[S]):

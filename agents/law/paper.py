@@ -133,7 +133,7 @@ class PaperLaw(Law[PaperState]):
 
     def step(self, state: PaperState, inputs: Inputs) -> tuple[PaperState, Output]:
         new, r, dr = self._estimate(state, inputs)
-        fields = self._fields(new, inputs.setup)
+        fields = self._fields(new)
         if not inputs.command:
             return new, _new(Output, (0j, r, dr, fields))
         return new, _new(Output, (self._command(new, inputs, r, dr), r, dr, fields))
@@ -213,19 +213,14 @@ class PaperLaw(Law[PaperState]):
                                         state.peer_age_s[setup.successor])
         return u
 
-    def _fields(self, state: PaperState, setup: Setup) -> dict[str, object]:
+    def _fields(self, state: PaperState) -> dict[str, object]:
         fields: dict[str, object] = {"phi_m": state.phi_m}
-        if self.robust and state.link_sums_m is not None and state.link_rates_m_s is not None:
-            fields["link_sums_m"] = dict(zip(setup.neighbours, state.link_sums_m, strict=True))
-            fields["link_rates_m_s"] = dict(zip(setup.neighbours, state.link_rates_m_s,
-                                                strict=True))
-        if self.second_order and state.vel_sums_m_s is not None \
-                and state.vel_rates_m_s2 is not None:
-            fields["rv_m_s"] = state.rv_m_s
-            fields["vel_sums_m_s"] = dict(zip(setup.neighbours, state.vel_sums_m_s,
-                                              strict=True))
-            fields["vel_rates_m_s2"] = dict(zip(setup.neighbours, state.vel_rates_m_s2,
-                                                strict=True))
+        if self.robust and state.link_sums_m is not None:
+            fields["link_sums_m"], fields["link_rates_m_s"] = state.link_sums_m, \
+                state.link_rates_m_s
+        if self.second_order and state.vel_sums_m_s is not None:
+            fields["rv_m_s"], fields["vel_sums_m_s"], fields["vel_rates_m_s2"] = \
+                state.rv_m_s, state.vel_sums_m_s, state.vel_rates_m_s2
         return fields
 
 
