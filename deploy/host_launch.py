@@ -21,6 +21,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from agents.scenario.file import load_scenario, parse_scenario, shipped_text
+from agents.scenario.law import pinned_law
 from agents.scenario.model import Scenario
 from deploy.deployment import Deployment
 from deploy.launch import Launch
@@ -48,10 +49,11 @@ class HostLaunch(Launch):
         if dep.inter_host_delay_ms > 0:  # at each follower's receiving end (impairment)
             out.mkdir(parents=True, exist_ok=True)
             path = out / IMPAIRED_SCENARIO
-            text = _source(dep.scenario) + _links(dep, scenario)
+            # The copy is elsewhere: its [law] module, if any, must name its folder.
+            text = pinned_law(_source(dep.scenario), scenario.law) + _links(dep, scenario)
             path.write_text(text)
             # The file the processes load, read here from the same text.
-            scenario = parse_scenario(text, origin=str(path))
+            scenario = parse_scenario(text, origin=str(path), base=path.parent)
             opts = replace(opts, scenario=str(path))
         super().__init__(scenario, opts, out, dep.swarm, duration_s)
         self.coordinator = dep.host_of("launcher") in local

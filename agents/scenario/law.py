@@ -19,6 +19,7 @@ relative to the current directory (a flag) or to the sweep file (a sweep).
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,7 @@ from agents.scenario.model import LawSpec
 from transport.errors import ScenarioError
 
 KEYS = ("name", "module")
+MODULE_LINE = re.compile(r"""(?m)^(\s*module\s*=\s*)("[^"\n]*"|'[^'\n]*')""")
 MODULE_REF = re.compile(
     r"(?:(?P<folder>.*)/)?(?P<module>[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*):(?P<cls>[A-Za-z_]\w*)")
 
@@ -68,6 +70,20 @@ def absolute_ref(spec: LawSpec) -> str:
     if spec.module is None:
         return spec.name
     return f"{spec.folder}/{spec.module}" if spec.folder else spec.module
+
+
+def pinned_law(text: str, spec: LawSpec) -> str:
+    """A scenario file's `text` with its `[law] module` naming its folder absolutely: what
+    a copy of the file written elsewhere (deploy.host_launch) needs to load the same law.
+    `spec` is the law the file was read into."""
+    if spec.module is None:
+        return text
+    ref = absolute_ref(spec)
+    pinned, count = MODULE_LINE.subn(lambda m: f"{m[1]}{json.dumps(ref)}", text, count=1)
+    if count != 1:
+        raise ScenarioError("law.module", "write it as a line `module = \"...\"` of a [law] "
+                            "table: a copy of this scenario must point it at its folder")
+    return pinned
 
 
 def _text(raw: Any, where: str) -> str:

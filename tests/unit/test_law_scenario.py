@@ -21,6 +21,7 @@ from agents.law_args import (
     toml_value,
 )
 from agents.scenario.file import load_scenario, shipped_text
+from agents.scenario.law import pinned_law
 from deploy.cli import main
 from transport.errors import ScenarioError
 
@@ -223,3 +224,14 @@ def test_the_example_law_loads_with_its_parameters_checked() -> None:
     with pytest.raises(ScenarioError, match=r"law\.k_c"):
         apply_law_arguments(scenario, LawOptions(None, (("k_c", "0"),)))
     assert isinstance(PaperLaw.from_params({}, scenario), PaperLaw)
+
+
+def test_a_copy_of_the_scenario_elsewhere_loads_the_same_law(tmp_path: Path) -> None:
+    original = load_scenario(EXAMPLE / "simple.toml")
+    copy = tmp_path / "copy.toml"
+    copy.write_text(pinned_law((EXAMPLE / "simple.toml").read_text(), original.law))
+    assert load_scenario(copy).law == original.law
+    paper = (EXAMPLE.parent.parent / "agents" / "scenario" / "shipped" / "paper.toml")
+    assert pinned_law(paper.read_text(), load_scenario("paper").law) == paper.read_text()
+    with pytest.raises(ScenarioError, match="law.module"):  # an inline table: not pinned
+        pinned_law('law = { module = "simple_law:SimpleLaw" }\n', original.law)
