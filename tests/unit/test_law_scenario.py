@@ -233,5 +233,5 @@ def test_a_copy_of_the_scenario_elsewhere_loads_the_same_law(tmp_path: Path) -> 
     assert load_scenario(copy).law == original.law
     paper = (EXAMPLE.parent.parent / "agents" / "scenario" / "shipped" / "paper.toml")
     assert pinned_law(paper.read_text(), load_scenario("paper").law) == paper.read_text()
-    with pytest.raises(ScenarioError, match="law.module"):  # an inline table: not pinned
+    with pytest.raises(ScenarioError, match=r"law\.module"):  # an inline table: not pinned
         pinned_law('law = { module = "simple_law:SimpleLaw" }\n', original.law)
