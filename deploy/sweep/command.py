@@ -45,7 +45,8 @@ TIMEOUT_MARGIN_S = 300.0  # link wait (up to 120 s) + recorder writing (up to 12
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
-        "sweep", help="a grid of real runs over network settings and laws: resumable, table and figures"
+        "sweep",
+        help="a grid of real runs over network settings and laws: resumable, table and figures",
     )
     p.add_argument("sweep_file", type=Path, help="sweep TOML file (see bench/sweeps/)")
     p.add_argument("--out", type=Path, default=None, help="sweep directory (default: file's out)")
