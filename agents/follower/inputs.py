@@ -80,25 +80,27 @@ class Latest:
         """What this follower keeps of a peer's message."""
         stamp = msg.header.stamp_s
         fields: dict[str, object] = {}
-        kinds, me = self._kinds, self.index
-        value: Any
-        for name, value in msg.law.items():
-            kind = kinds.get(name)
-            if kind == _VEC2:
-                fields[name] = complex(*value)
-            elif kind == _PER_LINK:
-                for j, x, y in value:
-                    if j == me:
-                        fields[name] = complex(x, y)
-                        break
-            elif kind == _SCALAR:
-                fields[name] = value
-        for name, rate, zero in self._rated:
-            held = fields.get(name)
-            if held is not None:
-                fields[name] = _new(Sample, (held, fields.get(rate, zero), stamp))
-        return _new(Peer, (_new(Sample, (complex(*msg.r_m), complex(*msg.dr_m_s), stamp)),
-                           _new(Sample, (complex(*msg.pos_m), complex(*msg.vel_m_s),
+        if msg.law:
+            kinds, me = self._kinds, self.index
+            value: Any
+            for name, value in msg.law.items():
+                kind = kinds.get(name)
+                if kind == _PER_LINK:
+                    for link in value:
+                        if link[0] == me:
+                            fields[name] = complex(link[1], link[2])
+                            break
+                elif kind == _VEC2:
+                    fields[name] = complex(value[0], value[1])
+                elif kind == _SCALAR:
+                    fields[name] = value
+            for name, rate, zero in self._rated:
+                held = fields.get(name)
+                if held is not None:
+                    fields[name] = _new(Sample, (held, fields.get(rate, zero), stamp))
+        r, dr, pos, vel = msg.r_m, msg.dr_m_s, msg.pos_m, msg.vel_m_s
+        return _new(Peer, (_new(Sample, (complex(r[0], r[1]), complex(dr[0], dr[1]), stamp)),
+                           _new(Sample, (complex(pos[0], pos[1]), complex(vel[0], vel[1]),
                                          msg.vehicle_stamp_s)),
                            fields))
 
@@ -106,10 +108,6 @@ class Latest:
         """True once every observed target and every neighbour and the successor was heard."""
         targets, peers = self.targets, self.peers
         return all(j in targets for j in setup.observed) and all(j in peers for j in setup.peers)
-
-    def heard_all_targets(self, setup: Setup) -> bool:
-        targets = self.targets
-        return all(j in targets for j in setup.observed)
 
     def stale(self, setup: Setup, peers: Mapping[int, Peer], now_s: float) -> int:
         """How many of the inputs of a step are missing or older than `setup.stale_s`."""

@@ -40,7 +40,6 @@ MAX_POS_M, MAX_SPEED_M_S, MAX_ACCEL_M_S2 = 1e5, 1e3, 1e4
 # Time constant of the low-passed data ages that scale each link's step limit.
 AGE_TAU_S = 0.5
 
-PHI = FieldSpec("phi_m", "vec2", MAX_POS_M)  # Phi_i (r_i = Phi_i + p~_i + carry): records
 ROBUST = (  # per link, the running sum of this follower's flow on it and its rate
     FieldSpec("link_sums_m", "per_link", MAX_POS_M, rate="link_rates_m_s"),
     FieldSpec("link_rates_m_s", "per_link", MAX_SPEED_M_S),
@@ -97,8 +96,8 @@ class PaperLaw(Law[PaperState]):
         self.estimator, self.control, self.lead_s = estimator, control, lead_s
         self.robust = robust
         self.second_order = robust and estimator.order == 2
-        self.fields = (PHI, *(ROBUST if robust else ()),
-                       *(SECOND_ORDER if self.second_order else ()))
+        # The paper's estimator needs nothing but r_j: its Phi_i stays its own.
+        self.fields = (*(ROBUST if robust else ()), *(SECOND_ORDER if self.second_order else ()))
 
     @classmethod
     def from_params(cls, table: Mapping[str, object], scenario: Scenario) -> PaperLaw:
@@ -214,7 +213,7 @@ class PaperLaw(Law[PaperState]):
         return u
 
     def _fields(self, state: PaperState) -> dict[str, object]:
-        fields: dict[str, object] = {"phi_m": state.phi_m}
+        fields: dict[str, object] = {}
         if self.robust and state.link_sums_m is not None:
             fields["link_sums_m"], fields["link_rates_m_s"] = state.link_sums_m, \
                 state.link_rates_m_s
