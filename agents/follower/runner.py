@@ -89,8 +89,11 @@ class LawRunner:
         for name, value in fields.items():
             kind = kinds.get(name)
             if kind == "per_link" and len(value) == len(nbrs):
-                wire[name] = tuple([(j, v.real, v.imag) for j, v in zip(nbrs, value, strict=True)])
-                total += sum(value, 0j)
+                links = []  # a plain loop: a comprehension or a strict zip costs more here
+                for j, v in zip(nbrs, value, strict=False):  # lengths compared above
+                    links.append((j, v.real, v.imag))
+                    total += v
+                wire[name] = tuple(links)
             elif kind == "vec2" and type(value) is complex:
                 wire[name] = (value.real, value.imag)
                 total += value
