@@ -72,15 +72,14 @@ def _case(name: str, estimator: str, calls: int, repeat: int) -> dict[str, float
     own = Sample(8.0 + 0.5j, 1j, t - 0.003)
     for step in (0.0, 0.005, 0.005, 0.005):  # a follower that has run: link sums, ages
         t += step
-        runner.step(t, False, own, latest.targets, latest.peers, True)
+        runner.step(t, False, own, latest.targets, latest.peers)
     later, state = t + 0.005, runner.state
     target, msg = setup.observed[0], msgs[setup.neighbours[0]]
 
     def step(command: bool) -> Any:
         runner.state, runner.last_step_s = state, t  # every call: the same step
         peers = stand_ins(latest.peers, setup, runner.last_r, later)
-        out = runner.step(later, command, own, latest.targets, peers,
-                          latest.heard_all_targets(setup))
+        out = runner.step(later, command, own, latest.targets, peers)
         if command:
             latest.stale(setup, peers, later)
         return out

@@ -82,8 +82,7 @@ def run_swarm(
             if runner.last_r is not None or inputs.ready(setup):
                 own = Sample(complex(*pos[i]), complex(*vel[i]), t)
                 peers = stand_ins(inputs.peers, setup, runner.last_r, t)
-                stepped = runner.step(t, True, own, inputs.targets, peers,
-                                      inputs.heard_all_targets(setup))
+                stepped = runner.step(t, True, own, inputs.targets, peers)
             if stepped is None:
                 r, dr, u, fields = runner.standing_estimate(inputs.targets, t), 0j, 0j, NO_FIELDS
             else:

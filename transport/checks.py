@@ -9,7 +9,8 @@ process holding the right key could still send wrong -- or what arrives with `--
   `max_age_s` behind it, is refused -- a forged future stamp must not win "newest";
 - values: every number finite, positions within `max_pos_m` of the origin, speeds below
   `max_speed_m_s` (no vehicle flies faster: a value beyond is a forgery or a fault); a
-  law's own fields within the bounds it declared (transport.law_fields, by the decoder).
+  law's own fields are held to the kinds and bounds it declared by a receiver that knows
+  the law (transport.law_fields, in the decoder), and are finite once decoded.
 A refusal is a short reason string, counted by the decoder as `drop_rejected_<reason>`.
 
 Every message a process accepts passes here, so the common case is cheap: the numbers of
@@ -27,7 +28,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 from transport.keys import parse_key
-from transport.law_fields import law_finite, law_sum
 from transport.messages import (
     FollowerState,
     Message,
@@ -132,8 +132,9 @@ def _observation_reason(msg: TargetObservation, lim: Limits) -> str | None:
 
 def _follower_reason(msg: FollowerState, now_s: float, lim: Limits) -> str | None:
     """As _follower_reason_exact, in straight-line code when every number is finite.  The
-    law's fields are held to their declared bounds by a receiver that knows the law
-    (transport.law_fields.reason, in transport.decoder); here only to being finite."""
+    law's fields are not looked at: the codec decodes only finite ones, and a receiver
+    that knows the law holds them to its declaration (transport.law_fields.reason, in
+    transport.decoder)."""
     try:
         r0, r1 = msg.r_m
         x0, x1 = msg.pos_m
@@ -141,8 +142,8 @@ def _follower_reason(msg: FollowerState, now_s: float, lim: Limits) -> str | Non
         v0, v1 = msg.vel_m_s
         u0, u1 = msg.u_m_s
         vst = msg.vehicle_stamp_s
-        s = r0 + r1 + x0 + x1 + d0 + d1 + v0 + v1 + u0 + u1 + vst + law_sum(msg.law)
-    except (TypeError, ValueError, OverflowError, AttributeError):  # not numbers, or not pairs
+        s = r0 + r1 + x0 + x1 + d0 + d1 + v0 + v1 + u0 + u1 + vst
+    except (TypeError, ValueError, OverflowError):  # not numbers, or not pairs
         return _follower_reason_exact(msg, now_s, lim)
     if not (type(s) is float and s - s == 0.0):
         return _follower_reason_exact(msg, now_s, lim)
@@ -160,7 +161,7 @@ def _follower_reason_exact(msg: FollowerState, now_s: float, lim: Limits) -> str
     positions = [msg.r_m, msg.pos_m]
     speeds = [msg.dr_m_s, msg.vel_m_s, msg.u_m_s]
     numbers = [*(x for v in positions + speeds for x in v), msg.vehicle_stamp_s]
-    if not (_finite(numbers) and law_finite(msg.law)):
+    if not _finite(numbers):
         return "nonfinite"
     if msg.vehicle_stamp_s > now_s + lim.future_s:
         return "future_stamp"

@@ -122,17 +122,36 @@ def _law_sum(law: Any, seq_type: Any) -> float:
     return s
 
 
-def _law_in(law: dict[str, Any]) -> dict[str, LawValue]:
-    """A decoded law map (checked by _law_sum) with its lists as tuples."""
+def _law_in(law: Any) -> dict[str, LawValue] | None:
+    """A decoded law map (transport.law_fields) with its lists as tuples, checked as
+    _law_sum checks it, in one pass; None if it is not one."""
+    if type(law) is not dict or len(law) > MAX_FIELDS:
+        return None
     out: dict[str, LawValue] = {}
+    s = 0.0
     for key, value in law.items():
+        if type(key) is not str or not 0 < len(key) <= MAX_NAME:
+            return None
         if type(value) is float:
+            s += value
             out[key] = value
+        elif type(value) is not list or len(value) > MAX_LINKS:
+            return None
         elif value and type(value[0]) is float:
-            out[key] = (value[0], value[1])
+            x, y = value
+            if type(y) is not float:
+                return None
+            s += x + y
+            out[key] = (x, y)
         else:
-            out[key] = tuple([(j, x, y) for j, x, y in value])
-    return out
+            links = []
+            for j, x, y in value:
+                if not (type(j) is int and j >= 0 and type(x) is float and type(y) is float):
+                    return None
+                s += x + y
+                links.append((j, x, y))
+            out[key] = tuple(links)
+    return out if s - s == 0.0 else None
 
 
 # ---- FollowerState, TargetObservation, TruthSnapshot: 50-200 Hz -----------------------------
@@ -168,15 +187,15 @@ def dec_follower_state(o: Wire) -> FollowerState | None:
             and type(vel0) is float and type(vel1) is float and type(u0) is float
             and type(u1) is float):
         return None
-    s = (st + vst + r0 + r1 + dr0 + dr1 + pos0 + pos1 + vel0 + vel1 + u0 + u1
-         + _law_sum(law, list))
-    if s - s != 0.0:
+    s = st + vst + r0 + r1 + dr0 + dr1 + pos0 + pos1 + vel0 + vel1 + u0 + u1
+    fields = _law_in(law)
+    if s - s != 0.0 or fields is None:
         return None
     m = NEW(FollowerState)
     SET(m, "__dict__", {
         "header": header(sid, seq, st), "index": idx, "r_m": (r0, r1), "dr_m_s": (dr0, dr1),
         "pos_m": (pos0, pos1), "vel_m_s": (vel0, vel1), "u_m_s": (u0, u1),
-        "vehicle_stamp_s": vst, "law": _law_in(law) if law else {}})
+        "vehicle_stamp_s": vst, "law": fields})
     return m
 
 

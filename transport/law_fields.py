@@ -116,33 +116,3 @@ def reason(fields: LawFields, specs: Mapping[str, FieldSpec]) -> str | None:
         if not mag2 <= spec.bound * spec.bound:  # beyond (or, overflowed, far beyond)
             return "law_bound"
     return None
-
-
-def law_sum(fields: LawFields) -> float:
-    """The sum of every number in `fields` (finite iff each is, unless it overflows);
-    TypeError/ValueError if they are not of the kinds' shapes."""
-    s = 0.0
-    value: Any
-    for value in fields.values():
-        if type(value) is float:
-            s += value
-        elif value and type(value[0]) is float:
-            x, y = value
-            s += x + y
-        else:
-            for _, x, y in value:
-                s += x + y
-    return s
-
-
-def law_finite(fields: LawFields) -> bool:
-    """Is every number in `fields` a finite int or float (whatever their shapes)?"""
-    def numbers(v: object) -> list[object]:
-        if isinstance(v, tuple | list):
-            return [x for item in v for x in numbers(item)]
-        return [v]
-
-    if not isinstance(fields, Mapping):
-        return False
-    values = [x for v in fields.values() for x in numbers(v)]
-    return all(isinstance(x, int | float) and math.isfinite(x) for x in values)

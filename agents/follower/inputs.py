@@ -11,7 +11,7 @@ a peer is kept; ages and staleness are read against `Setup.stale_s` at the step.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, NamedTuple
+from typing import Any
 
 from agents.core.estimator_one import finite_difference_velocity, lag_free_velocity
 from agents.follower.membership import TARGET_ACCEL_TAU_S, TARGET_VEL_TAU_S
@@ -26,14 +26,6 @@ _SCALAR, _VEC2, _PER_LINK = 0, 1, 2
 _KIND_CODE = {"scalar": _SCALAR, "vec2": _VEC2, "per_link": _PER_LINK}
 
 
-class TargetFilter(NamedTuple):
-    """The velocity filter's state of one target (agents.core.estimator_one.lag_free_velocity)."""
-
-    smooth: complex = 0j
-    accel: complex = 0j
-    primed: bool = False
-
-
 class Latest:
     """The newest target observations and peer messages of follower `index`, for a law
     that declared `specs`."""
@@ -41,9 +33,12 @@ class Latest:
     def __init__(self, index: int, specs: Mapping[str, FieldSpec]) -> None:
         self.index = index
         self.targets: dict[int, Sample] = {}
-        self.filters: dict[int, TargetFilter] = {}
+        # Per target heard twice or more, its velocity filter's state: the low-passed
+        # velocity and acceleration of lag_free_velocity.
+        self.filters: dict[int, tuple[complex, complex]] = {}
         self.peers: dict[int, Peer] = {}
         self._kinds = {name: _KIND_CODE[s.kind] for name, s in specs.items()}
+        # A field with a rate is kept as a Sample of both (agents.law.interface.Peer).
         self._rated = tuple((name, s.rate, 0j if s.kind != "scalar" else 0.0)
                             for name, s in specs.items() if s.rate is not None)
 
@@ -55,19 +50,19 @@ class Latest:
         prev = self.targets.get(target)
         if prev is None:
             self.targets[target] = _new(Sample, (pos_m, 0j, stamp_s))
-            self.filters[target] = TargetFilter()
             return
-        if stamp_s <= prev.stamp_s:
+        value, _, prev_s = prev
+        if stamp_s <= prev_s:
             return  # duplicate or reordered: the newer sample stands
-        smooth, accel, primed = self.filters[target]
-        if not primed:
-            vel = finite_difference_velocity(prev.value, prev.stamp_s, pos_m, stamp_s, 0j)
-            self.filters[target] = _new(TargetFilter, (vel, 0j, True))
+        filt = self.filters.get(target)
+        if filt is None:  # the second sample: the raw difference
+            vel = finite_difference_velocity(value, prev_s, pos_m, stamp_s, 0j)
+            self.filters[target] = (vel, 0j)
         else:
             vel, smooth, accel = lag_free_velocity(
-                prev.value, prev.stamp_s, pos_m, stamp_s, smooth, accel, TARGET_VEL_TAU_S,
+                value, prev_s, pos_m, stamp_s, filt[0], filt[1], TARGET_VEL_TAU_S,
                 TARGET_ACCEL_TAU_S)
-            self.filters[target] = _new(TargetFilter, (smooth, accel, True))
+            self.filters[target] = (smooth, accel)
         self.targets[target] = _new(Sample, (pos_m, vel, stamp_s))
 
     def receive(self, msg: FollowerState, now_s: float) -> None:
@@ -80,25 +75,27 @@ class Latest:
         """What this follower keeps of a peer's message."""
         stamp = msg.header.stamp_s
         fields: dict[str, object] = {}
-        kinds, me = self._kinds, self.index
-        value: Any
-        for name, value in msg.law.items():
-            kind = kinds.get(name)
-            if kind == _VEC2:
-                fields[name] = complex(*value)
-            elif kind == _PER_LINK:
-                for j, x, y in value:
-                    if j == me:
-                        fields[name] = complex(x, y)
-                        break
-            elif kind == _SCALAR:
-                fields[name] = value
-        for name, rate, zero in self._rated:
-            held = fields.get(name)
-            if held is not None:
-                fields[name] = _new(Sample, (held, fields.get(rate, zero), stamp))
-        return _new(Peer, (_new(Sample, (complex(*msg.r_m), complex(*msg.dr_m_s), stamp)),
-                           _new(Sample, (complex(*msg.pos_m), complex(*msg.vel_m_s),
+        if msg.law:
+            kinds, me = self._kinds, self.index
+            value: Any
+            for name, value in msg.law.items():
+                kind = kinds.get(name)
+                if kind == _PER_LINK:
+                    for link in value:
+                        if link[0] == me:
+                            fields[name] = complex(link[1], link[2])
+                            break
+                elif kind == _VEC2:
+                    fields[name] = complex(value[0], value[1])
+                elif kind == _SCALAR:
+                    fields[name] = value
+            for name, rate, zero in self._rated:  # a rated field: a Sample of both
+                held = fields.get(name)
+                if held is not None:
+                    fields[name] = _new(Sample, (held, fields.get(rate, zero), stamp))
+        r, dr, pos, vel = msg.r_m, msg.dr_m_s, msg.pos_m, msg.vel_m_s
+        return _new(Peer, (_new(Sample, (complex(r[0], r[1]), complex(dr[0], dr[1]), stamp)),
+                           _new(Sample, (complex(pos[0], pos[1]), complex(vel[0], vel[1]),
                                          msg.vehicle_stamp_s)),
                            fields))
 
@@ -106,10 +103,6 @@ class Latest:
         """True once every observed target and every neighbour and the successor was heard."""
         targets, peers = self.targets, self.peers
         return all(j in targets for j in setup.observed) and all(j in peers for j in setup.peers)
-
-    def heard_all_targets(self, setup: Setup) -> bool:
-        targets = self.targets
-        return all(j in targets for j in setup.observed)
 
     def stale(self, setup: Setup, peers: Mapping[int, Peer], now_s: float) -> int:
         """How many of the inputs of a step are missing or older than `setup.stale_s`."""
@@ -126,3 +119,4 @@ class Latest:
         self.targets = {j: s for j, s in self.targets.items() if j in setup.observed}
         self.filters = {j: f for j, f in self.filters.items() if j in setup.observed}
         self.peers = {j: p for j, p in self.peers.items() if j in members}
+

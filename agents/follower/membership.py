@@ -64,7 +64,12 @@ def stand_ins(peers: Mapping[int, Peer], setup: Setup, own: Sample | None, now_s
               ) -> Mapping[int, Peer]:
     """`peers` with a stand-in for every neighbour or successor not heard yet (a new link,
     after a change of members): this follower's own estimate `own`, too old to count."""
-    if own is None or all(j in peers for j in setup.peers):
+    if own is None:
+        return peers
+    for j in setup.peers:
+        if j not in peers:
+            break
+    else:
         return peers
     old = now_s - MISSING_AGE_S
     value = own.value

@@ -155,8 +155,7 @@ class FollowerNode:
         runner, latest = self.runner, self.latest
         setup = runner.setup
         peers = stand_ins(latest.peers, setup, runner.last_r, now_s)
-        stepped = runner.step(now_s, command, own, latest.targets, peers,
-                              latest.heard_all_targets(setup))
+        stepped = runner.step(now_s, command, own, latest.targets, peers)
         if command and stepped is not None:
             self.status.counters["stale_inputs"] += latest.stale(setup, peers, now_s)
             for j in setup.neighbours:
@@ -255,8 +254,8 @@ class FollowerNode:
                             state.stamp_s, fields)
         try:
             payload = encode(msg)
-        except CodecError:  # a number past what the wire carries (a velocity of 1e300)
-            self.status.counters["states_not_published"] += 1
+        except CodecError as exc:  # a law field not finite (the platform's fields are)
+            self.runner.failed(f"its fields do not encode: {exc}")
             return
         (self.est_out if estimate else self.out).put(payload)
 

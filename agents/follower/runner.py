@@ -3,7 +3,7 @@
 `LawRunner` keeps the law's state (opaque here), the time of its last step (dt), its last
 estimate (continuity across a change of members or a join: `Inputs.rebase_to`), and
 calls the law guarded: a step that raises, returns a non-finite estimate or command, or
-a field the law did not declare (or of the wrong kind, or beyond its bound) is a failure:
+a field the law did not declare (or of the wrong kind, or not finite) is a failure:
 counted, its traceback logged once (then at most every `LOG_EVERY_S`), and the vehicle
 holds; the law's next good output is taken as if nothing happened.  Pure apart from the
 log: the follower process (agents.follower.node) and the lock-step harness both run it.
@@ -33,8 +33,7 @@ class LawRunner:
     def __init__(self, law: Law[Any], setup: Setup) -> None:
         self.law = law
         self.declared: dict[str, FieldSpec] = law.declared()
-        self._plan = {name: (spec.kind, spec.bound * spec.bound)
-                      for name, spec in self.declared.items()}
+        self._kinds = {name: spec.kind for name, spec in self.declared.items()}
         self.setup = setup
         self.state: Any = law.start(setup)
         self.last_r: Sample | None = None  # the estimate of its last good step
@@ -44,8 +43,7 @@ class LawRunner:
         self._next_log_s = -math.inf
 
     def step(self, now_s: float, command: bool, own: Sample, targets: Mapping[int, Sample],
-             peers: Mapping[int, Peer], heard_all_targets: bool,
-             ) -> tuple[Output, LawFields] | None:
+             peers: Mapping[int, Peer]) -> tuple[Output, LawFields] | None:
         """One step of the law: its output and its fields as published; None if it failed
         (counted and logged: the caller holds the vehicle and publishes nothing).  The
         output's command is the law's on a control tick (0 if it was not finite), and
@@ -65,9 +63,9 @@ class LawRunner:
             return None
         self.state, self.last_step_s = state, now_s
         self.last_r = _new(Sample, (out.r_m, out.dr_m_s, now_s))
-        # A target newly ours is not heard yet: the law's reference lacks it, so the
-        # estimate stays carried until it is.
-        self.rebase = self.rebase and not heard_all_targets
+        if self.rebase:  # a target newly ours not heard yet: the law's reference lacks it,
+            # so the estimate stays carried until it is
+            self.rebase = not all(j in targets for j in setup.observed)
         if command and not (type(u) is complex and u.real - u.real + u.imag - u.imag == 0.0):
             # its estimate and fields are good: they are published, the vehicle holds
             self._failed(f"non-finite command {u!r}")
@@ -76,41 +74,42 @@ class LawRunner:
 
     def _wire(self, out: Output) -> LawFields:
         """`out`'s fields as FollowerState.law carries them; ValueError if its estimate is
-        not a finite complex, or a field is undeclared, of the wrong kind, not finite or
-        beyond its bound (transport.law_fields, the check its receivers make)."""
+        not a finite complex, or a field is undeclared, not of its declared kind or not
+        finite.  Its bound is every receiver's check (transport.law_fields): beyond it,
+        neighbours drop the message and count it."""
         r, dr, fields = out.r_m, out.dr_m_s, out.fields
         if not (type(r) is complex and type(dr) is complex
                 and r.real - r.real + r.imag - r.imag + dr.real - dr.real + dr.imag
                 - dr.imag == 0.0):
             raise ValueError(f"the estimate must be finite complex numbers: r = {r!r}, "
                              f"dr = {dr!r}")
-        plan: Mapping[str, tuple[str | None, float]] = self._plan
-        nbrs = self.setup.neighbours
+        kinds, nbrs = self._kinds, self.setup.neighbours
         wire: dict[str, LawValue] = {}
+        total = 0j  # finite iff every number is (short of an overflow: far past any bound)
         for name, value in fields.items():
-            kind, bound2 = plan.get(name, (None, 0.0))
+            kind = kinds.get(name)
             if kind == "per_link" and len(value) == len(nbrs):
-                links = []
-                for j, v in zip(nbrs, value, strict=True):
-                    x, y = v.real, v.imag
-                    if not x * x + y * y <= bound2:  # NaN too
-                        raise ValueError(f"field {name!r} towards {j} is not finite or "
-                                         f"beyond its bound: {v!r}")
-                    links.append((j, x, y))
+                links = []  # a plain loop: a comprehension or a strict zip costs more here
+                for j, v in zip(nbrs, value, strict=False):  # lengths compared above
+                    links.append((j, v.real, v.imag))
+                    total += v
                 wire[name] = tuple(links)
-                continue
-            if kind == "vec2" and type(value) is complex:
-                x, y = value.real, value.imag
-                wire[name], top = (x, y), x * x + y * y
+            elif kind == "vec2" and type(value) is complex:
+                wire[name] = (value.real, value.imag)
+                total += value
             elif kind == "scalar" and type(value) in (float, int):
-                x = float(value)
-                wire[name], top = x, x * x
+                wire[name] = float(value)
+                total += value
             else:
                 raise ValueError(f"field {name!r}: {'not declared' if kind is None else kind} "
                                  f"is not {value!r}")
-            if not top <= bound2:  # NaN too
-                raise ValueError(f"field {name!r} is not finite or beyond its bound: {value!r}")
+        if total.real - total.real + total.imag - total.imag != 0.0:
+            raise ValueError(f"a field is not finite: {fields!r}")
         return wire
+
+    def failed(self, detail: str) -> None:
+        """A failure of the law's found past its step (its fields did not encode)."""
+        self._failed(detail)
 
     def _failed(self, detail: str) -> None:
         self.failures += 1

@@ -40,7 +40,6 @@ MAX_POS_M, MAX_SPEED_M_S, MAX_ACCEL_M_S2 = 1e5, 1e3, 1e4
 # Time constant of the low-passed data ages that scale each link's step limit.
 AGE_TAU_S = 0.5
 
-PHI = FieldSpec("phi_m", "vec2", MAX_POS_M)  # Phi_i (r_i = Phi_i + p~_i + carry): records
 ROBUST = (  # per link, the running sum of this follower's flow on it and its rate
     FieldSpec("link_sums_m", "per_link", MAX_POS_M, rate="link_rates_m_s"),
     FieldSpec("link_rates_m_s", "per_link", MAX_SPEED_M_S),
@@ -51,7 +50,9 @@ SECOND_ORDER = (  # the velocity stage: rv_i, and its link sums and their rates
     FieldSpec("vel_rates_m_s2", "per_link", MAX_ACCEL_M_S2),
 )
 
-# A NamedTuple built without its Python-level __new__: half the cost, same object.
+# A NamedTuple built without its Python-level __new__: half the cost, same object.  The
+# per-link sequences of a step are one per neighbour by construction: their zips are not
+# strict (a strict zip costs a fifth of a microsecond, and a step makes several).
 _new = tuple.__new__
 Links = tuple[complex, ...]
 
@@ -97,8 +98,8 @@ class PaperLaw(Law[PaperState]):
         self.estimator, self.control, self.lead_s = estimator, control, lead_s
         self.robust = robust
         self.second_order = robust and estimator.order == 2
-        self.fields = (PHI, *(ROBUST if robust else ()),
-                       *(SECOND_ORDER if self.second_order else ()))
+        # The paper's estimator needs nothing but r_j: its Phi_i stays its own.
+        self.fields = (*(ROBUST if robust else ()), *(SECOND_ORDER if self.second_order else ()))
 
     @classmethod
     def from_params(cls, table: Mapping[str, object], scenario: Scenario) -> PaperLaw:
@@ -149,7 +150,7 @@ class PaperLaw(Law[PaperState]):
         sums, rates = state.link_sums_m, state.link_rates_m_s
         if self.robust:
             zeros = (0j,) * len(r_nbrs)
-            sums = tuple([s + dt * f for s, f in zip(sums or zeros, rates or zeros, strict=True)])
+            sums = tuple([s + dt * f for s, f in zip(sums or zeros, rates or zeros, strict=False)])
             phi = link_balance_c(sums, their_sums)
         else:
             phi = state.phi_m + dt * state.phi_rate_m_s
@@ -157,12 +158,12 @@ class PaperLaw(Law[PaperState]):
         flows = consensus_flows_c(phi + p_tilde + carry, r_nbrs, fractions, self.estimator,
                                   setup.est_period_s)
         if not all(live):
-            flows = [f if ok else 0j for f, ok in zip(flows, live, strict=True)]
+            flows = [f if ok else 0j for f, ok in zip(flows, live, strict=False)]
         vel_sums, vel_rates, rv = state.vel_sums_m_s, state.vel_rates_m_s2, state.rv_m_s
         if self.second_order:
             vel_sums, vel_rates, rv = self._velocity_stage(state, inputs, dt, p_tilde_rate,
                                                            live, fractions)
-            flows = [f + s if ok else 0j for f, s, ok in zip(flows, vel_sums, live, strict=True)]
+            flows = [f + s if ok else 0j for f, s, ok in zip(flows, vel_sums, live, strict=False)]
         if self.robust:
             phi_rate = link_balance_c(flows, their_rates)
             rates = tuple(flows)
@@ -180,7 +181,7 @@ class PaperLaw(Law[PaperState]):
         """Order 2: its link sums, new flows, and rv_i."""
         zeros = (0j,) * len(live)
         sums = tuple([s + dt * f for s, f in zip(state.vel_sums_m_s or zeros,
-                                                 state.vel_rates_m_s2 or zeros, strict=True)])
+                                                 state.vel_rates_m_s2 or zeros, strict=False)])
         now_s, peers, hold = inputs.now_s, inputs.peers, inputs.setup.hold_s
         theirs, rv_nbrs = [], []
         for j, _ in state.derived.nbr_steps:
@@ -195,7 +196,7 @@ class PaperLaw(Law[PaperState]):
         rv = link_balance_c(sums, theirs) + p_tilde_rate
         flows = consensus_flows_c(rv, [rv if v is None else v for v in rv_nbrs], fractions,
                                   self.estimator, inputs.setup.est_period_s)
-        return sums, tuple([f if ok else 0j for f, ok in zip(flows, live, strict=True)]), rv
+        return sums, tuple([f if ok else 0j for f, ok in zip(flows, live, strict=False)]), rv
 
     def _command(self, state: PaperState, inputs: Inputs, r: complex, dr: complex) -> complex:
         """The enclosing controller on the state predicted lead_s ahead."""
@@ -214,7 +215,7 @@ class PaperLaw(Law[PaperState]):
         return u
 
     def _fields(self, state: PaperState) -> dict[str, object]:
-        fields: dict[str, object] = {"phi_m": state.phi_m}
+        fields: dict[str, object] = {}
         if self.robust and state.link_sums_m is not None:
             fields["link_sums_m"], fields["link_rates_m_s"] = state.link_sums_m, \
                 state.link_rates_m_s

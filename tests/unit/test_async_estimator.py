@@ -150,7 +150,7 @@ def _impaired_ring(
             stepped = None
             if latest.ready(setup):
                 stepped = runner.step(t, False, Sample(0j, 0j, t), latest.targets,
-                                      latest.peers, True)
+                                      latest.peers)
             r, dr, fields = runner.standing_estimate(latest.targets, t), 0j, {}
             if stepped is not None:
                 r, dr, fields = stepped[0].r_m, stepped[0].dr_m_s, stepped[1]

@@ -63,8 +63,7 @@ def check_reference(msg: Any, key: str, now_s: float, lim: Limits = DEFAULT_LIMI
     if isinstance(msg, FollowerState):
         positions = [msg.r_m, msg.pos_m]
         speeds = [msg.dr_m_s, msg.vel_m_s, msg.u_m_s]
-        numbers = [*(x for v in positions + speeds for x in v), msg.vehicle_stamp_s,
-                   *_law_numbers(msg.law)]
+        numbers = [*(x for v in positions + speeds for x in v), msg.vehicle_stamp_s]
         if not _finite(numbers):
             return "nonfinite"
         if msg.vehicle_stamp_s > now_s + lim.future_s:
@@ -80,20 +79,6 @@ def check_reference(msg: Any, key: str, now_s: float, lim: Limits = DEFAULT_LIMI
         vecs = [*msg.follower_pos_m, *msg.follower_vel_m_s, *msg.target_pos_m, *msg.target_vel_m_s]
         return None if all(_finite(v) for v in vecs) else "nonfinite"
     return None
-
-
-def _law_numbers(law: Any) -> list[Any]:
-    """Every number of a law's fields (transport.law_fields), by their kinds' shapes; the
-    neighbour index of a per_link entry is an index, not a value."""
-    numbers: list[Any] = []
-    for value in law.values():
-        if isinstance(value, tuple) and value and isinstance(value[0], tuple):
-            numbers += [x for link in value for x in link[1:]]
-        elif isinstance(value, tuple):
-            numbers += value
-        else:
-            numbers.append(value)
-    return numbers
 
 
 class AgeHistogramReference:

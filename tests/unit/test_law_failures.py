@@ -47,7 +47,10 @@ class Flaky(PaperLaw):
         if how == "undeclared":
             return new, out._replace(fields={**out.fields, "secret": 1.0})
         if how == "wrong_kind":
-            return new, out._replace(fields={**out.fields, "phi_m": "north"})
+            return new, out._replace(fields={**out.fields, "link_sums_m": "north"})
+        if how == "nan_field":
+            sums = (complex(math.nan, 0.0), *out.fields["link_sums_m"][1:])
+            return new, out._replace(fields={**out.fields, "link_sums_m": sums})
         if how == "not_an_output":
             return new, cast(Output, None)
         return new, out
@@ -85,7 +88,7 @@ def fly(bad: Mapping[int, str], ticks: int = 8) -> tuple[FollowerNode, Vehicle, 
     for k in range(ticks):
         now = bus.now_s()
         for j in (1, 3):
-            law = {"phi_m": (0.0, 0.0), "link_sums_m": ((0, 0.1 * k, 0.0),),
+            law = {"link_sums_m": ((0, 0.1 * k, 0.0),),
                    "link_rates_m_s": ((0, 0.1, 0.0),)}
             msg = FollowerState(Header(f"follower-{j}", k, now), j, (float(j), 1.0),
                                 (0.0, 0.0), (5.0, 5.0 * j), (0.0, 0.0), (0.0, 0.0), now, law)
@@ -105,7 +108,8 @@ def test_a_good_law_flies_every_tick() -> None:
     node.close()
 
 
-@pytest.mark.parametrize("how", ["raise", "nan", "undeclared", "wrong_kind", "not_an_output"])
+@pytest.mark.parametrize("how", ["raise", "nan", "undeclared", "wrong_kind", "nan_field",
+                                 "not_an_output"])
 def test_each_failure_holds_the_vehicle_for_that_tick_only(how: str) -> None:
     node, vehicle, published = fly({3: how})
     assert node.counters()["law_failures"] == 1
@@ -142,5 +146,5 @@ def test_published_law_fields_carry_the_declared_values() -> None:
     (received,) = sub.drain()
     msg = decode(received.payload)
     assert isinstance(msg, FollowerState) and msg.law == {}
-    assert set(node.runner.declared) == {"phi_m", "link_sums_m", "link_rates_m_s"}
+    assert set(node.runner.declared) == {"link_sums_m", "link_rates_m_s"}
     node.close()

@@ -85,8 +85,7 @@ class Swarm:
             assert runner.last_r is not None or latest.ready(setup)
             peers = stand_ins(latest.peers, setup, runner.last_r, self.t)
             own = Sample(complex(*self.s.follower_pos_m[i]), 0j, self.t)
-            stepped = runner.step(self.t, True, own, latest.targets, peers,
-                                  latest.heard_all_targets(setup))
+            stepped = runner.step(self.t, True, own, latest.targets, peers)
             assert stepped is not None
             outs[i] = stepped
         for i, (out, fields) in outs.items():
@@ -206,7 +205,7 @@ def test_a_joiner_ticks_before_it_hears_its_targets_or_all_peers() -> None:
     assert setup.observed and joined is not None  # it observes a target, not heard yet
     now = swarm.t + DT
     peers = stand_ins({}, setup, joined, now)  # and no peer heard either
-    stepped = runner.step(now, True, Sample(0j, 0j, swarm.t), {}, peers, False)
+    stepped = runner.step(now, True, Sample(0j, 0j, swarm.t), {}, peers)
     assert stepped is not None and runner.failures == 0
     assert latest.stale(setup, peers, now) == len(setup.observed) + len(setup.peers)
     assert stepped[0].r_m == pytest.approx(joined.held(now, 1.0), abs=1e-12)

@@ -85,8 +85,8 @@ class One:
 
     def step(self, now_s: float, own: complex, command: bool = True) -> Output:
         peers = stand_ins(self.latest.peers, self.setup, self.runner.last_r, now_s)
-        stepped = self.runner.step(now_s, command, Sample(own, 0j, now_s), self.latest.targets,
-                                   peers, self.latest.heard_all_targets(self.setup))
+        stepped = self.runner.step(now_s, command, Sample(own, 0j, now_s),
+                                   self.latest.targets, peers)
         assert stepped is not None
         return stepped[0]
 
@@ -273,7 +273,7 @@ def test_parameters_and_fields_follow_the_scenario() -> None:
     assert err.value.field == "law.k_e"
     names = {est: [f.name for f in PaperLaw.from_params({}, with_estimator(PAPER, est)).fields]
              for est in ("paper", "robust", "robust2")}
-    assert names == {"paper": ["phi_m"],
-                     "robust": ["phi_m", "link_sums_m", "link_rates_m_s"],
-                     "robust2": ["phi_m", "link_sums_m", "link_rates_m_s", "rv_m_s",
-                                 "vel_sums_m_s", "vel_rates_m_s2"]}
+    assert names == {"paper": [],  # its neighbours need nothing but r_j
+                     "robust": ["link_sums_m", "link_rates_m_s"],
+                     "robust2": ["link_sums_m", "link_rates_m_s", "rv_m_s", "vel_sums_m_s",
+                                 "vel_rates_m_s2"]}
