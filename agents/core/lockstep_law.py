@@ -119,8 +119,7 @@ class _Swarm:
         latest = self.latest[i]
         own = Sample(vehicle, self.u[i], t_s)
         peers = stand_ins(latest.peers, runner.setup, runner.last_r, t_s)
-        stepped = runner.step(t_s, command, own, latest.targets, peers,
-                              latest.heard_all_targets(runner.setup))
+        stepped = runner.step(t_s, command, own, latest.targets, peers)
         if stepped is None:  # the law failed: hold, as a follower does
             if command:
                 self.u[i] = 0j
