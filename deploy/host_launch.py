@@ -35,6 +35,8 @@ from transport.zenoh_config import ZenohConfig
 
 log = logging.getLogger("enclose.host")
 IMPAIRED_SCENARIO = "scenario-hosts.toml"
+# The entry point of each kind of agent process (as deploy.launch starts them).
+AGENT_MODULES = {"follower": "agents.follower.main", "target": "agents.target"}
 
 
 class HostLaunch(Launch):
@@ -131,7 +133,7 @@ class HostLaunch(Launch):
         elif name != "launcher":
             role, _, idx = name.rpartition("-")
             extra = ["--mav-vehicle-host", self.sim_address] if remote else []
-            self.sup.start(name, f"agents.{role}", [*argv, *mav, *extra, "--index", idx],
+            self.sup.start(name, AGENT_MODULES[role], [*argv, *mav, *extra, "--index", idx],
                            prefix=pre)
 
     def open_bus(self) -> ZenohBus:
