@@ -4,6 +4,7 @@ each bad law is one error line naming the field, before any process starts."""
 from __future__ import annotations
 
 import argparse
+import ast
 import logging
 import subprocess
 import sys
@@ -235,3 +236,13 @@ def test_a_copy_of_the_scenario_elsewhere_loads_the_same_law(tmp_path: Path) -> 
     assert pinned_law(paper.read_text(), load_scenario("paper").law) == paper.read_text()
     with pytest.raises(ScenarioError, match=r"law\.module"):  # an inline table: not pinned
         pinned_law('law = { module = "simple_law:SimpleLaw" }\n', original.law)
+
+
+def test_the_example_law_imports_only_the_interface_of_enclose() -> None:
+    tree = ast.parse((EXAMPLE / "simple_law.py").read_text())
+    imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+    imported |= {a.name for node in ast.walk(tree) if isinstance(node, ast.Import)
+                 for a in node.names}
+    ours = {m for m in imported if m and m.split(".")[0] in ("agents", "transport", "deploy")}
+    assert ours == {"agents.law.interface"}
+    assert not {m for m in imported if m and m.split(".")[0] in ("numpy", "numba")}
