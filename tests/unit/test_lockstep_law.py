@@ -12,6 +12,7 @@ per-link fields), 60 s: within 3.1 % (the angle error; the others 1.7 %) and 1.8
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,7 @@ from agents.law.interface import Inputs, Law, Output, Setup
 from agents.law.loader import make_law
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
+from deploy.cli import main
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -115,3 +117,16 @@ def test_the_estimator_runs_at_its_own_rate_between_control_steps() -> None:
     assert twice.series.estimate_m.shape == once.series.estimate_m.shape
     assert not np.array_equal(twice.series.estimate_m, once.series.estimate_m)
     assert np.abs(twice.series.estimate_m - once.series.estimate_m)[100:].max() < 0.05
+
+
+def test_simulate_runs_the_papers_law_compiled_unless_asked_through_the_interface(
+        tmp_path: Path) -> None:
+    runs = {}
+    for name, extra in (("compiled", []), ("interface", ["--through-interface"])):
+        out = tmp_path / name
+        assert main(["simulate", "paper", "--dt", "0.02", "--duration", "6", "--out", str(out),
+                     "--no-progress", *extra]) == 0
+        runs[name] = json.loads((out / "metrics.json").read_text())
+    assert runs["compiled"]["law_path"] == "compiled" and "law_failures" not in runs["compiled"]
+    assert runs["interface"]["law_path"] == "interface"
+    assert runs["interface"]["law_failures"] == 0 and runs["interface"]["law"] == "paper"
