@@ -19,7 +19,7 @@ from agents.follower.inputs import Latest
 from agents.follower.membership import setup_for, stand_ins
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Output, Sample
-from agents.law.paper import PaperLaw
+from agents.law.loader import make_law
 from agents.liveness import MembershipWatch
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.process import StatusReporter
@@ -59,8 +59,7 @@ class FollowerNode:
     ) -> None:
         self.scenario = scenario
         self.members = frozenset(range(scenario.n))
-        self.runner = LawRunner(law or PaperLaw.from_params({}, scenario),
-                                setup_for(scenario, index))
+        self.runner = LawRunner(law or make_law(scenario), setup_for(scenario, index))
         self.latest = Latest(index, self.runner.declared)
         self.index, self.bus, self.vehicle = index, bus, vehicle
         self.altitude_m = scenario.vehicle.altitude_m
