@@ -59,8 +59,7 @@ class FollowerNode:
     ) -> None:
         self.scenario = scenario
         self.members = frozenset(range(scenario.n))
-        self.runner = LawRunner(law or make_law(scenario),  # the scenario's [law]
-                                setup_for(scenario, index))
+        self.runner = LawRunner(law or make_law(scenario), setup_for(scenario, index))
         self.latest = Latest(index, self.runner.declared)
         self.index, self.bus, self.vehicle = index, bus, vehicle
         self.altitude_m = scenario.vehicle.altitude_m

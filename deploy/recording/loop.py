@@ -15,6 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from agents.law.loader import make_law
 from agents.liveness import MembershipWatch
 from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
@@ -64,7 +65,10 @@ class Recorder:
         run_dir.mkdir(parents=True, exist_ok=True)
         self.mcap = McapLog(run_dir / MCAP_FILE, chunk_size=chunk_bytes,
                             metadata={"swarm": swarm, "scenario": scenario.name})
-        self.decoder = Decoder(limits=RECORDER_LIMITS)  # implausible messages dropped, counted
+        # Implausible messages dropped, counted; a state whose law fields are not what the
+        # scenario's law declares too, as its followers drop it (transport.law_fields).
+        self.decoder = Decoder(limits=RECORDER_LIMITS,
+                               law_fields=make_law(scenario).declared())
         self.asm = RunAssembler(scenario.n, scenario.m)
         self.state = "starting"
         self.stop_reason = ""

@@ -1,7 +1,7 @@
 """The core's scalar twins (complex plane vectors, Python floats) are its numpy laws, to 1e-9.
 
-agents.follower_fast calls them once per follower and step; the lock-step engines and
-agents.follower_logic call the vectorised ones.  Random inputs over every branch: the cap
+The paper's law (agents.law.paper) calls them once per follower and step; the lock-step
+engines call the vectorised ones.  Random inputs over every branch: the cap
 and the power of the step-limited law, step_fraction 0 (the paper's plain law), a missing
 successor's age, ranges down to the law's minimum.
 """
