@@ -84,9 +84,10 @@ def _case(name: str, estimator: str, calls: int, repeat: int) -> dict[str, float
             latest.stale(setup, peers, later)
         return out
 
-    def observe() -> None:
-        latest.targets[target] = latest.targets[target]._replace(stamp_s=later - 0.01)
-        latest.observe(setup, target, complex(0.5, 1.5), later)
+    stamps = iter(range(10**9))
+
+    def observe() -> None:  # each a newer sample than the last: the filter runs
+        latest.observe(setup, target, complex(0.5, 1.5), later + 0.01 * next(stamps))
 
     timings: list[tuple[str, Callable[[], Any]]] = [
         ("estimator step", lambda: step(False)),

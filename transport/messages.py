@@ -85,8 +85,9 @@ class FollowerState:
     u_m_s: Vec2  # velocity command sent this step
     vehicle_stamp_s: float  # stamp of the vehicle state used
     # The fields its law declared, by name (codec v4): a float, a Vec2, or per neighbour j
-    # (j, x, y).  The paper's law: phi_m (Phi_i, r_i = Phi_i + p~_i), and robust its link
-    # sums and their rates, and at order 2 rv_m_s and the velocity stage's (agents.law.paper).
+    # (j, x, y).  The paper's law: nothing with its own estimator; with the robust one its
+    # link sums and their rates, and at order 2 rv_m_s and the velocity stage's
+    # (agents.law.paper).
     law: LawFields = field(default_factory=dict)
 
 
