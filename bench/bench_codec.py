@@ -2,7 +2,7 @@
 
     python bench/bench_codec.py [--calls 20000] [--repeats 7]
 
-For FollowerState (a robust ring follower: its law's phi, and link sums and rates on 2
+For FollowerState (a robust ring follower: the paper law's link sums and rates on 2
 links; "FollowerState rv": the same with the second-order estimator's rv_m_s and
 velocity-stage sums and rates),
 TargetObservation and TruthSnapshot (16 followers, 2 targets), prints the time per call of
@@ -48,7 +48,7 @@ def follower_state(seq: int, now_s: float) -> FollowerState:
     return FollowerState(
         Header("follower-3", seq, now_s - 0.002), 3, (1.25, -2.5), (0.01, 0.02),
         (20.0, 3.5), (1.5, -0.5), (1.4, -0.6), now_s - 0.004,
-        {"phi_m": (0.5, 0.25), "link_sums_m": ((2, 0.125, -0.25), (4, -0.5, 0.75)),
+        {"link_sums_m": ((2, 0.125, -0.25), (4, -0.5, 0.75)),
          "link_rates_m_s": ((2, 0.001, 0.002), (4, -0.003, 0.0))})
 
 
