@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "sweep": "deploy.sweep.command",
     "keys": "deploy.commands.keys",
     "host": "deploy.commands.host",
+    "replay": "deploy.commands.replay",
 }
 COMMAND_MODULES: tuple[str, ...] = tuple(COMMANDS.values())
 

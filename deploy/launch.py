@@ -126,8 +126,9 @@ class Launch:
         for j in range(s.m):
             argv = [*joins, *mav, "--index", str(j), *sec(f"target-{j}")]
             self.sup.start(f"target-{j}", "agents.target", argv, fork=True)
+        journal = ["--journal", str(self.out / "journal")] if self.opts.journal else []
         for i in range(s.n):
-            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
+            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}"), *journal]
             self.sup.start(f"follower-{i}", "agents.follower.main", argv, fork=True)
 
     def expected_tokens(self) -> set[str]:

@@ -284,3 +284,5 @@ class FollowerNode:
         self.liveness.close()
         self.out.close()
         self.est_out.close()
+        if self.runner.journal is not None:
+            self.runner.journal.close()

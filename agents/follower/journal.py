@@ -1,0 +1,136 @@
+"""What a follower's law was handed, journaled, and read back.
+
+The follower's `LawRunner` writes one record per call that changes it: a step (`"s"`:
+the clock, control tick or estimator step, its vehicle's sample, its targets and peers as
+handed to the law, and what came out), a change of members (`"g"`) and a join (`"j"`).
+Targets and peers are written as changes: the keys in the order the law iterates them,
+and only the entries that are not the very objects of the last record (agents.follower.inputs
+makes a new one per newer message), so a record costs about the messages that arrived.
+A step's result is its command, estimate and rate exactly, and a CRC of its published
+fields; `enclose replay` (agents.follower.replay) re-runs the same runner and compares.
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import msgpack
+
+from agents.follower.journal_file import FrameWriter
+from agents.law.interface import Output, Peer, Sample
+from transport.law_fields import LawFields
+
+STEP, REGROUP, JOIN = "s", "g", "j"
+_new = tuple.__new__
+
+
+def _sample(s: Sample) -> list[float]:
+    v, r = s.value, s.rate
+    return [v.real, v.imag, r.real, r.imag, s.stamp_s]
+
+
+def _field(value: Any) -> Any:
+    if type(value) is complex:
+        return [value.real, value.imag]
+    if isinstance(value, Sample):
+        return _sample(value)
+    return value
+
+
+def fields_crc(wire: LawFields) -> int:
+    """The published fields' fingerprint: equal iff their msgpack bytes are."""
+    return zlib.crc32(msgpack.packb(wire, use_bin_type=True))
+
+
+class Changes:
+    """A keyed map written as what changed since the last one (by identity)."""
+
+    def __init__(self, encode: Any) -> None:
+        self._last: dict[int, object] = {}
+        self._encode = encode
+
+    def delta(self, now: Mapping[int, Any]) -> list[Any]:
+        last, changed = self._last, []
+        for j, v in now.items():
+            if last.get(j) is not v:
+                changed.append([j, *self._encode(v)])
+        self._last = dict(now)
+        return [list(now), changed]
+
+
+def _peer(p: Peer) -> list[Any]:
+    fields = {k: _field(v) for k, v in p.fields.items()} if p.fields else {}
+    return [_sample(p.r), _sample(p.pos), fields]
+
+
+class JournalWriter:
+    """The journal of one follower's runner, in `path` (agents.follower.journal_file)."""
+
+    def __init__(self, path: Path, header: dict[str, Any]) -> None:
+        self.file = FrameWriter(path, header)
+        self._targets = Changes(lambda s: _sample(s))
+        self._peers = Changes(_peer)
+        self._peers_join = Changes(_peer)
+
+    def step(self, now_s: float, command: bool, own: Sample, targets: Mapping[int, Sample],
+             peers: Mapping[int, Peer], result: tuple[Output, LawFields] | None) -> None:
+        done = None
+        if result is not None:
+            out, wire = result
+            u, r, dr = out.u_m_s, out.r_m, out.dr_m_s
+            done = [u.real, u.imag, r.real, r.imag, dr.real, dr.imag, fields_crc(wire)]
+        self.file.add([STEP, now_s, command, _sample(own), self._targets.delta(targets),
+                       self._peers.delta(peers), done])
+
+    def regroup(self, members: tuple[int, ...]) -> None:
+        self.file.add([REGROUP, list(members)])
+
+    def join(self, peers: Mapping[int, Peer], now_s: float) -> None:
+        self.file.add([JOIN, now_s, self._peers_join.delta(peers)])
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def read_sample(v: list[float]) -> Sample:
+    return _new(Sample, (complex(v[0], v[1]), complex(v[2], v[3]), v[4]))
+
+
+def _read_field(v: Any) -> Any:
+    if isinstance(v, list):
+        return complex(v[0], v[1]) if len(v) == 2 else read_sample(v)
+    return v
+
+
+def read_peer(v: list[Any]) -> Peer:
+    fields = {k: _read_field(f) for k, f in v[2].items()}
+    return _new(Peer, (read_sample(v[0]), read_sample(v[1]), fields))
+
+
+class Mirror:
+    """The keyed map a `Changes` wrote, rebuilt from its records."""
+
+    def __init__(self, decode: Any) -> None:
+        self._held: dict[int, Any] = {}
+        self._decode = decode
+
+    def apply(self, delta: list[Any]) -> dict[int, Any]:
+        keys, changed = delta
+        held = self._held
+        for entry in changed:
+            held[entry[0]] = self._decode(entry[1:])
+        self._held = {j: held[j] for j in keys}
+        return dict(self._held)
+
+
+def journal_path(folder: Path, index: int) -> Path:
+    """Where follower `index` journals: its first file, or the next part (a restarted
+    process) beside the earlier ones, in the order `enclose replay` reads them."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path, part = folder / f"follower-{index}.journal", 2
+    while path.exists():
+        path, part = folder / f"follower-{index}-part{part}.journal", part + 1
+    return path
