@@ -29,6 +29,7 @@ from agents.follower.journal import (
     Mirror,
     read_peer,
     read_sample,
+    read_target,
 )
 from agents.follower.journal_file import Frames
 from agents.follower.replay import replay
@@ -40,7 +41,7 @@ def rewrite_cpu_s(path: Path) -> tuple[float, int, float]:
     """CPU seconds to write `path`'s records again, its step count, its span (s)."""
     frames = Frames.open(path)
     records = [r for _, r in frames.records()]
-    targets, peers, joins = Mirror(read_sample), Mirror(read_peer), Mirror(read_peer)
+    targets, peers, joins = Mirror(read_target), Mirror(read_peer), Mirror(read_peer)
     calls: list[tuple[str, Any]] = []
     for rec in records:  # decoded first: only the writing is timed
         if rec[0] == STEP:

@@ -12,6 +12,7 @@ fields; `enclose replay` (agents.follower.replay) re-runs the same runner and co
 
 from __future__ import annotations
 
+import struct
 import zlib
 from collections.abc import Mapping
 from pathlib import Path
@@ -27,9 +28,21 @@ STEP, REGROUP, JOIN = "s", "g", "j"
 _new = tuple.__new__
 
 
-def _sample(s: Sample) -> list[float]:
+# A Sample as bytes: its four plane numbers as float32 when that is exact (a vehicle's
+# telemetry arrives as MAVLink float32: a fifth of a record's bytes), else float64.
+_F32, _F64 = struct.Struct("<4fd"), struct.Struct("<5d")
+
+
+def _sample(s: Sample) -> bytes:
     v, r = s.value, s.rate
-    return [v.real, v.imag, r.real, r.imag, s.stamp_s]
+    x, y, vx, vy = v.real, v.imag, r.real, r.imag
+    try:
+        short = _F32.pack(x, y, vx, vy, s.stamp_s)
+        if _F32.unpack(short)[:4] == (x, y, vx, vy):
+            return short
+    except OverflowError:  # beyond float32's range
+        pass
+    return _F64.pack(x, y, vx, vy, s.stamp_s)
 
 
 def _field(value: Any) -> Any:
@@ -71,7 +84,7 @@ class JournalWriter:
 
     def __init__(self, path: Path, header: dict[str, Any]) -> None:
         self.file = FrameWriter(path, header)
-        self._targets = Changes(lambda s: _sample(s))
+        self._targets = Changes(lambda s: [_sample(s)])
         self._peers = Changes(_peer)
         self._peers_join = Changes(_peer)
 
@@ -95,13 +108,20 @@ class JournalWriter:
         self.file.close()
 
 
-def read_sample(v: list[float]) -> Sample:
+def read_sample(b: bytes) -> Sample:
+    v = (_F32 if len(b) == _F32.size else _F64).unpack(b)
     return _new(Sample, (complex(v[0], v[1]), complex(v[2], v[3]), v[4]))
+
+
+def read_target(v: list[bytes]) -> Sample:
+    return read_sample(v[0])
 
 
 def _read_field(v: Any) -> Any:
     if isinstance(v, list):
-        return complex(v[0], v[1]) if len(v) == 2 else read_sample(v)
+        return complex(v[0], v[1])
+    if isinstance(v, bytes):
+        return read_sample(v)
     return v
 
 

@@ -14,7 +14,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from agents.follower.journal import JOIN, REGROUP, STEP, Mirror, fields_crc, read_peer, read_sample
+from agents.follower.journal import (
+    JOIN,
+    REGROUP,
+    STEP,
+    Mirror,
+    fields_crc,
+    read_peer,
+    read_sample,
+    read_target,
+)
 from agents.follower.journal_file import Frames
 from agents.follower.membership import setup_for
 from agents.follower.runner import LawRunner
@@ -89,7 +98,7 @@ def replay(path: Path, scenario: Scenario, law: Law[Any], check: bool = True) ->
     index = int(frames.header["index"])
     runner = LawRunner(law, setup_for(scenario, index))
     found = Replay(path)
-    targets, peers, joins = Mirror(read_sample), Mirror(read_peer), Mirror(read_peer)
+    targets, peers, joins = Mirror(read_target), Mirror(read_peer), Mirror(read_peer)
     for at, rec in frames.records():
         kind = rec[0]
         if kind == REGROUP:
