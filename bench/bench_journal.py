@@ -73,7 +73,7 @@ def rewrite_cpu_s(path: Path) -> tuple[float, int, float]:
 
 
 class _Result:
-    """A step's result as the writer takes it, from a journal's record."""
+    """A step's result as the writer takes it (its CRCs cost the same whatever the values)."""
 
     @staticmethod
     def of(done: list[Any] | None) -> Any:
@@ -81,9 +81,8 @@ class _Result:
             return None
         from agents.law.interface import Output
 
-        out = Output(complex(done[0], done[1]), complex(done[2], done[3]),
-                     complex(done[4], done[5]), {})
-        return out, {}
+        fields = {"link_sums_m": ((1, 0.5, 0.25), (3, 0.5, 0.25))}
+        return Output(1j, 2j, 3j, {}), fields
 
 
 def measure(run_dir: Path) -> None:

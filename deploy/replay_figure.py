@@ -14,20 +14,21 @@ from agents.follower.replay import Series
 from deploy.marks import draw_marks, legend_handles, run_marks
 
 
-def counterfactual_figure(series: Series, run_dir: Path, follower: int, label: str,
-                          out: Path) -> Path:
-    """Command and estimate, run vs `label`, x and y, on the run's time axis.  The journal
-    has the follower's clock: its first control tick is taken as the run's start."""
+def counterfactual_figure(run: Series, series: Series, run_dir: Path, follower: int,
+                          label: str, out: Path) -> Path:
+    """Command and estimate, `run` (the run's law replayed) vs `series` (`label`), x and
+    y, on the run's time axis.  The journal has the follower's clock: its first control
+    tick is taken as the run's start."""
     t0 = series.t_s[0] if series.t_s else 0.0
     t = [x - t0 for x in series.t_s]
     marks = run_marks(run_dir, [x - t0 for x in series.regroups_s])
     fig, axes = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
-    rows = ((axes[0], series.recorded_u_m_s, series.u_m_s, "command (m/s)"),
-            (axes[1], series.recorded_r_m, series.r_m, "estimate of the centre (m)"))
-    for ax, run, other, ylabel in rows:
+    rows = ((axes[0], run.u_m_s, series.u_m_s, "command (m/s)"),
+            (axes[1], run.r_m, series.r_m, "estimate of the centre (m)"))
+    for ax, ran, other, ylabel in rows:
         for part, colour in (("real", "tab:blue"), ("imag", "tab:orange")):
             axis = "x" if part == "real" else "y"
-            ax.plot(t, [getattr(v, part) for v in run], color=colour, lw=1.2,
+            ax.plot(t, [getattr(v, part) for v in ran], color=colour, lw=1.2,
                     label=f"{axis}: the run")
             ax.plot(t, [getattr(v, part) for v in other], color=colour, lw=1.2, ls="--",
                     label=f"{axis}: {label}")

@@ -6,8 +6,8 @@ handed to the law, and what came out), a change of members (`"g"`) and a join (`
 Targets and peers are written as changes: the keys in the order the law iterates them,
 and only the entries that are not the very objects of the last record (agents.follower.inputs
 makes a new one per newer message), so a record costs about the messages that arrived.
-A step's result is its command, estimate and rate exactly, and a CRC of its published
-fields; `enclose replay` (agents.follower.replay) re-runs the same runner and compares.
+A step's result is kept as CRCs of its command, its estimate and rate, and its
+published fields; `enclose replay` (agents.follower.replay) re-runs the same runner and compares.
 """
 
 from __future__ import annotations
@@ -58,6 +58,21 @@ def fields_crc(wire: LawFields) -> int:
     return zlib.crc32(msgpack.packb(wire, use_bin_type=True))
 
 
+_TWO, _FOUR = struct.Struct("<2d"), struct.Struct("<4d")
+
+
+def result_crcs(result: tuple[Output, LawFields] | None) -> list[int] | None:
+    """A step's result as the journal keeps it: CRCs of its command, of its estimate and
+    rate, and of its published fields (None: the law failed).  A replay recomputes them:
+    the values are its own, a fingerprint is enough to say it is the run's, bit for bit."""
+    if result is None:
+        return None
+    out, wire = result
+    u, r, dr = out.u_m_s, out.r_m, out.dr_m_s
+    return [zlib.crc32(_TWO.pack(u.real, u.imag)),
+            zlib.crc32(_FOUR.pack(r.real, r.imag, dr.real, dr.imag)), fields_crc(wire)]
+
+
 class Changes:
     """A keyed map written as what changed since the last one (by identity)."""
 
@@ -90,13 +105,8 @@ class JournalWriter:
 
     def step(self, now_s: float, command: bool, own: Sample, targets: Mapping[int, Sample],
              peers: Mapping[int, Peer], result: tuple[Output, LawFields] | None) -> None:
-        done = None
-        if result is not None:
-            out, wire = result
-            u, r, dr = out.u_m_s, out.r_m, out.dr_m_s
-            done = [u.real, u.imag, r.real, r.imag, dr.real, dr.imag, fields_crc(wire)]
         self.file.add([STEP, now_s, command, _sample(own), self._targets.delta(targets),
-                       self._peers.delta(peers), done])
+                       self._peers.delta(peers), result_crcs(result)])
 
     def regroup(self, members: tuple[int, ...]) -> None:
         self.file.add([REGROUP, list(members)])

@@ -19,10 +19,10 @@ from agents.follower.journal import (
     REGROUP,
     STEP,
     Mirror,
-    fields_crc,
     read_peer,
     read_sample,
     read_target,
+    result_crcs,
 )
 from agents.follower.journal_file import Frames
 from agents.follower.membership import setup_for
@@ -49,8 +49,6 @@ class Series:
     t_s: list[float] = field(default_factory=list)
     u_m_s: list[complex] = field(default_factory=list)
     r_m: list[complex] = field(default_factory=list)
-    recorded_u_m_s: list[complex] = field(default_factory=list)
-    recorded_r_m: list[complex] = field(default_factory=list)
     regroups_s: list[float] = field(default_factory=list)
 
 
@@ -69,27 +67,24 @@ class Replay:
         return self.difference is None and self.steps > 0
 
 
-def _result(done: list[Any] | None) -> tuple[complex, complex, complex, int] | None:
-    if done is None:
-        return None
-    return complex(done[0], done[1]), complex(done[2], done[3]), complex(done[4], done[5]), done[6]
+_PARTS = ("command", "estimate or its rate", "published fields")
 
 
-def compare(got: tuple[Output, LawFields] | None, done: list[Any] | None) -> str | None:
-    """Why `got` is not the recorded `done`, or None if it is, bit for bit."""
-    want = _result(done)
-    if got is None or want is None:
-        if got is None and want is None:
+def compare(got: tuple[Output, LawFields] | None, done: list[int] | None) -> str | None:
+    """Why `got` is not the recorded result `done` (journal.result_crcs), or None if it
+    is, bit for bit."""
+    if got is None or done is None:
+        if got is None and done is None:
             return None
         return "the law failed in the replay" if got is None else "the law failed in the run"
-    out, wire = got
-    for name, a, b in (("command", out.u_m_s, want[0]), ("estimate", out.r_m, want[1]),
-                       ("estimate rate", out.dr_m_s, want[2])):
-        if a.real.hex() != b.real.hex() or a.imag.hex() != b.imag.hex():
-            return f"{name} {a!r} in the replay, {b!r} in the run"
-    if fields_crc(wire) != want[3]:
-        return "the published fields differ"
-    return None
+    mine = result_crcs(got)
+    assert mine is not None
+    wrong = [name for name, a, b in zip(_PARTS, mine, done, strict=True) if a != b]
+    if not wrong:
+        return None
+    out = got[0]
+    return (f"{' and '.join(wrong)} not the run's (the replay's: command {out.u_m_s:.6g}, "
+            f"estimate {out.r_m:.6g})")
 
 
 def replay(path: Path, scenario: Scenario, law: Law[Any], check: bool = True) -> Replay:
@@ -111,7 +106,7 @@ def replay(path: Path, scenario: Scenario, law: Law[Any], check: bool = True) ->
             got = runner.step(now_s, command, read_sample(own), targets.apply(tdelta),
                               peers.apply(pdelta))
             if command:
-                _keep(found.series, now_s, got, done)
+                _keep(found.series, now_s, got)
             if check and found.difference is None:
                 why = compare(got, done)
                 if why is not None:
@@ -121,16 +116,12 @@ def replay(path: Path, scenario: Scenario, law: Law[Any], check: bool = True) ->
     return found
 
 
-def _keep(series: Series, now_s: float, got: tuple[Output, LawFields] | None,
-          done: list[Any] | None) -> None:
-    want = _result(done)
+def _keep(series: Series, now_s: float, got: tuple[Output, LawFields] | None) -> None:
+    """A control tick's command (0: a failed law holds) and estimate (the last one held)."""
     series.t_s.append(now_s)
     series.u_m_s.append(0j if got is None else got[0].u_m_s)
-    series.r_m.append(series.r_m[-1] if got is None and series.r_m else
-                      (0j if got is None else got[0].r_m))
-    series.recorded_u_m_s.append(0j if want is None else want[0])
-    series.recorded_r_m.append(series.recorded_r_m[-1] if want is None and series.recorded_r_m
-                               else (0j if want is None else want[1]))
+    held = series.r_m[-1] if series.r_m else 0j
+    series.r_m.append(held if got is None else got[0].r_m)
 
 
 def journals(run_dir: Path, follower: int) -> Iterator[Path]:

@@ -79,8 +79,8 @@ def _follower(text: str | None) -> int:
 
 
 def replay_follower(run_dir: Path, k: int, args: argparse.Namespace) -> bool:
-    """Replay follower k's journals; print the verdict; True if it reproduced (or, as a
-    counterfactual, ran)."""
+    """Replay follower k's journals; print the verdict; True if it reproduced.  With
+    another law or parameters, also what they would have commanded (the figure)."""
     paths = list(journals(run_dir, k))
     if not paths:
         raise EncloseError(f"follower-{k}: no journal in {run_dir / 'journal'} (a run "
@@ -89,29 +89,34 @@ def replay_follower(run_dir: Path, k: int, args: argparse.Namespace) -> bool:
     ok = True
     for path in paths:
         scenario = run_scenario(Frames.open(path).header)
-        if counterfactual:
-            other = apply_law_arguments(scenario, LawOptions.from_namespace(args))
-            scenario = with_sets(other, args.set)
         t0 = time.perf_counter()
-        found = replay(path, scenario, make_law(scenario), check=not counterfactual)
-        _say(found, k, counterfactual, time.perf_counter() - t0)
-        ok = ok and (counterfactual or found.reproduced)
+        found = replay(path, scenario, make_law(scenario))
+        _say(found, k, time.perf_counter() - t0)
+        ok = ok and found.reproduced
         if counterfactual and path == paths[0]:
-            label = " ".join([*(["law " + args.law] if args.law else []),
-                              *args.law_param, *args.set])
-            from deploy.replay_figure import counterfactual_figure
-
-            out = args.figure or run_dir / f"replay-follower-{k}.png"
-            print(f"  figure: {counterfactual_figure(found.series, run_dir, k, label, out)}")
+            _counterfactual(path, scenario, found, run_dir, k, args)
     return ok
 
 
-def _say(found: Replay, k: int, counterfactual: bool, took_s: float) -> None:
+def _counterfactual(path: Path, scenario: Scenario, found: Replay, run_dir: Path, k: int,
+                    args: argparse.Namespace) -> None:
+    """The other law or parameters on the same inputs, open loop, drawn beside the run."""
+    other = with_sets(apply_law_arguments(scenario, LawOptions.from_namespace(args)), args.set)
+    asked = replay(path, other, make_law(other), check=False)
+    label = " ".join([*(["law " + args.law] if args.law else []), *args.law_param, *args.set])
+    from deploy.replay_figure import counterfactual_figure
+
+    out = args.figure or run_dir / f"replay-follower-{k}.png"
+    drawn = counterfactual_figure(found.series, asked.series, run_dir, k, label, out)
+    jump = max((abs(b - a) for a, b in zip(asked.series.u_m_s, asked.series.u_m_s[1:],
+                                            strict=False)), default=0.0)
+    print(f"  {label}, open loop: largest command jump {jump:.3f} m/s; figure: {drawn}")
+
+
+def _say(found: Replay, k: int, took_s: float) -> None:
     rate = found.steps / took_s if took_s > 0 else 0.0
     head = f"follower-{k} ({found.path.name}): {found.steps} steps, {rate:.0f} steps/s"
-    if counterfactual:
-        print(f"{head}: counterfactual, open loop")
-    elif found.difference is not None:
+    if found.difference is not None:
         d = found.difference
         print(f"{head}: NOT reproduced: step {d.tick} (t = {d.now_s:.3f} s, frame at byte "
               f"{d.offset}): {d.why}")
