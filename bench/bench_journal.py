@@ -27,7 +27,7 @@ from agents.follower.journal import (
     STEP,
     JournalWriter,
     Mirror,
-    read_peer,
+    PeerCodec,
     read_sample,
     read_target,
 )
@@ -35,13 +35,15 @@ from agents.follower.journal_file import Frames
 from agents.follower.replay import replay
 from agents.law.loader import make_law
 from deploy.commands.replay import run_scenario
+from transport.law_fields import FieldSpec
 
 
 def rewrite_cpu_s(path: Path) -> tuple[float, int, float]:
     """CPU seconds to write `path`'s records again, its step count, its span (s)."""
     frames = Frames.open(path)
     records = [r for _, r in frames.records()]
-    targets, peers, joins = Mirror(read_target), Mirror(read_peer), Mirror(read_peer)
+    codec = PeerCodec(frames.header.get("fields") or [])
+    targets, peers, joins = Mirror(read_target), Mirror(codec.decode), Mirror(codec.decode)
     calls: list[tuple[str, Any]] = []
     for rec in records:  # decoded first: only the writing is timed
         if rec[0] == STEP:
@@ -55,7 +57,9 @@ def rewrite_cpu_s(path: Path) -> tuple[float, int, float]:
     steps = [c for k, c in calls if k == STEP]
     span_s = steps[-1][0] - steps[0][0] if len(steps) > 1 else 0.0
     with tempfile.TemporaryDirectory() as tmp:
-        writer = JournalWriter(Path(tmp) / "j", frames.header)
+        header = {k: v for k, v in frames.header.items() if k != "fields"}
+        writer = JournalWriter(Path(tmp) / "j", header, {
+            name: FieldSpec(name, "vec2", 1.0, rate=rate) for name, rate in codec.fields})
         writer.file._next_flush_s = float("inf")  # flushed below, once a simulated second
         per_s = max(1, round(len(steps) / span_s)) if span_s > 0 else 50
         t0 = time.thread_time()

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import struct
 import zlib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +22,7 @@ import msgpack
 
 from agents.follower.journal_file import FrameWriter
 from agents.law.interface import Output, Peer, Sample
-from transport.law_fields import LawFields
+from transport.law_fields import FieldSpec, LawFields
 
 STEP, REGROUP, JOIN = "s", "g", "j"
 _new = tuple.__new__
@@ -43,14 +43,6 @@ def _sample(s: Sample) -> bytes:
     except OverflowError:  # beyond float32's range
         pass
     return _F64.pack(x, y, vx, vy, s.stamp_s)
-
-
-def _field(value: Any) -> Any:
-    if type(value) is complex:
-        return [value.real, value.imag]
-    if isinstance(value, Sample):
-        return _sample(value)
-    return value
 
 
 def fields_crc(wire: LawFields) -> int:
@@ -89,19 +81,64 @@ class Changes:
         return [list(now), changed]
 
 
-def _peer(p: Peer) -> list[Any]:
-    fields = {k: _field(v) for k, v in p.fields.items()} if p.fields else {}
-    return [_sample(p.r), _sample(p.pos), fields]
+class PeerCodec:
+    """A peer as the journal keeps it, for a law that declared `fields` (name, rate's
+    name or None) in this order: its fields as a list in that order, a complex as 16
+    bytes, a rated field's Sample as its value alone when its rate and stamp are those
+    agents.follower.inputs gives it (the rate field's value, the message's stamp)."""
+
+    def __init__(self, fields: Sequence[tuple[str, str | None]]) -> None:
+        self.fields = [(name, rate) for name, rate in fields]
+
+    def encode(self, p: Peer) -> list[Any]:
+        held, stamp = p.fields, p.r.stamp_s
+        out: list[Any] = []
+        for name, rate in self.fields:
+            v = held.get(name)
+            if type(v) is complex:
+                out.append(_TWO.pack(v.real, v.imag))
+            elif isinstance(v, Sample):
+                value = v.value
+                if (rate is not None and type(value) is complex and v.stamp_s == stamp
+                        and v.rate == held.get(rate, 0j)):
+                    out.append(_TWO.pack(value.real, value.imag))
+                else:
+                    out.append(_sample(v))
+            else:
+                out.append(v)
+        return [_sample(p.r), _sample(p.pos), out]
+
+    def decode(self, v: list[Any]) -> Peer:
+        r = read_sample(v[0])
+        fields: dict[str, Any] = {}
+        for (name, _), f in zip(self.fields, v[2], strict=True):
+            if f is not None:
+                fields[name] = (complex(*_TWO.unpack(f)) if isinstance(f, bytes)
+                                and len(f) == _TWO.size else read_sample(f)
+                                if isinstance(f, bytes) else f)
+        for name, rate in self.fields:  # a value alone: the rate field's, at r's stamp
+            f = fields.get(name)
+            if rate is not None and type(f) is complex:
+                fields[name] = _new(Sample, (f, fields.get(rate, 0j), r.stamp_s))
+        return _new(Peer, (r, read_sample(v[1]), fields))
+
+
+def field_names(specs: Mapping[str, FieldSpec]) -> list[tuple[str, str | None]]:
+    """A law's declared fields as the journal's header keeps them."""
+    return [(name, spec.rate) for name, spec in specs.items()]
 
 
 class JournalWriter:
     """The journal of one follower's runner, in `path` (agents.follower.journal_file)."""
 
-    def __init__(self, path: Path, header: dict[str, Any]) -> None:
-        self.file = FrameWriter(path, header)
+    def __init__(self, path: Path, header: dict[str, Any],
+                 specs: Mapping[str, FieldSpec]) -> None:
+        fields = field_names(specs)
+        self.file = FrameWriter(path, {**header, "fields": fields})
+        codec = PeerCodec(fields)
         self._targets = Changes(lambda s: [_sample(s)])
-        self._peers = Changes(_peer)
-        self._peers_join = Changes(_peer)
+        self._peers = Changes(codec.encode)
+        self._peers_join = Changes(codec.encode)
 
     def step(self, now_s: float, command: bool, own: Sample, targets: Mapping[int, Sample],
              peers: Mapping[int, Peer], result: tuple[Output, LawFields] | None) -> None:
@@ -125,19 +162,6 @@ def read_sample(b: bytes) -> Sample:
 
 def read_target(v: list[bytes]) -> Sample:
     return read_sample(v[0])
-
-
-def _read_field(v: Any) -> Any:
-    if isinstance(v, list):
-        return complex(v[0], v[1])
-    if isinstance(v, bytes):
-        return read_sample(v)
-    return v
-
-
-def read_peer(v: list[Any]) -> Peer:
-    fields = {k: _read_field(f) for k, f in v[2].items()}
-    return _new(Peer, (read_sample(v[0]), read_sample(v[1]), fields))
 
 
 class Mirror:

@@ -36,7 +36,8 @@ def run(opts: AgentOptions) -> int:
         node = FollowerNode(scenario, opts.index, impaired, mav, opts.bus.swarm, opts.join)
         if opts.journal is not None:
             node.runner.journal = JournalWriter(journal_path(Path(opts.journal), opts.index),
-                                                journal_header(opts))
+                                                journal_header(opts),
+                                                node.runner.declared)
         return node
 
     return fly(opts, scenario, "follower", opts.index, make)

@@ -19,7 +19,7 @@ from agents.follower.journal import (
     REGROUP,
     STEP,
     Mirror,
-    read_peer,
+    PeerCodec,
     read_sample,
     read_target,
     result_crcs,
@@ -93,7 +93,8 @@ def replay(path: Path, scenario: Scenario, law: Law[Any], check: bool = True) ->
     index = int(frames.header["index"])
     runner = LawRunner(law, setup_for(scenario, index))
     found = Replay(path)
-    targets, peers, joins = Mirror(read_target), Mirror(read_peer), Mirror(read_peer)
+    codec = PeerCodec(frames.header.get("fields") or [])
+    targets, peers, joins = Mirror(read_target), Mirror(codec.decode), Mirror(codec.decode)
     for at, rec in frames.records():
         kind = rec[0]
         if kind == REGROUP:

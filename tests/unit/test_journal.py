@@ -11,7 +11,7 @@ from pathlib import Path
 import msgpack
 import pytest
 
-from agents.follower.journal import JournalWriter, journal_path
+from agents.follower.journal import JournalWriter, PeerCodec, journal_path
 from agents.follower.journal_file import JOURNAL_VERSION, Frames, FrameWriter
 from agents.follower.membership import setup_for
 from agents.follower.replay import replay
@@ -29,7 +29,7 @@ def _fly(path: Path, steps: int) -> LawRunner:
     """Follower 0 of the paper case on made-up inputs, journaled at `path`."""
     scenario = load_scenario("paper", whole_run=False)
     runner = LawRunner(make_law(scenario), setup_for(scenario, 0))
-    runner.journal = JournalWriter(path, HEADER)
+    runner.journal = JournalWriter(path, HEADER, runner.declared)
     setup = runner.setup
     peers: dict[int, Peer] = {}
     for k in range(steps):
@@ -120,3 +120,16 @@ def test_a_restarted_process_writes_the_next_part(tmp_path: Path) -> None:
     assert first.name == "follower-3.journal"
     assert journal_path(tmp_path, 3).name == "follower-3-part2.journal"
     assert not os.path.exists(tmp_path / "follower-3-part2.journal")
+
+
+def test_a_peer_with_rated_fields_round_trips_exactly() -> None:
+    codec = PeerCodec([("sums", "rates"), ("rates", None), ("k", None), ("v", None)])
+    r = Sample(complex(0.1, 0.7), complex(1e-3, 3.0), 12.5)
+    rated = Sample(complex(2.0, -1.0 / 3.0), complex(0.25, 0.5), 12.5)
+    off = Sample(complex(2.0, 1.0), complex(9.0, 0.5), 11.0)  # not at r's stamp: kept whole
+    for fields in ({"sums": rated, "rates": complex(0.25, 0.5), "k": 3, "v": 0.1},
+                   {"sums": off, "rates": complex(0.25, 0.5)}, {}):
+        peer = Peer(r, Sample(complex(1.5, 2.5), 0.5j, 12.25), fields)
+        back = codec.decode(msgpack.unpackb(msgpack.packb(codec.encode(peer))))
+        assert back == peer and list(back.fields) == list(fields)
+        assert all(type(back.fields[k]) is type(v) for k, v in fields.items())
