@@ -11,15 +11,11 @@
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
-
+from deploy.version import enclose_version
 from enclose.api import run, simulate, sweep
 from enclose.results import Run, load_run
 from enclose.scenario import Scenario
 
-try:
-    __version__ = version("enclose")
-except PackageNotFoundError:  # a source tree that was never installed
-    __version__ = "0+unknown"
+__version__ = enclose_version()
 
 __all__ = ["Run", "Scenario", "__version__", "load_run", "run", "simulate", "sweep"]

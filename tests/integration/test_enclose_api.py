@@ -27,6 +27,7 @@ def test_networked_paper_run_reads_back_whole(enclose_swarm: enclose.Run) -> Non
     assert not run.links.empty
     assert {"metrics", "series", "launch", "recording", "performance"} <= set(run.paths)
     assert set(run.launch["processes"]) >= {"sim", "recorder", "follower-0", "target-1"}
+    assert run.launch["enclose_version"] == run.metrics["enclose_version"] == enclose.__version__
     again = enclose.load_run(run.run_dir)  # the same directory read from scratch
     assert again.metrics == run.metrics and again.exit_code is None
 

@@ -121,3 +121,30 @@ def test_sim_arguments_are_checked_before_any_process() -> None:
     with pytest.raises(ConfigError) as count, running_sim(vehicles=0):
         pass
     assert count.value.field == "vehicles"
+
+
+def test_version_on_the_command_line_and_in_the_package(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from deploy.cli import main
+    from deploy.version import enclose_version
+
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0
+    assert capsys.readouterr().out.strip() == f"enclose {enclose_version()}"
+    assert enclose.__version__ == enclose_version() != ""
+
+
+def test_metrics_json_carries_the_version(tmp_path: Path) -> None:
+    import numpy as np
+
+    from agents.core.metrics import Metrics
+    from deploy.rundir import RunInfo, write_metrics
+    from deploy.version import enclose_version
+
+    metrics = Metrics(1.0, 0.01, 0.01, 0.001, 2.0, 0.1, 10.0, 100)
+    info = RunInfo("paper", "lockstep", 4, 2, (1, 2, 3, 0), tuple(np.ones(4)), 8.0, 0.1,
+                   0.02, 5.0)
+    write_metrics(tmp_path, metrics, info, {})
+    saved = json.loads((tmp_path / "metrics.json").read_text())
+    assert saved["enclose_version"] == enclose_version()
