@@ -4,6 +4,9 @@ Each builds the typed options its command builds from the command line
 (deploy.commands.simulate.SimulateOptions, deploy.commands.run.RunOptions,
 deploy.sweep.spec.SweepSpec) and calls the same function; the result is read back from the
 run directory (enclose.results.load_run), as `enclose report` would read it.
+
+The commands' modules are imported when called: `import enclose` stays light, and the
+pytest plugin imports it in every test session of a project that installs enclose.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ from transport.errors import ConfigError
 
 if TYPE_CHECKING:
     import pandas as pd
+
+    from deploy.launch_options import LaunchOptions
 
 ScenarioLike = Scenario | str | Path | None
 RUN_KEYS = ("duration_s", "swarm")
@@ -75,7 +80,7 @@ def run(scenario: ScenarioLike = None, **overrides: Any) -> Run:
     return load_run(out, code)
 
 
-def launch_options(scenario_ref: str, overrides: Mapping[str, Any]) -> Any:
+def launch_options(scenario_ref: str, overrides: Mapping[str, Any]) -> LaunchOptions:
     """deploy.launch_options.LaunchOptions from `enclose.run`'s keyword overrides."""
     from agents.network_args import NetworkOptions
     from agents.scenario.network import IMPAIRMENT_KEYS
