@@ -75,3 +75,39 @@ def test_mavsdk_takes_off(enclose_sim) -> None:
             time.sleep(0.05)
     finally:
         drone.destroy()
+
+
+USER_TEST = '''
+from pymavlink import mavutil
+
+
+def test_heartbeat(enclose_sim):
+    conn = mavutil.mavlink_connection(enclose_sim[0].pymavlink_address, source_system=255)
+    assert conn.wait_heartbeat(timeout=10) is not None
+    conn.close()
+'''
+
+
+def test_plugin_loads_by_its_entry_point_alone(tmp_path) -> None:
+    """A user's project: a test file with no plugin line, the plugin found by its pytest11
+    entry point (declared here by a distribution's metadata, as pip installs it)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    dist = tmp_path / "site" / "enclose_probe-0.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: enclose-probe\nVersion: 0\n")
+    (dist / "entry_points.txt").write_text("[pytest11]\nenclose.testing = enclose.testing\n")
+    project = tmp_path / "project"
+    project.mkdir()
+    (project / "test_mine.py").write_text(USER_TEST)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path / "site"), str(root)])}
+    env.pop("PYTEST_ADDOPTS", None)
+    proc = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "test_mine.py"],
+        cwd=project, env=env, capture_output=True, text=True, timeout=80)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
+    assert "1 passed" in proc.stdout
