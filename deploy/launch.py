@@ -13,6 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from agents.law_args import law_overrides
 from agents.network_args import network_overrides
 from agents.phases import mark
 from agents.scenario.faults import parse_fault_flag
@@ -78,7 +79,7 @@ class Launch:
 
     def common(self) -> list[str]:
         extra = ["--zenoh-config", self.opts.zenoh_config] if self.opts.zenoh_config else []
-        extra += network_overrides(self.opts.network)
+        extra += network_overrides(self.opts.network) + law_overrides(self.opts.law)
         return ["--scenario", self.opts.scenario_ref(), "--swarm", self.keys.swarm, *extra]
 
     def recorder_sensor_argv(self) -> list[str]:
@@ -127,7 +128,7 @@ class Launch:
             self.sup.start(f"target-{j}", "agents.target", argv, fork=True)
         for i in range(s.n):
             argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
-            self.sup.start(f"follower-{i}", "agents.follower", argv, fork=True)
+            self.sup.start(f"follower-{i}", "agents.follower.main", argv, fork=True)
 
     def expected_tokens(self) -> set[str]:
         k, s = self.keys, self.scenario
@@ -298,7 +299,7 @@ class Launch:
 
     def _before_restart(self, child: Child) -> None:
         """A restarted recorder starts a new MCAP: keep the dead one's beside it.  A
-        restarted follower joins a running swarm (agents.follower --join)."""
+        restarted follower joins a running swarm (agents.follower.main --join)."""
         mcap = self.out / "recording.mcap"
         if child.name == "recorder" and mcap.exists():
             mcap.rename(self.out / f"recording-part{child.restarts + 1}.mcap")
