@@ -12,6 +12,7 @@ pytest plugin imports it in every test session of a project that installs enclos
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -26,12 +27,14 @@ from transport.errors import ConfigError
 if TYPE_CHECKING:
     import pandas as pd
 
+    from agents.law_args import LawOptions
     from deploy.launch_options import LaunchOptions
 
 ScenarioLike = Scenario | str | Path | None
 RUN_KEYS = ("duration_s", "swarm")
 LAUNCH_KEYS = ("zenoh_config", "noise_std_m", "link_timeout_s", "insecure", "restart",
                "max_restarts", "faults", "port_range", "live")
+LAW_KEYS = ("law", "law_params")
 
 
 def as_scenario(scenario: ScenarioLike) -> Scenario:
@@ -43,13 +46,15 @@ def simulate(scenario: ScenarioLike = None, **overrides: Any) -> Run:
     """The closed loop integrated in lock-step (`enclose simulate`), no network.
 
     `overrides`: dt_s, duration_s, out (default runs/simulate-<name>), engine
-    ("auto", "numba", "numpy"), estimator_dt_s, progress (a bar on a terminal)."""
+    ("auto", "numba", "numpy"), estimator_dt_s, progress (a bar on a terminal),
+    through_interface, law and law_params (`law_options`)."""
     from deploy.commands.simulate import SimulateOptions
     from deploy.commands.simulate import simulate as simulate_command
 
     scen = as_scenario(scenario)
-    known = {f.name for f in dataclasses.fields(SimulateOptions)} - {"scenario", "json", "out"}
-    _check_keys("enclose.simulate", overrides, known | {"out"})
+    known = {f.name for f in dataclasses.fields(SimulateOptions)} - {"scenario", "json"}
+    _check_keys("enclose.simulate", overrides, known | set(LAW_KEYS))
+    overrides["law"] = law_options(overrides.pop("law", None), overrides.pop("law_params", None))
     out = Path(overrides.pop("out", None) or Path("runs") / f"simulate-{scen.name}").resolve()
     out.mkdir(parents=True, exist_ok=True)
     overrides.setdefault("progress", False)
@@ -64,9 +69,9 @@ def run(scenario: ScenarioLike = None, **overrides: Any) -> Run:
     runs/run-<name>-<time>), swarm, insecure, noise_std_m, link_timeout_s, restart,
     max_restarts, faults (["AT_S:ACTION:TARGET[:DURATION_S]", ...]), port_range ("LO-HI"),
     zenoh_config, live (True or a deploy.live_args.LiveOptions: serve the live view; default
-    none), the network's (estimator, estimator_order, link, zenoh_runtime, agent_sched,
-    impair_seed, latency_stamps) and its impairments (loss, delay_ms, ...:
-    agents.scenario.network.IMPAIRMENT_KEYS)."""
+    none), law and law_params (`law_options`), the network's (estimator, estimator_order,
+    link, zenoh_runtime, agent_sched, impair_seed, latency_stamps) and its impairments
+    (loss, delay_ms, ...: agents.scenario.network.IMPAIRMENT_KEYS)."""
     from deploy.commands.run import RunOptions
     from deploy.commands.run import run as run_command
 
@@ -89,7 +94,7 @@ def launch_options(scenario_ref: str, overrides: Mapping[str, Any]) -> LaunchOpt
 
     network_keys = {f.name for f in dataclasses.fields(NetworkOptions)} - {"impairment"}
     _check_keys("enclose.run", overrides,
-                {*RUN_KEYS, *LAUNCH_KEYS, *network_keys, *IMPAIRMENT_KEYS})
+                {*RUN_KEYS, *LAUNCH_KEYS, *LAW_KEYS, *network_keys, *IMPAIRMENT_KEYS})
     launch = {k: overrides[k] for k in LAUNCH_KEYS if k in overrides}
     live = launch.get("live")
     launch["live"] = LiveOptions() if live is True else (live or None)
@@ -97,7 +102,23 @@ def launch_options(scenario_ref: str, overrides: Mapping[str, Any]) -> LaunchOpt
     impairment = tuple((k, overrides[k]) for k in IMPAIRMENT_KEYS if k in overrides)
     network = NetworkOptions(**{k: overrides[k] for k in network_keys if k in overrides},
                              impairment=impairment)
-    return LaunchOptions(scenario=scenario_ref, network=network, **launch)
+    law = law_options(overrides.get("law"), overrides.get("law_params"))
+    return LaunchOptions(scenario=scenario_ref, network=network, law=law, **launch)
+
+
+def law_options(law: str | LawOptions | None,
+                params: Mapping[str, Any] | None = None) -> LawOptions:
+    """The command's --law and --law-param: `law` a shipped law's name or
+    "[folder/]module:Class" (from the current directory), None for the scenario's own;
+    `params` override the law's parameters by name."""
+    from agents.law_args import LawOptions
+    from agents.scenario.law import absolute_ref, law_from_ref
+
+    if isinstance(law, LawOptions):
+        return law
+    ref = None if law is None else absolute_ref(law_from_ref(law, None, "law"))
+    given = tuple((k, json.dumps(v)) for k, v in (params or {}).items())
+    return LawOptions(ref, given)
 
 
 def sweep(

@@ -3,7 +3,8 @@
 A variation is the same document with some values replaced and checked again by the one
 scenario reader (`agents.scenario.file.build_scenario`): every error names its field.
 A networked run's processes read a scenario from a file, so a variation is written as
-TOML into its run directory (`Scenario.reference`).
+TOML into its run directory (`Scenario.reference`), its `[law] module` pinned to the folder
+it was loaded from.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 import tomli_w
 
 from agents.scenario.file import DEFAULT_SCENARIO, build_scenario, shipped_text
+from agents.scenario.law import absolute_ref
 from agents.scenario.model import Scenario as ScenarioModel
 from transport.errors import ScenarioError
 
@@ -27,11 +29,13 @@ SCENARIO_FILE = "scenario.toml"  # a variation, written into the run directory i
 @dataclass(frozen=True)
 class Scenario:
     """One enclosing experiment. `document`: its TOML tables; `model`: the checked scenario
-    the controller runs; `origin`: the shipped name or file it came from ("" once changed)."""
+    the controller runs; `origin`: the shipped name or file it came from ("" once changed);
+    `base`: the folder a `[law] module` is imported from (the file's; None: shipped)."""
 
     document: Mapping[str, Any] = field(repr=False)
     model: ScenarioModel = field(repr=False)
     origin: str = ""
+    base: Path | None = None
 
     @classmethod
     def load(cls, source: str | Path | None = None) -> Scenario:
@@ -44,23 +48,26 @@ class Scenario:
             text = path.read_text(encoding="utf-8")
         except OSError as exc:
             raise ScenarioError("scenario", f"cannot read {path}: {exc.strerror}") from exc
-        return cls.from_toml(text, origin=str(path.resolve()))
+        path = path.resolve()
+        return cls.from_toml(text, origin=str(path), base=path.parent)
 
     @classmethod
-    def from_toml(cls, text: str, origin: str = "") -> Scenario:
+    def from_toml(cls, text: str, origin: str = "", base: Path | None = None) -> Scenario:
         try:
             doc = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise ScenarioError("scenario", f"{origin or 'text'} is not valid TOML: {exc}") from exc
-        return cls.from_document(doc, origin)
+        return cls.from_document(doc, origin, base)
 
     @classmethod
-    def from_document(cls, document: Mapping[str, Any], origin: str = "") -> Scenario:
+    def from_document(cls, document: Mapping[str, Any], origin: str = "",
+                      base: Path | None = None) -> Scenario:
         """Checked as a file is; the name defaults to the origin's stem, as a file's does."""
         doc = copy.deepcopy(dict(document))
-        model = build_scenario(doc, default_name=Path(origin).stem if origin else "scenario")
+        model = build_scenario(doc, default_name=Path(origin).stem if origin else "scenario",
+                               base=base)
         doc["name"] = model.name  # a written variation keeps the name the model has
-        return cls(doc, model, origin)
+        return cls(doc, model, origin, base)
 
     def replace(self, changes: Mapping[str, Any] | None = None, /, **values: Any) -> Scenario:
         """A variation: `changes` by dotted path ({"pattern.rho_d_m": 6.0,
@@ -70,7 +77,7 @@ class Scenario:
         paths = {**(changes or {}), **{k.replace("__", "."): v for k, v in values.items()}}
         for path, value in paths.items():
             _assign(doc, path, value)
-        return Scenario.from_document(doc, "")
+        return Scenario.from_document(doc, "", self.base)
 
     def __repr__(self) -> str:
         return f"Scenario(name={self.name!r}, n={self.n}, m={self.m}, origin={self.origin!r})"
@@ -90,8 +97,14 @@ class Scenario:
         return self.model.m
 
     def to_toml(self) -> str:
+        """The document, its `[law] module` naming its folder absolutely: the text loads the
+        same law wherever it is written."""
+        doc = copy.deepcopy(dict(self.document))
+        law = doc.get("law")
+        if self.model.law.module is not None and isinstance(law, dict):
+            law["module"] = absolute_ref(self.model.law)
         try:
-            return tomli_w.dumps(dict(self.document))
+            return tomli_w.dumps(doc)
         except (TypeError, ValueError) as exc:
             raise ScenarioError("scenario", f"cannot be written as TOML: {exc}") from exc
 

@@ -148,3 +148,15 @@ def test_metrics_json_carries_the_version(tmp_path: Path) -> None:
     write_metrics(tmp_path, metrics, info, {})
     saved = json.loads((tmp_path / "metrics.json").read_text())
     assert saved["enclose_version"] == enclose_version()
+
+
+def test_law_overrides_become_the_commands_law_flags() -> None:
+    example = ROOT / "examples" / "simple_law"
+    opts = api.launch_options("paper", {"law": f"{example}/simple_law:SimpleLaw",
+                                        "law_params": {"k_c": 4.0, "mode": "x"}})
+    assert opts.law.law == f"{example.resolve()}/simple_law:SimpleLaw"
+    assert dict(opts.law.params) == {"k_c": "4.0", "mode": '"x"'}
+    assert api.launch_options("paper", {}).law.law is None  # the scenario's own law
+    with pytest.raises(ConfigError) as bad:
+        api.law_options("not a reference")
+    assert bad.value.field == "law"

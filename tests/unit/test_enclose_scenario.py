@@ -67,3 +67,17 @@ def test_unwritable_value_is_a_scenario_error() -> None:
     doc["extra"] = object()
     with pytest.raises(ScenarioError, match="TOML"):
         Scenario(doc, odd.model, "").to_toml()
+
+
+def test_a_variation_of_a_scenario_with_its_own_law_loads_it_anywhere(tmp_path: Path) -> None:
+    example = Path(__file__).resolve().parents[2] / "examples" / "simple_law" / "simple.toml"
+    mine = Scenario.load(example)
+    assert mine.model.law.module is not None
+    assert mine.base == example.parent
+    wider = mine.replace({"pattern.rho_d_m": 10.0})
+    assert wider.model.law == mine.model.law  # the law still from the example's folder
+    ref = wider.reference(tmp_path / "run")  # written far from the law's module
+    again = Scenario.load(ref)
+    assert again.model.law.folder == mine.model.law.folder
+    assert again.model.law.module == mine.model.law.module
+    assert again.model.pattern.rho_d_m == 10.0
