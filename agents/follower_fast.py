@@ -4,8 +4,8 @@ The same functions with the same arguments and the same laws, step for step, wit
 vectors as complex numbers x + iy instead of (2,) arrays, and per-setup constants worked
 out once (`FastSetup`).  At 2-vectors numpy's per-call cost was most of a step's (issue 15:
 ring16's followers run ~200 estimator steps a second each, 16 on 2 cores).  The laws
-themselves are the core's scalar twins (agents.core: `consensus_flows_c`,
-`link_balance_c`, `enclosing_control_one`; agents.estimate_carry.next_carry_c);
+themselves are agents.law's (the lock-step engine compiles the same functions) and
+agents.estimate_carry.next_carry_c;
 tests/unit/test_follower_fast.py pins every function here to follower_logic's over random
 inputs and sequences of steps.  agents.follower_logic stays the reference (and is what
 the lock-step harness tests/swarm_harness.py drives); agents.follower runs this one.
@@ -17,13 +17,6 @@ import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
-from agents.core.controller_one import enclosing_control_one
-from agents.core.estimator_one import (
-    consensus_flows_c,
-    finite_difference_velocity,
-    lag_free_velocity,
-    link_balance_c,
-)
 from agents.estimate_carry import REBASE_TAU_S, next_carry_c
 
 # The types live beside it; importers keep finding them here.
@@ -33,6 +26,11 @@ from agents.follower_fast_memory import PeerView as PeerView
 from agents.follower_fast_memory import Sample as Sample
 from agents.follower_fast_memory import TargetTrack as TargetTrack
 from agents.follower_fast_memory import TickOutput as TickOutput
+from agents.law.consensus import consensus_flows, link_balance
+from agents.law.enclosing import enclosing_control
+from agents.law.sig import rate_cap
+from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
+from agents.law.velocity_stage import fed_flow, lap_velocity
 
 if TYPE_CHECKING:
     from transport.messages import FollowerState
@@ -172,21 +170,23 @@ def _advance(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int, PeerV
     if setup.robust:
         zeros = (0j,) * len(r_nbrs)
         sums = tuple([s + dt * f for s, f in zip(sums or zeros, rates or zeros, strict=True)])
-        phi = link_balance_c(sums, their_sums)
+        phi = link_balance(sums, their_sums)
     else:
         phi = memory.phi_m + dt * memory.phi_rate_m_s
     carry = next_carry_c(memory.carry_m, phi + p_tilde, resume, dt)
-    flows = consensus_flows_c(phi + p_tilde + carry, r_nbrs, fractions, setup.ref.estimator,
-                              setup.est_period_s)
+    est = setup.ref.estimator
+    flows = consensus_flows(phi + p_tilde + carry, r_nbrs, fractions, est.k_e, 1.0 / est.alpha1,
+                            rate_cap(est.step_fraction, setup.est_period_s))
     if not all(live):
         flows = [f if ok else 0j for f, ok in zip(flows, live, strict=True)]
     vel_sums, vel_rates, rv = memory.vel_sums_m_s, memory.vel_rates_m_s2, memory.rv_m_s
     if setup.second_order:
         vel_sums, vel_rates, rv = _velocity_stage(memory, setup, peers, now_s, dt,
                                                   p_tilde_rate, live, fractions)
-        flows = [f + s if ok else 0j for f, s, ok in zip(flows, vel_sums, live, strict=True)]
+        flows = [fed_flow(f, s) if ok else 0j
+                 for f, s, ok in zip(flows, vel_sums, live, strict=True)]
     if setup.robust:
-        phi_rate = link_balance_c(flows, their_rates)
+        phi_rate = link_balance(flows, their_rates)
         rates = tuple(flows)
     else:
         phi_rate = sum(flows, 0j)
@@ -220,9 +220,10 @@ def _velocity_stage(memory: FollowerMemory, setup: FastSetup, peers: Mapping[int
             value, rate, stamp = flow
             theirs.append(value + rate * (min(now_s, stamp + hold) - stamp))
         rv_nbrs.append(view.rv)
-    rv = link_balance_c(sums, theirs) + p_tilde_rate
-    flows = consensus_flows_c(rv, [rv if v is None else v for v in rv_nbrs], fractions,
-                              setup.ref.estimator, setup.est_period_s)
+    rv = lap_velocity(link_balance(sums, theirs), p_tilde_rate)
+    est = setup.ref.estimator
+    flows = consensus_flows(rv, [rv if v is None else v for v in rv_nbrs], fractions, est.k_e,
+                            1.0 / est.alpha1, rate_cap(est.step_fraction, setup.est_period_s))
     return sums, tuple([f if ok else 0j for f, ok in zip(flows, live, strict=True)]), rv
 
 
@@ -246,10 +247,12 @@ def follower_tick(memory: FollowerMemory, setup: FastSetup, own: Sample,
         succ_pos = succ.value + succ.rate * (at_s - succ.stamp_s)
     else:  # missing: where it should be, so that only radius and rotation act
         succ_pos = r_at + (own_pos - r_at) * setup.rotation
+    c = ref.control
     try:
-        u, z, delta = enclosing_control_one(
-            own_pos, succ_pos, r_at, dr, setup.angle_rad, ref.control, ref.period_s,
-            new_memory.peer_age_s[setup.successor])
+        u, z, delta = enclosing_control(
+            own_pos, succ_pos, r_at, dr, setup.angle_rad, c.k_z, 1.0 / c.alpha2, c.k_d,
+            1.0 / c.alpha3, c.rho_d_m, c.w_d_rad_s, c.step_fraction, c.spacing_gain_age,
+            ref.period_s, new_memory.peer_age_s[setup.successor])
     except ArithmeticError:  # numpy's inf where Python raises (|x| past 1e308)
         u, z, delta = 0j, math.nan, math.nan
     if not (math.isfinite(u.real) and math.isfinite(u.imag) and math.isfinite(z)):

@@ -28,13 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agents.core.controller import enclosing_control
-from agents.core.estimator import (
-    EstimatorParams,
-    consensus_flows,
-    finite_difference_velocity,
-    lag_free_velocity,
-    link_balance,
-)
+from agents.core.estimator import consensus_flows, link_balance
 from agents.estimate_carry import REBASE_TAU_S, next_carry
 
 # The types live beside it; importers keep finding them here.
@@ -49,6 +43,8 @@ from agents.follower_memory import TickOutput as TickOutput
 # Its weights and edge fractions are tuples: the follower process builds one too, without
 # numpy (agents.follower_fast); this module makes arrays of them where it computes.
 from agents.follower_setup import FollowerSetup as FollowerSetup
+from agents.law.consensus import EstimatorParams
+from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
 
 if TYPE_CHECKING:
     from transport.messages import FollowerState
@@ -75,7 +71,7 @@ def observe_target(
     memory: FollowerMemory, setup: FollowerSetup, target: int, pos_m: FloatArray, stamp_s: float
 ) -> FollowerMemory:
     """Fold one observation in: position, and velocity by finite difference, low-passed
-    and corrected for the lag that costs (estimator_one.lag_free_velocity)."""
+    and corrected for the lag that costs (agents.law.target_velocity.lag_free_velocity)."""
     if target not in setup.observed:
         return memory
     prev = memory.targets.get(target)

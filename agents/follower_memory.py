@@ -38,7 +38,7 @@ class Sample:
 @dataclass(frozen=True)
 class TargetTrack(Sample):
     """A target's last observed position with its velocity (a Sample), and the filter state
-    behind that velocity (agents.core.estimator_one.lag_free_velocity)."""
+    behind that velocity (agents.law.target_velocity.lag_free_velocity)."""
 
     smooth_m_s: FloatArray = field(default_factory=lambda: np.zeros(2))
     accel_m_s2: FloatArray = field(default_factory=lambda: np.zeros(2))

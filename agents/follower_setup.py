@@ -12,9 +12,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from agents.core.controller_one import ControlGains
-from agents.core.estimator_one import EstimatorParams
 from agents.core.params import control_gains, estimator_params
+from agents.law.consensus import EstimatorParams
+from agents.law.enclosing import ControlGains
 from agents.membership import membership
 from agents.scenario import Scenario
 
@@ -33,7 +33,7 @@ class FollowerSetup:
     estimator: EstimatorParams
     control: ControlGains
     period_s: float
-    robust: bool = False  # the link-sum estimator (agents.core.estimator.link_balance)
+    robust: bool = False  # the link-sum estimator (agents.law.consensus.link_balance)
     stale_after_s: float = 0.5  # a peer older than this is missing (no flow, no spacing)
     hold_after_s: float = 1.0  # longest extrapolation of any input; held afterwards
     target_vel_tau_s: float = 0.1

@@ -12,6 +12,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from agents.follower_logic import (
     FollowerMemory,
@@ -27,6 +29,8 @@ from agents.follower_logic import (
 from agents.follower_membership import join_running, regroup, with_missing
 from agents.scenario import NetworkConfig
 from agents.scenario_file import load_scenario
+
+VALUE = st.one_of(st.floats(-1e3, 1e3), st.floats(-1e-6, 1e-6))
 
 DT = 0.02
 TARGETS = np.array([[0.0, 0.0], [6.0, 4.0]])  # still: the LAP is their mean
@@ -186,6 +190,23 @@ def test_carry_makes_r_continuous_then_decays() -> None:
     np.testing.assert_allclose(raw + carry, [1.0, 1.0])  # continuous at the change
     later = next_carry(carry, raw, None, REBASE_TAU_S)
     np.testing.assert_allclose(later, carry / np.e)
+
+
+@given(carry=st.builds(complex, VALUE, VALUE), raw=st.builds(complex, VALUE, VALUE),
+       resume=st.one_of(st.none(), st.builds(complex, VALUE, VALUE)),
+       step=st.sampled_from([0.001, 0.005, 0.02, 0.1]))
+def test_the_followers_carry_is_the_references(carry: complex, raw: complex,
+                                                resume: complex | None, step: float) -> None:
+    """next_carry_c (complex, what the follower process runs) is next_carry (arrays)."""
+    from agents.estimate_carry import next_carry, next_carry_c
+
+    def plane(v: complex) -> np.ndarray:
+        return np.array([v.real, v.imag])
+
+    expected = next_carry(plane(carry), plane(raw), None if resume is None else plane(resume),
+                          step)
+    np.testing.assert_allclose(plane(next_carry_c(carry, raw, resume, step)), expected,
+                               rtol=1e-12, atol=1e-12)
 
 
 def test_a_joiner_ticks_before_it_hears_its_targets_or_all_peers() -> None:

@@ -14,11 +14,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.core.estimator_one import finite_difference_velocity, lag_free_velocity
 from agents.follower_fast import FastSetup
 from agents.follower_fast import FollowerMemory as FastMemory
 from agents.follower_fast import observe_target as observe_fast
 from agents.follower_logic import FollowerMemory, FollowerSetup, observe_target
+from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
 from agents.scenario_file import load_scenario
 
 PERIOD_S = 0.05
