@@ -6,8 +6,9 @@ out once (`FastSetup`).  At 2-vectors numpy's per-call cost was most of a step's
 ring16's followers run ~200 estimator steps a second each, 16 on 2 cores).  The laws
 themselves are agents.law's (the lock-step engine compiles the same functions) and
 agents.estimate_carry.next_carry_c; tests/unit/test_follower_fast.py pins every function
-here to follower_logic's over random inputs and sequences of steps.  agents.follower_logic stays the reference (and is what
-the lock-step harness tests/swarm_harness.py drives); agents.follower runs this one.
+here to follower_logic's over random inputs and sequences of steps.  agents.follower_logic
+stays the reference (and is what the lock-step harness tests/swarm_harness.py drives);
+agents.follower runs this one.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from agents.core.params import control_gains, estimator_params
 from agents.law.consensus import EstimatorParams
 from agents.law.enclosing import ControlGains
 from agents.membership import membership
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 
 @dataclass(frozen=True)

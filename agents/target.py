@@ -17,13 +17,14 @@ from collections.abc import Sequence
 import numpy as np
 
 from agents.core.profiles import TargetMotion
-from agents.errors import EncloseError
 from agents.mavlink.adapter import MavlinkAdapter
-from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, process_main
-from agents.scenario import Scenario
-from agents.vehicle_loop import add_vehicle_arguments, fly
+from agents.process import StatusReporter, load_run_scenario, process_main
+from agents.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
+from agents.scenario.model import Scenario
+from agents.vehicle_loop import fly
 from transport.bus import Bus
 from transport.decoder import Decoder
+from transport.errors import EncloseError
 from transport.keys import SwarmKeys
 from transport.messages import RunControl
 
@@ -96,15 +97,15 @@ class TargetNode:
         self.control.close()
 
 
-def run(args: argparse.Namespace) -> int:
-    scenario = load_run_scenario(args)
-    if not 0 <= args.index < scenario.m:
+def run(opts: AgentOptions) -> int:
+    scenario = load_run_scenario(opts.bus)
+    if not 0 <= opts.index < scenario.m:
         raise EncloseError(f"--index must be within 0..{scenario.m - 1}")
 
     def make(bus: Bus, mav: MavlinkAdapter) -> TargetNode:
-        return TargetNode(scenario, args.index, bus, mav, args.swarm)
+        return TargetNode(scenario, opts.index, bus, mav, opts.bus.swarm)
 
-    return fly(args, scenario, "target", args.index, scenario.n + args.index, make)
+    return fly(opts, scenario, "target", scenario.n + opts.index, make)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -112,7 +113,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_bus_arguments(parser)
     parser.add_argument("--index", type=int, required=True, help="target number, 0-based")
     add_vehicle_arguments(parser)
-    return process_main(parser, argv, run, lambda a: f"target-{a.index}")
+    return process_main(parser, argv, AgentOptions.from_namespace, run,
+                        lambda o: f"target-{o.index}")
 
 
 if __name__ == "__main__":

@@ -15,15 +15,16 @@ launcher then supervises several namespaced hosts.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario, parse_scenario, shipped_text
+from agents.scenario.model import Scenario
 from deploy.deployment import Deployment
 from deploy.launch import Launch
+from deploy.launch_options import LaunchOptions
 from deploy.run_secrets import RunSecrets
 from transport.clock import clock_env
 from transport.clock_sync import format_clock_hosts, parse_clock_hosts
@@ -38,28 +39,29 @@ class HostLaunch(Launch):
     # Every process starts through its host's prefix (netns, clock): none is forked.
     forks_followers = False
 
-    def __init__(self, dep: Deployment, local: tuple[int, ...], args: argparse.Namespace,
+    def __init__(self, dep: Deployment, local: tuple[int, ...], opts: LaunchOptions,
                  out: Path, duration_s: float) -> None:
         self.dep, self.local = dep, local
         scenario = load_scenario(dep.scenario)
         dep.check(scenario.n, scenario.m)
+        opts = replace(opts, scenario=dep.scenario)
         if dep.inter_host_delay_ms > 0:  # at each follower's receiving end (impairment)
             out.mkdir(parents=True, exist_ok=True)
             path = out / IMPAIRED_SCENARIO
-            path.write_text(_source(dep.scenario) + _links(dep, scenario))
-            dep_scenario = str(path)
-        else:
-            dep_scenario = dep.scenario
-        args.scenario = dep_scenario
-        super().__init__(load_scenario(dep_scenario), args, out, dep.swarm, duration_s)
+            text = _source(dep.scenario) + _links(dep, scenario)
+            path.write_text(text)
+            # The file the processes load, read here from the same text.
+            scenario = parse_scenario(text, origin=str(path))
+            opts = replace(opts, scenario=str(path))
+        super().__init__(scenario, opts, out, dep.swarm, duration_s)
         self.coordinator = dep.host_of("launcher") in local
         self.sim_address = dep.hosts[dep.host_of("sim")].address
 
     def make_secrets(self) -> RunSecrets:
-        if self.args.credentials_dir is not None:
-            return RunSecrets(Path(self.args.credentials_dir).resolve())
+        if self.opts.credentials_dir is not None:
+            return RunSecrets(Path(self.opts.credentials_dir).resolve())
         s = self.scenario
-        return RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure,
+        return RunSecrets.make(self.out, self.keys, s.n, s.m, self.opts.insecure,
                                n_routers=len(self.dep.hosts))
 
     def prefix(self, k: int) -> list[str]:
@@ -83,11 +85,11 @@ class HostLaunch(Launch):
         return format_clock_hosts([[_sender(p) for p in h.processes] for h in self.dep.hosts])
 
     def router(self, k: int) -> str:
-        return self.dep.router_endpoint(k, secure=not self.args.insecure)
+        return self.dep.router_endpoint(k, secure=not self.opts.insecure)
 
     def start_all(self) -> None:
         for k in self.local:
-            argv = [*self.dep.router_argv(k, secure=not self.args.insecure),
+            argv = [*self.dep.router_argv(k, secure=not self.opts.insecure),
                     "--swarm", self.keys.swarm, *self.secrets.args_for(f"router-{k}")]
             if self.clocks_differ():
                 argv += ["--clock-id", f"router-{k}"]
@@ -105,7 +107,7 @@ class HostLaunch(Launch):
             self.sup.start(name, "deploy.swarm_sim", [
                 *argv, "--mav-host", "0.0.0.0", "--base-port", str(self.vehicle_base),
                 "--send-base-port", str(self.adapter_base),
-                "--noise-std-m", str(self.args.noise_std_m)], prefix=pre)
+                "--noise-std-m", str(self.opts.noise_std_m)], prefix=pre)
         elif name == "recorder":
             self.sup.start(name, "deploy.recorder",
                            [*argv, "--out", str(self.out), *self.recorder_sensor_argv()],
@@ -119,7 +121,7 @@ class HostLaunch(Launch):
     def open_bus(self) -> ZenohBus:
         k = self.dep.host_of("launcher")
         bus = ZenohBus(ZenohConfig(  # our clock: the environment's (transport.clock)
-            mode="client", connect=(self.router(k),), user_config_path=self.args.zenoh_config,
+            mode="client", connect=(self.router(k),), user_config_path=self.opts.zenoh_config,
             identity=self.secrets.identity("launcher"),
             runtime=self.scenario.network.zenoh_runtime))
         if self.clocks_differ():
@@ -160,8 +162,7 @@ def _sender(name: str) -> str:
 def _source(scenario: str) -> str:
     if scenario.endswith(".toml"):
         return Path(scenario).read_text()
-    from importlib import resources
-    return (resources.files("agents") / "scenarios" / f"{scenario}.toml").read_text()
+    return shipped_text(scenario)
 
 
 def _links(dep: Deployment, s: Scenario) -> str:

@@ -83,7 +83,7 @@ def exit_code(launch: Launch, interrupted: bool) -> int:
     for c in failed:
         log.error("%s exited with code %s (log: %s)", c.name, c.exit_code, c.log_path)
     title = f"enclose run {launch.scenario.name}"
-    announce(launch.out, title, getattr(launch.args, "json", False),
+    announce(launch.out, title, launch.opts.json,
              "interrupted" if interrupted else "")
     if interrupted:
         return 130

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.mavlink.signing import write_key
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.forked import call_forked
 from transport.credentials import Identity, identity_file, make_credentials
 from transport.keys import SwarmKeys

@@ -14,6 +14,7 @@ import logging
 import math
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -24,13 +25,13 @@ from agents.membership import membership
 from agents.phases import log_phases, mark
 from agents.process import (
     StatusReporter,
-    add_bus_arguments,
     load_run_scenario,
     open_bus,
     process_main,
     stop_on_signals,
 )
-from agents.scenario import Scenario
+from agents.process_options import BusOptions, add_bus_arguments
+from agents.scenario.model import Scenario
 from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from transport.bus import Bus
@@ -141,28 +142,50 @@ def sim_tick_hz(control_hz: float) -> float:
     return control_hz * math.floor(MAX_DEFAULT_TICK_HZ / control_hz + 1e-9)
 
 
-def run(args: argparse.Namespace) -> int:
-    scenario = load_run_scenario(args)
-    tick_hz = args.rate_hz or sim_tick_hz(scenario.run.rate_hz)
+@dataclass(frozen=True)
+class SwarmSimOptions:
+    """The simulator process's command line (None rates: from the scenario)."""
+
+    bus: BusOptions
+    rate_hz: float | None = None
+    telemetry_hz: float | None = None
+    sensor_hz: float | None = None
+    noise_std_m: float = 0.0
+    seed: int = 0
+    base_port: int = 14580
+    mav_host: str = "127.0.0.1"
+    send_base_port: int = 14540
+    signing_key: str | None = None
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> SwarmSimOptions:
+        return cls(BusOptions.from_namespace(args), args.rate_hz, args.telemetry_hz,
+                   args.sensor_hz, args.noise_std_m, args.seed, args.base_port, args.mav_host,
+                   args.send_base_port, args.signing_key)
+
+
+def run(opts: SwarmSimOptions) -> int:
+    scenario = load_run_scenario(opts.bus)
+    tick_hz = opts.rate_hz or sim_tick_hz(scenario.run.rate_hz)
     cfg = SimConfig(
         rate_hz=tick_hz,
-        telemetry_hz=args.telemetry_hz or tick_hz,
+        telemetry_hz=opts.telemetry_hz or tick_hz,
         flavour=scenario.vehicle.flavour,
-        host=args.mav_host,
-        listen_base_port=args.base_port,
-        send_base_port=args.send_base_port,
-        signing_key=None if args.signing_key is None else load_key(args.signing_key),
+        host=opts.mav_host,
+        listen_base_port=opts.base_port,
+        send_base_port=opts.send_base_port,
+        signing_key=None if opts.signing_key is None else load_key(opts.signing_key),
     )
-    keys = SwarmKeys(args.swarm)
-    with stop_on_signals() as stop, open_bus(args) as bus:
+    keys = SwarmKeys(opts.bus.swarm)
+    with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus:
         sim = Simulator(spawn_points_ned(scenario), scenario.vehicle, scenario.home, cfg)
         sensor = SensorPublisher(
             scenario,
             bus,
             keys,
-            sensor_every_ticks(tick_hz, args.sensor_hz or scenario.run.rate_hz),
-            args.noise_std_m,
-            args.seed,
+            sensor_every_ticks(tick_hz, opts.sensor_hz or scenario.run.rate_hz),
+            opts.noise_std_m,
+            opts.seed,
             late_s=lambda t: sim.boot_time_s() - t,
         )
         status = StatusReporter(bus, keys, "sim", 0)
@@ -232,7 +255,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--send-base-port", type=int, default=14540)
     parser.add_argument("--signing-key", default=None, metavar="FILE",
                         help="MAVLink 2 signing key the vehicles enforce")
-    return process_main(parser, argv, run, lambda _a: "sim")
+    return process_main(parser, argv, SwarmSimOptions.from_namespace, run, lambda _o: "sim")
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from agents.mavlink.signing import SignatureVerifier
 from agents.mavlink.wire import MAVLinkMessage as Msg
 from agents.mavlink.wire import decode_datagram, encode, new_codec, sign_outgoing, signature_ok
-from agents.scenario import HomeConfig
+from agents.scenario.model import HomeConfig
 from sim_backend import commands, protocols
 from sim_backend import telemetry as tm
 from sim_backend.autopilot import SEVERITY_WARNING, Autopilot

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.frames import enu_to_ned
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 
 @dataclass(frozen=True)

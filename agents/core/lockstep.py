@@ -21,7 +21,7 @@ from agents.core.geometry import as_complex, as_plane
 from agents.core.profiles import TargetMotion
 from agents.core.timeseries import RunSeries
 from agents.law.sig import rate_cap
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 ProgressFn = Callable[[float], None]
 ENGINES = ("auto", "python", "numba")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from agents.law.consensus import EstimatorParams
 from agents.law.enclosing import ControlGains
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 
 def control_gains(scenario: Scenario) -> ControlGains:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import contextlib
 import socket
 
-from agents.errors import MavlinkError
 from agents.mavlink.timemap import SO_TIMESTAMPNS
+from transport.errors import MavlinkError
 
 
 def bind_udp(host: str, port: int) -> socket.socket:

@@ -13,7 +13,7 @@ from agents.core.estimator import observation_weights
 from agents.core.params import control_gains, estimator_params
 from agents.core.profiles import TargetMotion
 from agents.core.timeseries import RunSeries
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 from tests.reference.law import Edges, enclosing_control, estimator_rates
 
 

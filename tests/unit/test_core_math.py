@@ -20,7 +20,7 @@ from agents.law import consensus, enclosing
 from agents.law.consensus import EstimatorParams
 from agents.law.enclosing import TWO_PI, ControlGains
 from agents.law.sig import rate_cap
-from agents.scenario import ccw_order, successor_is_cycle
+from agents.scenario.model import ccw_order, successor_is_cycle
 
 RNG = np.random.default_rng(7)
 

@@ -12,9 +12,8 @@ from typing import Any
 import pytest
 from foxglove import messages as fm
 
-from agents.errors import DeployError
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 from deploy import live_args
 from deploy.recording.live_links import LinkTracker, health
 from deploy.recording.live_server import LiveServer, is_loopback
@@ -39,6 +38,7 @@ from deploy.recording.view import (
 from deploy.rundir import RunInfo
 from tests.foxglove_client import foxglove_client, protobuf_class
 from tests.recorder_synth import SynthRun
+from transport.errors import DeployError
 from transport.keys import SwarmKeys
 from transport.messages import FollowerState, Header, ProcessStatus, TruthSnapshot
 
@@ -232,10 +232,11 @@ def test_server_refuses_a_bad_port_and_knows_loopback() -> None:
 def test_launcher_options_url_and_port_pinning(tmp_path: Path) -> None:
     parser = argparse.ArgumentParser()
     live_args.add_live_arguments(parser)
-    on = parser.parse_args([])
+    on = live_args.LiveOptions.from_namespace(parser.parse_args([]))
+    off = live_args.LiveOptions.from_namespace(parser.parse_args(["--no-live"]))
     assert live_args.recorder_live_argv(on) == ["--live-port", "8765", "--live-host", "127.0.0.1"]
-    assert live_args.recorder_live_argv(parser.parse_args(["--no-live"])) == []
-    assert live_args.announce_live_url(parser.parse_args(["--no-live"]), tmp_path) is None
+    assert off is None and live_args.recorder_live_argv(off) == []
+    assert live_args.announce_live_url(off, tmp_path) is None
     (tmp_path / "progress.json").write_text(json.dumps({"live_url": "ws://127.0.0.1:8770"}))
     assert live_args.read_live_url(tmp_path, wait_s=0.0) == "ws://127.0.0.1:8770"
     argv = ["-m", "deploy.recorder", "--live-port", "8765", "--live-host", "127.0.0.1"]

@@ -13,8 +13,8 @@ import pytest
 from agents.core import lockstep_kernel
 from agents.core.lockstep import estimator_substeps, simulate_lockstep
 from agents.core.timeseries import RunSeries
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario, parse_scenario
+from agents.scenario.file import load_scenario, parse_scenario
+from agents.scenario.model import Scenario
 from tests.reference import lockstep as reference
 from tests.unit.test_closed_loop import SIX
 

@@ -27,8 +27,8 @@ from agents.follower_logic import (
     reference,
 )
 from agents.follower_membership import join_running, regroup, with_missing
-from agents.scenario import NetworkConfig
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from transport.network_schema import NetworkConfig
 
 VALUE = st.one_of(st.floats(-1e3, 1e3), st.floats(-1e-6, 1e-6))
 

@@ -17,7 +17,7 @@ import pytest
 from agents.core.lockstep import simulate_lockstep
 from agents.core.metrics import compute_metrics, error_series
 from agents.law.enclosing import ControlGains, enclosing_control
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from tests.reference.law import enclosing_control as reference_control
 
 GAINS = ControlGains(2.0, 3.0, 2.0, 3.0, 8.0, 0.2, 0.25)

@@ -1,6 +1,6 @@
 """`enclose sweep SWEEP_FILE`: a grid of real `enclose run`s, resumable; one after the other
-by default, `--jobs N` at a time here (deploy.sweep_parallel), or on a Dask cluster
-(`--cluster`, deploy.sweep_cluster).
+by default, `--jobs N` at a time here (deploy.sweep.parallel), or on a Dask cluster
+(`--cluster`, deploy.sweep.cluster).
 
 Each cell has its own run directory under the sweep directory; a cell whose directory holds
 good metrics and clean exit codes is done and skipped on the next invocation. The table and
@@ -19,22 +19,23 @@ import shutil
 import signal
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
 from rich.console import Console
 
-from agents.errors import ConfigError
 from deploy.json_files import read_json
-from deploy.sweep_figures import write_figures
-from deploy.sweep_parallel import StopSignals, run_parallel
-from deploy.sweep_progress import SweepProgress
-from deploy.sweep_runner import HOST_FILE, CellRunner, SubprocessRunner
-from deploy.sweep_spec import Cell, SweepSpec, load_sweep
-from deploy.sweep_summary import write_summary
-from deploy.sweep_table import RECORD, CellState, cell_state, collect, write_tables
-from deploy.sweep_verdict import print_sweep_verdict
+from deploy.sweep.figures import write_figures
+from deploy.sweep.parallel import StopSignals, run_parallel
+from deploy.sweep.progress import SweepProgress
+from deploy.sweep.runner import HOST_FILE, CellRunner, SubprocessRunner
+from deploy.sweep.spec import Cell, SweepSpec, load_sweep
+from deploy.sweep.summary import write_summary
+from deploy.sweep.table import RECORD, CellState, cell_state, collect, write_tables
+from deploy.sweep.verdict import print_sweep_verdict
+from transport.errors import ConfigError
 
 log = logging.getLogger("enclose.sweep")
 STARTUP_S = 15.0  # a cell's start-up and shutdown, for the ETA before any cell has run
@@ -75,35 +76,57 @@ def register(sub: Any) -> None:
     p.set_defaults(func=_main)
 
 
+@dataclass(frozen=True)
+class SweepOptions:
+    """`enclose sweep`'s command line."""
+
+    sweep_file: Path
+    out: Path | None = None  # None: the file's `out`
+    report_only: bool = False
+    list: bool = False
+    cell_timeout_s: float | None = None  # None: duration + TIMEOUT_MARGIN_S
+    jobs: int | None = None  # None: 1 here, one per worker thread on a cluster
+    cluster: str | None = None  # a Dask scheduler's address
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> SweepOptions:
+        return cls(args.sweep_file, args.out, args.report_only, args.list, args.cell_timeout,
+                   args.jobs, args.cluster)
+
+
 def _main(args: argparse.Namespace) -> int:
-    spec = load_sweep(args.sweep_file, args.out.resolve() if args.out else None)
-    if args.jobs is not None and args.jobs < 1:
-        raise ConfigError("--jobs", f"must be >= 1, got {args.jobs}")
-    if args.list:
+    return sweep(SweepOptions.from_namespace(args))
+
+
+def sweep(opts: SweepOptions) -> int:
+    spec = load_sweep(opts.sweep_file, opts.out.resolve() if opts.out else None)
+    if opts.jobs is not None and opts.jobs < 1:
+        raise ConfigError("--jobs", f"must be >= 1, got {opts.jobs}")
+    if opts.list:
         for row in collect(spec):
             print(f"{row.state.status:11s} {row.cell.name}")
         return 0
-    if args.report_only:
+    if opts.report_only:
         report(spec)
         return 0
     previous = signal.signal(signal.SIGTERM, _interrupt)  # stop as cleanly as on Ctrl-C
     try:
-        if args.cluster:
-            return _on_cluster(spec, args)
-        return run_sweep(spec, timeout_s=args.cell_timeout, jobs=args.jobs or 1)
+        if opts.cluster:
+            return _on_cluster(spec, opts.cluster, opts)
+        return run_sweep(spec, timeout_s=opts.cell_timeout_s, jobs=opts.jobs or 1)
     finally:
         signal.signal(signal.SIGTERM, previous)
 
 
-def _on_cluster(spec: SweepSpec, args: argparse.Namespace) -> int:
-    from deploy.sweep_cluster import ClusterRunner, connect  # the optional extra
+def _on_cluster(spec: SweepSpec, address: str, opts: SweepOptions) -> int:
+    from deploy.sweep.cluster import ClusterRunner, connect  # the optional extra
 
     signals = StopSignals()
-    with connect(args.cluster) as client:
+    with connect(address) as client:
         runner = ClusterRunner(client, signals)
-        jobs = args.jobs or runner.capacity()
+        jobs = opts.jobs or runner.capacity()
         return run_sweep(
-            spec, runner, args.cell_timeout, jobs=jobs, signals=signals, where=args.cluster
+            spec, runner, opts.cell_timeout_s, jobs=jobs, signals=signals, where=address
         )
 
 

@@ -6,15 +6,16 @@ import argparse
 import logging
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from agents.core.lockstep import ENGINES, simulate_lockstep
-from agents.errors import ScenarioError
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.report import write_run_outputs
 from deploy.rundir import RunInfo
 from deploy.verdict import add_json_argument, announce
+from transport.errors import ScenarioError
 
 log = logging.getLogger(__name__)
 
@@ -72,16 +73,39 @@ class ProgressBar:
         sys.stderr.flush()
 
 
+@dataclass(frozen=True)
+class SimulateOptions:
+    """`enclose simulate`'s command line (None: the scenario's value)."""
+
+    scenario: str | None = None
+    dt_s: float | None = None
+    duration_s: float | None = None
+    out: Path | None = None  # None: runs/simulate-<name>
+    engine: str = "auto"
+    estimator_dt_s: float | None = None  # None: the scenario's estimator rate
+    progress: bool = True
+    json: bool = False
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> SimulateOptions:
+        return cls(args.scenario, args.dt, args.duration, args.out, args.engine,
+                   args.estimator_dt, not args.no_progress, args.json)
+
+
 def _main(args: argparse.Namespace) -> int:
-    scenario = load_scenario(args.scenario)
-    dt = scenario.run.dt_s if args.dt is None else args.dt
-    duration = scenario.run.duration_s if args.duration is None else args.duration
+    return simulate(SimulateOptions.from_namespace(args))
+
+
+def simulate(opts: SimulateOptions) -> int:
+    scenario = load_scenario(opts.scenario)
+    dt = scenario.run.dt_s if opts.dt_s is None else opts.dt_s
+    duration = scenario.run.duration_s if opts.duration_s is None else opts.duration_s
     if not 0.0 < dt < duration:
         raise ScenarioError("--dt", f"must satisfy 0 < dt < duration ({duration} s), got {dt}")
-    est_dt = args.estimator_dt
+    est_dt = opts.estimator_dt_s
     if est_dt is None:  # the followers' estimator rate, in whole steps of dt
         est_dt = dt / max(1, round(dt * scenario.run.estimator_hz))
-    out = args.out or Path("runs") / f"simulate-{scenario.name}"
+    out = opts.out or Path("runs") / f"simulate-{scenario.name}"
     log.info(
         "simulating %s: n=%d m=%d dt=%g s estimator dt=%g s duration=%g s",
         scenario.name,
@@ -92,16 +116,16 @@ def _main(args: argparse.Namespace) -> int:
         duration,
     )
     start = time.perf_counter()
-    bar = ProgressBar("simulate", not args.no_progress)
+    bar = ProgressBar("simulate", opts.progress)
     try:
-        series = simulate_lockstep(scenario, dt, duration, bar, args.engine, est_dt)
+        series = simulate_lockstep(scenario, dt, duration, bar, opts.engine, est_dt)
     except ValueError as exc:
         raise ScenarioError("--estimator-dt", str(exc)) from exc
     wall = time.perf_counter() - start
     info = RunInfo.from_scenario(scenario, "lockstep", duration)
-    extra = {"dt_s": dt, "estimator_dt_s": est_dt, "engine": args.engine,
+    extra = {"dt_s": dt, "estimator_dt_s": est_dt, "engine": opts.engine,
              "integration_wall_s": wall}
     write_run_outputs(out, series, info, extra)
     log.info("integration took %.2f s wall; outputs in %s", wall, out)
-    announce(out.resolve(), f"enclose simulate {scenario.name}", args.json)
+    announce(out.resolve(), f"enclose simulate {scenario.name}", opts.json)
     return 0
