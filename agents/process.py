@@ -19,19 +19,21 @@ from dataclasses import dataclass, field
 from types import FrameType
 from typing import TypeVar
 
+from agents.lifeline import die_with_launcher
 from agents.network_args import apply_network_arguments
 from agents.phases import mark
 from agents.process_options import BusOptions
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 from transport.bus import Bus
-from transport.clock_sync import parse_clock_hosts
+from transport.clock_sync import clock_hosts_count, parse_clock_hosts
 from transport.codec import encode
 from transport.credentials import Identity
 from transport.errors import EncloseError
 from transport.keys import SwarmKeys
 from transport.messages import ProcessStatus, Stamper
 from transport.network_schema import NetworkConfig
+from transport.peer_clock import PROCESS_BOOK, ClockBook
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
@@ -67,6 +69,7 @@ def open_bus(opts: BusOptions, network: NetworkConfig, arrival_stamps: bool = Fa
     mark("bus_open")  # the session is up: its first link (TLS handshake included) is made
     if opts.clock_host is not None:
         bus.start_clock_sync(SwarmKeys(opts.swarm), f"router-{opts.clock_host}",
+                             clock_hosts_count(opts.clock_hosts),
                              clock_of=parse_clock_hosts(opts.clock_hosts))
     return bus
 
@@ -93,7 +96,9 @@ def process_main(
     name: Callable[[Options], str],
 ) -> int:
     """Parse into typed options (`read`), set up logging, run; a named error becomes a
-    logged line and exit code 2.  `log_level` is read from the parsed flags."""
+    logged line and exit code 2.  `log_level` is read from the parsed flags.  First of
+    all, die with the launcher that started us, if one did (agents.lifeline)."""
+    die_with_launcher()
     mark("main")  # the entry point's imports are done
     args = parser.parse_args(argv)
     opts = read(args)
@@ -207,6 +212,7 @@ class StatusReporter:
     period_s: float = 1.0
     counters: Counter[str] = field(default_factory=Counter)
     state: str = "starting"
+    clocks: ClockBook = PROCESS_BOOK
     _stamper: Stamper | None = None
     _last_s: float = -1e18
 
@@ -228,7 +234,8 @@ class StatusReporter:
         self._last_s = now
         if self._stamper is None:
             self._stamper = Stamper(f"{self.role}-{self.index}", self.bus.now_s)
-        counters = {**self.counters, **(extra or {})}
+        # Dropped clock probes (transport.peer_clock): non-zero only across hosts.
+        counters = {**self.counters, **(extra or {}), **self.clocks.counters()}
         msg = ProcessStatus(
             self._stamper.header(),
             self.role,

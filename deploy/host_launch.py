@@ -23,6 +23,7 @@ from pathlib import Path
 from agents.scenario.file import load_scenario, parse_scenario, shipped_text
 from agents.scenario.model import Scenario
 from deploy.deployment import Deployment
+from deploy.host_keys import HostSecrets, write_swarm_keys
 from deploy.launch import Launch
 from deploy.launch_options import LaunchOptions
 from deploy.run_secrets import RunSecrets
@@ -40,8 +41,10 @@ class HostLaunch(Launch):
     forks_followers = False
 
     def __init__(self, dep: Deployment, local: tuple[int, ...], opts: LaunchOptions,
-                 out: Path, duration_s: float) -> None:
-        self.dep, self.local = dep, local
+                 out: Path, duration_s: float, every_host: bool = False) -> None:
+        """`every_host`: the hosts of `local` are run from here (--all): their credentials
+        are the folders of one `enclose keys` output (deploy.host_keys)."""
+        self.dep, self.local, self.every_host = dep, local, every_host
         scenario = load_scenario(dep.scenario)
         dep.check(scenario.n, scenario.m)
         opts = replace(opts, scenario=dep.scenario)
@@ -58,11 +61,22 @@ class HostLaunch(Launch):
         self.sim_address = dep.hosts[dep.host_of("sim")].address
 
     def make_secrets(self) -> RunSecrets:
-        if self.opts.credentials_dir is not None:
-            return RunSecrets(Path(self.opts.credentials_dir).resolve())
-        s = self.scenario
-        return RunSecrets.make(self.out, self.keys, s.n, s.m, self.opts.insecure,
-                               n_routers=len(self.dep.hosts))
+        """Each local host's folder of `enclose keys` (deploy.host_keys): with --host, the
+        one given; with --all, the folders of the `enclose keys` output given, or of one
+        made fresh in the run directory (without the CA key: nobody adds hosts to it)."""
+        if self.opts.insecure:
+            return RunSecrets.make(self.out, self.keys, 0, 0, insecure=True)
+        given = self.opts.credentials_dir
+        if given is None:
+            s = self.scenario
+            root = write_swarm_keys(self.out / "credentials", self.dep, s.n, s.m,
+                                    keep_ca_key=False)
+            folders = {k: root[self.dep.hosts[k].name] for k in self.local}
+        elif self.every_host:
+            folders = {k: Path(given) / self.dep.hosts[k].name for k in self.local}
+        else:
+            folders = {self.local[0]: Path(given)}
+        return HostSecrets.of(self.dep, self.local, folders)
 
     def prefix(self, k: int) -> list[str]:
         host = self.dep.hosts[k]
@@ -92,7 +106,7 @@ class HostLaunch(Launch):
             argv = [*self.dep.router_argv(k, secure=not self.opts.insecure),
                     "--swarm", self.keys.swarm, *self.secrets.args_for(f"router-{k}")]
             if self.clocks_differ():
-                argv += ["--clock-id", f"router-{k}"]
+                argv += ["--clock-id", f"router-{k}", "--clock-routers", str(len(self.dep.hosts))]
             self.sup.start(f"router-{k}", "deploy.router", argv, prefix=self.prefix(k))
         mav = ["--mav-local-base", str(self.adapter_base),
                "--mav-vehicle-base", str(self.vehicle_base)]
@@ -125,7 +139,7 @@ class HostLaunch(Launch):
             identity=self.secrets.identity("launcher"),
             runtime=self.scenario.network.zenoh_runtime))
         if self.clocks_differ():
-            bus.start_clock_sync(self.keys, f"router-{k}",
+            bus.start_clock_sync(self.keys, f"router-{k}", len(self.dep.hosts),
                                  clock_of=parse_clock_hosts(self.clock_hosts()))
         return bus
 

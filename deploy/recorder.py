@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from agents.lifeline import die_with_launcher
 from agents.phases import log_phases, mark
 from agents.process import (
     apply_agent_sched,
@@ -93,6 +94,7 @@ def start_live(opts: RecorderOptions) -> LiveServer | None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()  # agents.lifeline
     mark("main")
     opts = parse_options(argv)
     logging.basicConfig(level=logging.DEBUG if opts.verbose else logging.INFO,

@@ -20,6 +20,7 @@ import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from agents.lifeline import die_with_launcher
 from agents.process import stop_on_signals
 from transport.credentials import Identity
 from transport.errors import EncloseError
@@ -40,11 +41,12 @@ class RouterOptions:
     swarm: str = "enclose"
     zenoh_config: str | None = None
     clock_id: str | None = None  # router-K: probe the other routers' clocks
+    clock_routers: int = 1  # the swarm's routers, router-0..: whose probes count
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> RouterOptions:
         return cls(tuple(args.listen), tuple(args.connect), args.credentials, args.swarm,
-                   args.zenoh_config, args.clock_id)
+                   args.zenoh_config, args.clock_id, args.clock_routers)
 
 
 def parse_options(argv: Sequence[str] | None) -> RouterOptions:
@@ -60,10 +62,14 @@ def parse_options(argv: Sequence[str] | None) -> RouterOptions:
     parser.add_argument("--clock-id", default=None, metavar="router-K",
                         help="probe the other routers' clocks as this host's clock "
                         "(transport.clock_sync): for hosts whose clocks differ")
+    parser.add_argument("--clock-routers", type=int, default=1, metavar="K",
+                        help="with --clock-id: the swarm's routers are router-0..router-K-1 "
+                        "(probes from any other name are dropped)")
     return RouterOptions.from_namespace(parser.parse_args(argv))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()  # agents.lifeline
     opts = parse_options(argv)
     logging.basicConfig(level=logging.INFO,
                         format="%(asctime)s %(levelname)s router: %(message)s")
@@ -76,7 +82,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             log.info("router %s of swarm %s: listen %s, connect %s", bus.zid, opts.swarm,
                      opts.listen, opts.connect)
             if opts.clock_id is not None:
-                bus.start_clock_sync(SwarmKeys(opts.swarm), opts.clock_id, probe=True)
+                bus.start_clock_sync(SwarmKeys(opts.swarm), opts.clock_id, opts.clock_routers,
+                                     probe=True)
             idle = threading.Event()
             while not stop.raised:
                 idle.wait(0.2)

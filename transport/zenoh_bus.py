@@ -227,12 +227,13 @@ class ZenohBus(BusBase):
         """Zenoh ids of the peers this session is linked to right now."""
         return [str(z) for z in self.session.info.peers_zid()]
 
-    def start_clock_sync(self, keys: SwarmKeys, clock_id: str, probe: bool = False,
+    def start_clock_sync(self, keys: SwarmKeys, clock_id: str, n_routers: int,
+                         probe: bool = False,
                          clock_of: dict[str, str] | None = None) -> ClockSync:
         """Estimate the other hosts' clock offsets from here on (transport.clock_sync):
-        `clock_id` is this host's router, `probe` True on the router itself."""
+        `clock_id` is this host's router (of `n_routers`), `probe` True on the router."""
         if self.clock_sync is None:
-            self.clock_sync = ClockSync(self, keys, clock_id, probe, clock_of)
+            self.clock_sync = ClockSync(self, keys, clock_id, probe, n_routers, clock_of)
         return self.clock_sync
 
     def close(self) -> None:

@@ -34,8 +34,9 @@ def register(sub: Any) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds after the start")
     p.add_argument("--out", type=Path, default=Path("runs/host"), help="run directory")
     p.add_argument("--credentials", dest="credentials_dir", default=None, metavar="DIR",
-                   help="this host's copy of `enclose keys DIR --routers K` (default: fresh "
-                   "per run, which works only with --all)")
+                   help="this host's folder of `enclose keys OUT_DIR --deployment FILE` "
+                   "(OUT_DIR/<host>; with --all, OUT_DIR itself; default: fresh per run, "
+                   "which works only with --all)")
     p.add_argument("--noise-std-m", type=float, default=0.0, help="noise on target observations")
     p.add_argument("--zenoh-config", default=None, metavar="JSON5", help="your Zenoh config")
     p.add_argument("--link-timeout", type=float, default=120.0,
@@ -76,8 +77,9 @@ def run(opts: HostOptions) -> int:
     if opts.host is not None and opts.launch.credentials_dir is None \
             and not opts.launch.insecure:
         raise DeployError("--credentials DIR: hosts of one swarm must share its CA "
-                          "(`enclose keys DIR SCENARIO --swarm NAME --routers K`)")
-    launch = HostLaunch(dep, local, opts.launch, opts.out.resolve(), 1.0)
+                          "(`enclose keys OUT_DIR --deployment FILE`, then OUT_DIR/<host>)")
+    launch = HostLaunch(dep, local, opts.launch, opts.out.resolve(), 1.0,
+                        every_host=opts.host is None)
     launch.duration_s = (launch.scenario.run.duration_s if opts.duration_s is None
                          else opts.duration_s)
     if launch.duration_s <= 0:

@@ -11,6 +11,7 @@ import argparse
 import contextlib
 import json
 import logging
+import os
 import signal
 import subprocess
 import sys
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
 
+from agents.lifeline import launcher_env
 from agents.network_args import network_overrides
 from deploy.launch_options import LaunchOptions
 from deploy.netns.namespace import MAVLINK_PORTS, lossy_namespace
@@ -66,8 +68,10 @@ def inner_argv(opts: LaunchOptions, out: Path, swarm: str, duration_s: float) ->
 
 def run_forwarding_signals(argv: Sequence[str]) -> int:
     """Run `argv` in its own session (a terminal's Ctrl-C reaches only us, once) and pass
-    SIGINT/SIGTERM on to it; its exit code, 128+N when killed by signal N."""
-    proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, start_new_session=True)
+    SIGINT/SIGTERM on to it; its exit code, 128+N when killed by signal N.  It dies with
+    us (agents.lifeline), and its processes with it."""
+    proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, start_new_session=True,
+                            env={**os.environ, **launcher_env()})
 
     def forward(signum: int, frame: FrameType | None) -> None:
         with contextlib.suppress(ProcessLookupError):
