@@ -89,3 +89,13 @@ def test_the_compiled_loops_disk_cache_is_keyed_on_every_law_source() -> None:
     assert law_files <= used  # every law file the loop is built from is in the digest
     stamp = lockstep_kernel.compiled_steps()._cache._cache_file._source_stamp
     assert stamp[1] == lockstep_kernel.sources_digest()
+
+
+def test_without_numba_auto_runs_the_law_interpreted(monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_numba() -> None:
+        raise AssertionError("compiled without numba")
+
+    monkeypatch.setattr(lockstep_kernel, "HAVE_NUMBA", False)
+    monkeypatch.setattr(lockstep_kernel, "compiled_steps", no_numba)
+    auto = simulate_lockstep(load_scenario(), 0.02, 1.0)
+    _assert_same(auto, simulate_lockstep(load_scenario(), 0.02, 1.0, engine="python"), 0.0)
