@@ -28,6 +28,7 @@ from agents.liveness import MembershipWatch
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.process import StatusReporter
 from agents.scenario.model import Scenario
+from transport.access import sender_ids
 from transport.bus import Bus, Subscription
 from transport.checks import DEFAULT_LIMITS, newer
 from transport.codec import encode
@@ -87,7 +88,8 @@ class FollowerNode:
         self.last_state: VehicleState | None = None
         self.last_u = 0j
         # Checked, not trusted (transport.checks); + per-link rx and age (transport.link_stats)
-        self.decoder: Decoder = LinkDecoder(limits=DEFAULT_LIMITS)
+        self.decoder: Decoder = LinkDecoder(limits=DEFAULT_LIMITS,
+                                            senders=sender_ids(scenario.n, scenario.m))
         self.status = StatusReporter(bus, self.keys, "follower", index)
         self.memory = FollowerMemory()
         self.peers: dict[int, PeerView] = {}
@@ -281,7 +283,8 @@ class FollowerNode:
             ages = {"nbr_age_p50_us": round(p50 * 1e6), "nbr_age_p99_us": round(p99 * 1e6)}
         links = self.bus.counters() if isinstance(self.bus, ImpairedBus) else {}
         sent = self.stamper.next_seq + self.est_stamper.next_seq
-        return {**self.decoder.counters(), **ages, **links, "states_sent": sent}
+        return {**self.decoder.counters(), **self.liveness.counters(), **ages, **links,
+                "states_sent": sent}
 
     def close(self) -> None:
         for sub in [*self.subs, *self.peer_subs.values(), *self.est_subs.values()]:

@@ -22,7 +22,9 @@ from agents.process import StatusReporter, load_run_scenario, process_main
 from agents.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
 from agents.scenario.model import Scenario
 from agents.vehicle_loop import fly
+from transport.access import sender_ids
 from transport.bus import Bus
+from transport.checks import DEFAULT_LIMITS
 from transport.decoder import Decoder
 from transport.errors import EncloseError
 from transport.keys import SwarmKeys
@@ -67,7 +69,8 @@ class TargetNode:
         self.speed_max_m_s = scenario.vehicle.max_speed_xy_m_s
         self.keys = SwarmKeys(swarm)
         self.control = bus.subscribe(self.keys.control())
-        self.decoder = Decoder(expect=(RunControl,))
+        self.decoder = Decoder(expect=(RunControl,), limits=DEFAULT_LIMITS,
+                               senders=sender_ids(scenario.n, scenario.m))
         self.status = StatusReporter(bus, self.keys, "target", index)
         self.start_s: float | None = None
         self.stop_s = math.inf

@@ -7,8 +7,8 @@ with the second-order estimator's rv_m_s and 2 velocity-stage flows, codec v3),
 TargetObservation and TruthSnapshot (16 followers, 2 targets), prints the time per call of
 - `encode(msg)`;
 - `decode(payload)`;
-- the whole receive path: `encode(msg)` plus `LinkDecoder(limits=DEFAULT_LIMITS).decode()`
-  of a `Received` on the message's key (codec, key/index checks, clock mapping,
+- the whole receive path: `encode(msg)` plus `LinkDecoder(limits=DEFAULT_LIMITS,
+  senders=...).decode()` of a `Received` on the message's key (codec, key checks, clock mapping,
   plausibility checks, sequence tracking, per-link tally), as a follower/recorder runs it.
 Each figure is the best of `repeats` runs of `calls` calls, in CPU time of this process
 (process_time: other processes on the machine disturb it less than wall time), the least
@@ -24,6 +24,7 @@ import os
 import time
 from collections.abc import Callable
 
+from transport.access import sender_ids
 from transport.bus import Received
 from transport.checks import DEFAULT_LIMITS
 from transport.codec import decode, encode
@@ -39,6 +40,7 @@ from transport.messages import (
 
 KEYS = SwarmKeys("bench")
 N_FOLLOWERS = 16
+SENDERS = sender_ids(N_FOLLOWERS, 2)  # as every process decodes: the scenario's senders only
 
 
 def follower_state(seq: int, now_s: float) -> FollowerState:
@@ -100,7 +102,7 @@ def measure(make: Callable[[int, float], Message], key: str, calls: int,
 
     def run_receive() -> None:
         # A fresh decoder per run; each message has its own sequence number: all new.
-        dec = LinkDecoder(limits=DEFAULT_LIMITS)
+        dec = LinkDecoder(limits=DEFAULT_LIMITS, senders=SENDERS)
         for m in msgs:
             if dec.decode(Received(key, encode(m), now_s)) is None:
                 raise AssertionError(f"dropped: {dec.dropped}")

@@ -29,6 +29,7 @@ from deploy.run_board import BoardView, LiveBoard
 from deploy.run_monitor import StatusBoard, launch_view
 from deploy.run_secrets import RunSecrets
 from deploy.supervisor import Child, Supervisor
+from transport.access import sender_ids
 from transport.bus import Bus
 from transport.codec import encode
 from transport.errors import DeployError
@@ -60,7 +61,7 @@ class Launch:
             scenario.n + scenario.m, scenario.network.link, not opts.insecure, opts.port_range)
         self.secrets = RunSecrets(None)
         self.timings: dict[str, float] = {}
-        self.board = StatusBoard()
+        self.board = StatusBoard(sender_ids(scenario.n, scenario.m))
         # The statuses as the flight ended, before the processes stop: a vehicle whose
         # follower has stopped fails safe, so the final counts include the shutdown.
         self.status_at_stop: dict[str, Any] | None = None

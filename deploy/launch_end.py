@@ -63,6 +63,8 @@ def launch_report(launch: Launch) -> dict[str, Any]:
         "events": [] if launch.watchdog is None else launch.watchdog.events,
         "status": launch.board.as_dict(),
         "status_at_stop": launch.status_at_stop,
+        # What the launcher itself refused (statuses not from the process they name).
+        "launcher": launch.board.decoder.counters(),
         "load": load_report(launch),
     }
 

@@ -195,7 +195,7 @@ def run(opts: SwarmSimOptions) -> int:
             st = sim.stats
             return {"ticks": st.ticks, "overruns": st.overruns, "catch_ups": st.catch_ups,
                     "caught_up_ticks": st.caught_up_ticks, "resyncs": st.resyncs,
-                    **dict(sim.counters)}
+                    **dict(sim.counters), **sensor.liveness.counters()}
 
         def report(_t: float, _s: FleetState) -> None:
             if status.due():

@@ -19,6 +19,7 @@ from rich.text import Text
 
 from deploy.cpu_load import load_line, memory_line, overrun_line
 from deploy.json_files import read_json
+from deploy.refusals import launch_refusals, refusal_text
 
 # metrics.json key -> (label, unit, run.json key of its bound)
 BOUNDED = (
@@ -66,6 +67,7 @@ class Verdict:
     memory: str | None = None  # peak resident memory per process (deploy.cpu_load)
     silent: tuple[int, ...] = ()  # 0-based followers that sent no state: not judged whole
     recording: str | None = None  # what the recorder lost, when it lost enough to matter
+    refused: dict[str, Any] | None = None  # bus input the processes refused (deploy.refusals)
 
     @property
     def inside(self) -> bool:
@@ -165,7 +167,7 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
         live if isinstance(live, str) and live else None,
         tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
         bool(launch), load_line(load), overrun_line(ticks), memory_line(load),
-        silent_followers(metrics), recording_line(metrics),
+        silent_followers(metrics), recording_line(metrics), launch_refusals(launch),
     )
 
 
@@ -178,6 +180,7 @@ def verdict_json(v: Verdict) -> dict[str, Any]:
                    for c in v.checks},
         "silent_followers": list(v.silent),
         "processes": list(v.processes),
+        "refused": v.refused or {},
         "live_url": v.live_url,
         "load": v.load,
         "memory": v.memory,
@@ -218,7 +221,9 @@ def print_verdict(console: Console, v: Verdict) -> None:
         n = len(v.metrics.get("followers") or {}) or None
         rows.append(("silent", silent_text(v.silent, n)))
     if v.networked:
-        rows.append(("processes", "; ".join(v.processes) or "none died, restarted or failed"))
+        said = [*v.processes] or ["none died, restarted or failed"]
+        refused = refusal_text(v.refused or {})
+        rows.append(("processes", "; ".join(said + ([refused] if refused else []))))
     rows += [("links", v.links)] if v.links else []
     rows += [("recording", v.recording)] if v.recording else []
     rows += [("late ticks", v.ticks)] if v.ticks else []

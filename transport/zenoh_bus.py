@@ -15,7 +15,15 @@ from typing import TypeVar, Union
 
 import zenoh
 
-from transport.bus import DEFAULT_CAPACITY, AliveEvent, BusBase, Clock, Congestion, Received
+from transport.bus import (
+    DEFAULT_CAPACITY,
+    AliveEvent,
+    BusBase,
+    Clock,
+    Congestion,
+    Received,
+    apply_alive,
+)
 from transport.clock import process_clock
 from transport.clock_sync import ClockSync
 from transport.errors import TransportError
@@ -156,7 +164,7 @@ class ZenohAliveWatch:
         events: list[AliveEvent] = []
         while (sample := self._sub.try_recv()) is not None:
             ev = AliveEvent(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
-            (self._alive.add if ev.alive else self._alive.discard)(ev.key)
+            apply_alive(self._alive, ev)
             events.append(ev)
         return events
 

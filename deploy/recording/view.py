@@ -10,7 +10,8 @@ panels work without set-up:
   `agents.core.metrics.error_series`);
 - `/links` (JSON `enclose.LiveLinks`): per link age and delivered ratio
   (`deploy.recording.live_links`), once a recorder tick;
-- `/status` (JSON `enclose.LiveStatus`): each process's state and the member set, each tick;
+- `/status` (JSON `enclose.LiveStatus`): each process's state, the member set and what the
+  processes refused from the bus (deploy.refusals), each tick;
 - `/log` (`foxglove.Log`, protobuf): a line per process state or membership change.
 """
 
@@ -28,6 +29,7 @@ from agents.core.timeseries import RunSeries
 from deploy.recording.live_links import LinkTracker
 from deploy.recording.mcap_log import RawFrame, RawSchema
 from deploy.recording.scene import LinkView, scene_update, timestamp
+from deploy.refusals import refusals
 from deploy.rundir import RunInfo
 from transport.messages import FollowerState, Message, ProcessStatus, RunControl, TruthSnapshot
 
@@ -65,7 +67,8 @@ SCHEMAS = {
         "links": {"type": "array", "items": {"type": "object"}}}),
     STATUS_TOPIC: _json_schema("enclose.LiveStatus", {
         "processes": {"type": "array", "items": {"type": "object"}},
-        "members": {"type": "array", "items": {"type": "integer"}}}),
+        "members": {"type": "array", "items": {"type": "integer"}},
+        "refused": {"type": "object"}}),
 }
 
 
@@ -176,5 +179,8 @@ class LiveView:
         return [*self.frames(),
                 _json(LINKS_TOPIC, {"links": [k.as_json() for k in self.links.links()]}, ns),
                 _json(STATUS_TOPIC, {"processes": procs,
-                                     "members": sorted(self._members or ())}, ns)]
+                                     "members": sorted(self._members or ()),
+                                     "refused": refusals(s.counters
+                                                         for s in self.processes.values())},
+                      ns)]
 

@@ -19,7 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from transport.checks import DEFAULT_LIMITS, Limits, _owner, _time_reason, check
+from transport.checks import DEFAULT_LIMITS, Limits, _time_reason, check, key_rule
 from transport.keys import SwarmKeys, parse_key
 from transport.link_stats import AGE_MAX_S, AgeHistogram, latency_histogram
 from transport.messages import (
@@ -39,7 +39,7 @@ KEYS = SwarmKeys("chk")
 NOW = 1_800_000_000.0
 
 
-# ---- the reference: transport.checks before issue 15 ---------------------------------------
+# ---- the reference: transport.checks before issue 15 (with the rules added since) ----------
 def _finite(values: Iterable[Any]) -> bool:
     return all(isinstance(v, int | float) and math.isfinite(v) for v in values)
 
@@ -49,8 +49,8 @@ def _bounded(vectors: Iterable[tuple[float, ...]], bound: float) -> bool:
 
 
 def check_reference(msg: Any, key: str, now_s: float, lim: Limits = DEFAULT_LIMITS) -> str | None:
-    owner = _owner(key)
-    if owner is not None and msg.header.sender_id != owner:
+    rule = key_rule(key)
+    if rule is not None and msg.header.sender_id != rule.owner:
         return "sender"
     if isinstance(msg, ProcessStatus):
         return None
@@ -83,6 +83,11 @@ def check_reference(msg: Any, key: str, now_s: float, lim: Limits = DEFAULT_LIMI
     if isinstance(msg, TargetObservation):
         if not _finite((*msg.pos_m, msg.observed_stamp_s)):
             return "nonfinite"
+        reason = _time_reason(msg.observed_stamp_s, now_s, lim)
+        if reason is not None:
+            return reason
+        if msg.observed_stamp_s > msg.header.stamp_s:
+            return "future_stamp"
         return None if _bounded([msg.pos_m], lim.max_pos_m) else "impossible"
     if isinstance(msg, TruthSnapshot):
         vecs = [*msg.follower_pos_m, *msg.follower_vel_m_s, *msg.target_pos_m, *msg.target_vel_m_s]

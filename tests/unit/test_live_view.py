@@ -156,7 +156,14 @@ def test_view_throttles_the_scene_and_logs_state_changes(paper: Scenario) -> Non
     status = json.loads(next(f.data for f in frames if f.topic == STATUS_TOPIC))
     assert status["members"] == [0, 2, 3]
     assert status["processes"] == [{"name": "follower-1", "state": "failed", "detail": "boom"}]
+    assert status["refused"] == {}
     assert json.loads(next(f.data for f in frames if f.topic == LINKS_TOPIC)) == {"links": []}
+    view.add(ProcessStatus(Header("recorder-0", 0, START_S), "recorder", 0, "running",
+                           {"statuses_rejected": 7, "tokens_rejected": 2,
+                            "rejected_from_follower-2": 7}), START_S)
+    frames = view.tick_frames(START_S + 2.0, frozenset({0, 2, 3}))
+    status = json.loads(next(f.data for f in frames if f.topic == STATUS_TOPIC))
+    assert status["refused"] == {"statuses": 7, "tokens": 2, "from": {"follower-2": 7}}
 
 
 def status(i: int, counters: dict[str, int], seq: int = 0) -> ProcessStatus:

@@ -76,7 +76,7 @@ def test_watch_and_follower_node_reform_when_a_follower_leaves_and_returns() -> 
     node.tick(bus.now_s())
     assert node.members == {0, 1, 2, 3} and node.setup.neighbours == (1, 3)
     assert node.status.counters["membership_changes"] == 2
-    watch = MembershipWatch(MemoryBus(hub, "sim"), KEYS)
+    watch = MembershipWatch(MemoryBus(hub, "sim"), KEYS, n_followers=4)
     assert watch.members(bus.now_s()) == {0, 1, 2, 3}
     node.close()
 
