@@ -111,7 +111,8 @@ def law_vector(k_e: float, alpha1: float, estimator_cap_per_s: float, order: int
                      rho_d_m, w_d_rad_s, step_fraction, spacing_gain_age], dtype=np.float64)
 
 
-# Everything `_steps` calls, in the order numba must know them (callees first).
+# Every function `_steps` calls, directly or not: numba compiles a call to a plain Python
+# function only once it is registered (`compiled_steps`), and the cache digests their files.
 _LAW = (limited_sig, rate_cap, spacing_step_s, link_flow, lap_velocity, fed_flow,
         enclosing_control)
 _LOOP = (_consensus, _rates, _commands)
