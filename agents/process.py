@@ -44,7 +44,7 @@ Options = TypeVar("Options")
 
 def load_run_scenario(opts: BusOptions, whole_run: bool = True) -> Scenario:
     """The scenario named on the command line, with the command line's network overrides;
-    checked over the whole run unless `whole_run` is false (agents.follower: see
+    checked over the whole run unless `whole_run` is false (agents.follower.main: see
     agents.scenario.checks.check_admissible).  A process calls it once and passes the
     result on."""
     return apply_network_arguments(load_scenario(opts.scenario, whole_run), opts.network)

@@ -127,7 +127,7 @@ class Launch:
             self.sup.start(f"target-{j}", "agents.target", argv, fork=True)
         for i in range(s.n):
             argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
-            self.sup.start(f"follower-{i}", "agents.follower", argv, fork=True)
+            self.sup.start(f"follower-{i}", "agents.follower.main", argv, fork=True)
 
     def expected_tokens(self) -> set[str]:
         k, s = self.keys, self.scenario
@@ -298,7 +298,7 @@ class Launch:
 
     def _before_restart(self, child: Child) -> None:
         """A restarted recorder starts a new MCAP: keep the dead one's beside it.  A
-        restarted follower joins a running swarm (agents.follower --join)."""
+        restarted follower joins a running swarm (agents.follower.main --join)."""
         mcap = self.out / "recording.mcap"
         if child.name == "recorder" and mcap.exists():
             mcap.rename(self.out / f"recording-part{child.restarts + 1}.mcap")

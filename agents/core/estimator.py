@@ -3,18 +3,13 @@
     p~_i = (n/m) * sum_{j in N_i^T} p_j^t / |N_j^F|,   edge fractions 1 / max(deg_i, deg_j)
 
 for the lock-step engine, which sees the whole swarm at once (the follower process forms
-its own row: agents.membership).  The laws themselves are agents.law's; `consensus_flows`
-and `link_balance` here are numpy forms kept for agents.follower_logic's reference tick.
+its own row: agents.membership).  The laws themselves are agents.law's.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-
-from agents.core.geometry import limited_sig
-from agents.law.consensus import EstimatorParams
-from agents.law.sig import rate_cap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -34,20 +29,3 @@ def edge_fractions(adjacency: FloatArray, tails: IntArray, heads: IntArray) -> F
     (capped) regime of the consensus a stable averaging on any graph, from local data."""
     degree = adjacency.sum(axis=1)
     return 1.0 / np.maximum(degree[tails], degree[heads])
-
-
-def consensus_flows(
-    r_self_m: FloatArray,
-    r_nbrs_m: FloatArray,
-    nbr_fractions: FloatArray,
-    params: EstimatorParams,
-    dt_s: float,
-) -> FloatArray:
-    """(d, 2) agents.law.consensus.link_flow of one follower's links (follower_logic's)."""
-    cap = rate_cap(params.step_fraction, dt_s) * nbr_fractions[:, None]
-    return limited_sig(r_nbrs_m - r_self_m, 1.0 / params.alpha1, params.k_e, cap)
-
-
-def link_balance(own_sums_m: FloatArray, their_sums_m: FloatArray) -> FloatArray:
-    """agents.law.consensus.link_balance of (d, 2) link sums (follower_logic's)."""
-    return np.asarray(0.5 * (own_sums_m - their_sums_m).sum(axis=0))

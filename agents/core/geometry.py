@@ -38,11 +38,3 @@ def as_complex(vec_m: FloatArray) -> ComplexArray:
 def as_plane(vec: ComplexArray) -> FloatArray:
     """(...) complex back to (..., 2) float rows, without copying."""
     return vec.view(np.float64).reshape(*vec.shape, 2)
-
-
-def limited_sig(
-    x: FloatArray, exponent: float, gain: float, rate_cap_per_s: FloatArray | float
-) -> FloatArray:
-    """agents.law.sig.limited_sig elementwise, for agents.follower_logic's numpy tick."""
-    mag = np.abs(x)
-    return np.copysign(np.minimum(gain * mag**exponent, rate_cap_per_s * mag), x)

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from agents.law.loader import make_law
 from agents.liveness import MembershipWatch
 from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
@@ -65,8 +66,11 @@ class Recorder:
         run_dir.mkdir(parents=True, exist_ok=True)
         self.mcap = McapLog(run_dir / MCAP_FILE, chunk_size=chunk_bytes,
                             metadata={"swarm": swarm, "scenario": scenario.name})
-        # Implausible messages, and any not from the process its key names, dropped, counted.
-        self.decoder = Decoder(limits=RECORDER_LIMITS, senders=sender_ids(scenario.n, scenario.m))
+        # Implausible messages, and any not from the process its key names, dropped,
+        # counted; a state whose law fields are not what the scenario's law declares too,
+        # as its followers drop it (transport.law_fields).
+        self.decoder = Decoder(limits=RECORDER_LIMITS, senders=sender_ids(scenario.n, scenario.m),
+                               law_fields=make_law(scenario).declared())
         self.asm = RunAssembler(scenario.n, scenario.m)
         self.state = "starting"
         self.stop_reason = ""

@@ -50,7 +50,7 @@ BAD_TOKENS = ("9", "4", "123456789", "99999999999", "-1", "01", "\u00b2", "\u066
 
 
 def forged_state(i: int, seq: int, **kw: object) -> FollowerState:
-    f: dict[str, object] = dict(r_m=(500.0, -500.0), dr_m_s=(0.0, 0.0), phi_m=(0.0, 0.0),
+    f: dict[str, object] = dict(r_m=(500.0, -500.0), dr_m_s=(0.0, 0.0),
                                 pos_m=(500.0, -500.0), vel_m_s=(0.0, 0.0), u_m_s=(0.0, 0.0),
                                 vehicle_stamp_s=time.time())
     f.update(kw)

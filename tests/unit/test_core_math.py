@@ -1,5 +1,4 @@
-"""The numpy helpers of agents.core: angles for the metrics, the estimator's weights, and
-the numpy forms of the law that agents.follower_logic's reference tick still uses."""
+"""The numpy helpers of agents.core: angles for the metrics, the estimator's weights."""
 
 from __future__ import annotations
 
@@ -8,18 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from agents.core.controller import enclosing_control as enclosing_rows
-from agents.core.estimator import (
-    consensus_flows,
-    edge_fractions,
-    link_balance,
-    observation_weights,
-)
+from agents.core.estimator import edge_fractions, observation_weights
 from agents.core.geometry import as_complex, as_plane, included_angles, wrap_2pi
-from agents.law import consensus, enclosing
-from agents.law.consensus import EstimatorParams
-from agents.law.enclosing import TWO_PI, ControlGains
-from agents.law.sig import rate_cap
+from agents.law.enclosing import TWO_PI
 from agents.scenario.model import ccw_order, successor_is_cycle
 
 RNG = np.random.default_rng(7)
@@ -72,24 +62,3 @@ def test_edge_fractions_are_one_over_the_larger_degree() -> None:
     # Degrees 3, 1, 2, 2: only the links 2 - 3 are between two followers of degree 2.
     expected = [1 / 2 if {i, j} == {2, 3} else 1 / 3 for i, j in zip(tails, heads, strict=True)]
     np.testing.assert_allclose(edge_fractions(adj, tails, heads), expected)
-
-
-def test_the_numpy_forms_are_the_law() -> None:
-    params, gains = EstimatorParams(6.0, 7.0 / 3.0, 0.5), ControlGains(2, 3, 2, 3, 8, 0.2, 0.25)
-    for _ in range(50):
-        r, nbrs = RNG.normal(size=2) * 5, RNG.normal(size=(3, 2)) * 5
-        fractions = RNG.uniform(0.1, 1.0, size=3)
-        rows = consensus_flows(r, nbrs, fractions, params, 0.02)
-        flows = consensus.consensus_flows(complex(*r), list(as_complex(nbrs)), list(fractions),
-                                          6.0, 3.0 / 7.0, rate_cap(0.5, 0.02))
-        np.testing.assert_allclose(rows, as_plane(np.array(flows)), rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(as_complex(link_balance(rows, nbrs)),
-                                   consensus.link_balance(flows, list(as_complex(nbrs))),
-                                   rtol=1e-12, atol=1e-12)
-        pos, succ, rate = (RNG.normal(size=(1, 2)) * 10 for _ in range(3))
-        out = enclosing_rows(pos, succ, r[None, :], rate, np.array([1.2]), gains, 0.02, 0.05)
-        u, z, delta = enclosing.enclosing_control(
-            complex(*pos[0]), complex(*succ[0]), complex(*r), complex(*rate[0]), 1.2, 2.0,
-            1 / 3, 2.0, 1 / 3, 8.0, 0.2, 0.25, 0.0, 0.02, 0.05)
-        assert (z, delta) == pytest.approx((out.z_m[0], out.delta[0]), rel=1e-12, abs=1e-12)
-        assert u == pytest.approx(complex(*out.u_m_s[0]), rel=1e-12, abs=1e-12)

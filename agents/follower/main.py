@@ -1,6 +1,6 @@
 """A follower process: its vehicle through MAVLink, its peers through the bus, one loop.
 
-python -m agents.follower --index I --scenario paper --swarm S --connect tcp/127.0.0.1:P
+python -m agents.follower.main --index I --scenario paper --swarm S --connect tcp/127.0.0.1:P
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from agents.follower_node import FollowerNode
+from agents.follower.node import FollowerNode
 from agents.mavlink.adapter import MavlinkAdapter
 from agents.process import load_run_scenario, process_main
 from agents.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
@@ -19,7 +19,7 @@ from transport.errors import EncloseError
 from transport.impairment import ImpairedBus
 
 
-# The node (its state and loop body) is agents.follower_node, not named in the module
+# The node (its state and loop body) is agents.follower.node, not named in the module
 # docstring above: that is this process's --help text.
 def run(opts: AgentOptions) -> int:
     # The launcher (or the user's `enclose` command) checked the targets' spread over the
