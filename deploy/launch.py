@@ -13,6 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from agents.law_args import law_overrides
 from agents.network_args import network_overrides
 from agents.phases import mark
 from agents.scenario.faults import parse_fault_flag
@@ -78,7 +79,7 @@ class Launch:
 
     def common(self) -> list[str]:
         extra = ["--zenoh-config", self.opts.zenoh_config] if self.opts.zenoh_config else []
-        extra += network_overrides(self.opts.network)
+        extra += network_overrides(self.opts.network) + law_overrides(self.opts.law)
         return ["--scenario", self.opts.scenario_ref(), "--swarm", self.keys.swarm, *extra]
 
     def recorder_sensor_argv(self) -> list[str]:

@@ -10,6 +10,7 @@ import argparse
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from agents.law_args import LawOptions
 from agents.network_args import NetworkOptions
 from deploy.live_args import LiveOptions
 
@@ -26,6 +27,7 @@ class LaunchOptions:
     max_restarts: int = 5
     faults: tuple[str, ...] = ()  # --fault AT_S:ACTION:TARGET[:DURATION_S]
     network: NetworkOptions = field(default_factory=NetworkOptions)
+    law: LawOptions = field(default_factory=LawOptions)  # --law, --law-param
     live: LiveOptions | None = None  # None: no live view
     port_range: str | None = None  # LO-HI
     credentials_dir: str | None = None  # a host's copy of `enclose keys` (enclose host)
@@ -41,7 +43,8 @@ class LaunchOptions:
             scenario=scenario, zenoh_config=args.zenoh_config, noise_std_m=args.noise_std_m,
             link_timeout_s=args.link_timeout, insecure=args.insecure, json=args.json,
             restart=args.restart, max_restarts=args.max_restarts, faults=tuple(args.fault),
-            network=network, live=live, port_range=port_range,
+            network=network, law=LawOptions.from_namespace(args), live=live,
+            port_range=port_range,
             credentials_dir=credentials_dir, verbose=int(getattr(args, "verbose", 0)),
         )
 

@@ -68,6 +68,7 @@ class Verdict:
     silent: tuple[int, ...] = ()  # 0-based followers that sent no state: not judged whole
     recording: str | None = None  # what the recorder lost, when it lost enough to matter
     refused: dict[str, Any] | None = None  # bus input the processes refused (deploy.refusals)
+    law: str | None = None  # the followers' law and how often it failed in flight
 
     @property
     def inside(self) -> bool:
@@ -149,6 +150,27 @@ def silent_text(silent: tuple[int, ...], n: int | None) -> str:
     return f"follower{'s' if len(silent) > 1 else ''} {names} (0-based) sent no state{over}"
 
 
+def law_line(info: dict[str, Any], metrics: dict[str, Any],
+             launch: dict[str, Any]) -> str | None:
+    """The law the followers flew (run.json) and its failures: in flight, the followers'
+    `law_failures` counters as the flight ended (launch.json); in lock-step, metrics.json's."""
+    law = info.get("law")
+    if not isinstance(law, str):
+        return None
+    if launch:
+        status = _dict(launch.get("status_at_stop") or launch.get("status"))
+        counts = {name: _dict(c).get("law_failures") for name, c in status.items()
+                  if name.startswith("follower-")}
+    else:
+        counts = {"lock-step": metrics.get("law_failures")}
+    failed = {name: n for name, n in counts.items() if isinstance(n, int) and n > 0}
+    if not failed:
+        return f"{law} (no failure)" if launch or "law_failures" in metrics else law
+    worst = max(failed, key=lambda k: failed[k])
+    return (f"{law}: FAILED {sum(failed.values())} times, the vehicle held (most: {worst} "
+            f"{failed[worst]}; its log has the traceback)")
+
+
 def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
     metrics, info = _read(run_dir / "metrics.json"), _read(run_dir / "run.json")
     launch = _read(run_dir / "launch.json")
@@ -168,6 +190,7 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
         tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
         bool(launch), load_line(load), overrun_line(ticks), memory_line(load),
         silent_followers(metrics), recording_line(metrics), launch_refusals(launch),
+        law_line(info, metrics, launch),
     )
 
 
@@ -186,6 +209,7 @@ def verdict_json(v: Verdict) -> dict[str, Any]:
         "memory": v.memory,
         "late_ticks": v.ticks,
         "recording": v.recording,
+        "law": v.law,
         "run_dir": str(v.run_dir),
     }}
 
@@ -217,6 +241,7 @@ def print_verdict(console: Console, v: Verdict) -> None:
         console.print(grid)
     settle = _num(v.metrics.get("settle_time_s"))
     rows = [] if v.error else [("settle time", "never" if settle is None else f"{settle:.1f} s")]
+    rows += [("law", v.law)] if v.law else []
     if v.silent:
         n = len(v.metrics.get("followers") or {}) or None
         rows.append(("silent", silent_text(v.silent, n)))

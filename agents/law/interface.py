@@ -71,7 +71,9 @@ from transport.law_fields import FieldSpec, check_specs
 if TYPE_CHECKING:
     from agents.scenario.model import Scenario
 
-__all__ = ["FieldSpec", "Inputs", "Law", "Output", "Peer", "Sample", "Setup", "Value", "reference"]
+# A law author imports from this module only: ScenarioError is what `from_params` raises.
+__all__ = ["FieldSpec", "Inputs", "Law", "Output", "Peer", "Sample", "ScenarioError", "Setup",
+           "Value", "reference"]
 
 S = TypeVar("S")
 

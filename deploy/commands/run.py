@@ -10,6 +10,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from agents.law_args import add_law_arguments, apply_law_arguments
 from agents.network_args import NetworkOptions, add_network_arguments, apply_network_arguments
 from agents.scenario.file import load_scenario
 from deploy.launch import Launch
@@ -56,6 +57,7 @@ def register(sub: Any) -> None:
     add_json_argument(p)
     add_supervision_arguments(p)
     add_network_arguments(p)
+    add_law_arguments(p)
     add_netns_arguments(p)
     add_hosts_arguments(p)
     p.set_defaults(func=_main)
@@ -88,6 +90,7 @@ def _main(args: argparse.Namespace) -> int:
 def run(opts: RunOptions) -> int:
     launch = opts.launch
     scenario = apply_network_arguments(load_scenario(launch.scenario), launch.network)
+    scenario = apply_law_arguments(scenario, launch.law)  # a bad law fails here, first
     duration = scenario.run.duration_s if opts.duration_s is None else opts.duration_s
     if duration <= 0:
         raise DeployError("--duration must be > 0")
