@@ -3,6 +3,7 @@ estimate of one follower, with the run's marks (deploy.marks)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import matplotlib
@@ -14,12 +15,12 @@ from agents.follower.replay import Series
 from deploy.marks import draw_marks, legend_handles, run_marks
 
 
-def counterfactual_figure(run: Series, series: Series, run_dir: Path, follower: int,
-                          label: str, out: Path) -> Path:
+def counterfactual_figure(run: Series, series: Series, start_s: float, run_dir: Path,
+                          follower: int, label: str, out: Path) -> Path:
     """Command and estimate, `run` (the run's law replayed) vs `series` (`label`), x and
-    y, on the run's time axis.  The journal has the follower's clock: its first control
-    tick is taken as the run's start."""
-    t0 = series.t_s[0] if series.t_s else 0.0
+    y, on the run's time axis (from `start_s`, the start on the follower's clock; a
+    journal without it starts at its first control tick)."""
+    t0 = start_s if math.isfinite(start_s) else (series.t_s[0] if series.t_s else 0.0)
     t = [x - t0 for x in series.t_s]
     marks = run_marks(run_dir, [x - t0 for x in series.regroups_s])
     fig, axes = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
@@ -38,7 +39,7 @@ def counterfactual_figure(run: Series, series: Series, run_dir: Path, follower: 
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
     axes[0].set_title(f"follower-{follower}: the run and {label}, on the same inputs (open loop)")
-    axes[1].set_xlabel("time from the follower's first control tick (s)")
+    axes[1].set_xlabel("time from the start (s)")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)

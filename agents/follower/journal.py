@@ -2,7 +2,8 @@
 
 The follower's `LawRunner` writes one record per call that changes it: a step (`"s"`:
 the clock, control tick or estimator step, its vehicle's sample, its targets and peers as
-handed to the law, and what came out), a change of members (`"g"`) and a join (`"j"`).
+handed to the law, and what came out), a change of members (`"g"`), a join (`"j"`), and the experiment's start and stop
+as the follower heard them (`"w"`: the replay's time axis).
 Targets and peers are written as changes: the keys in the order the law iterates them,
 and only the entries that are not the very objects of the last record (agents.follower.inputs
 makes a new one per newer message), so a record costs about the messages that arrived.
@@ -24,7 +25,7 @@ from agents.follower.journal_file import FrameWriter
 from agents.law.interface import Output, Peer, Sample
 from transport.law_fields import FieldSpec, LawFields
 
-STEP, REGROUP, JOIN = "s", "g", "j"
+STEP, REGROUP, JOIN, WINDOW = "s", "g", "j", "w"
 _new = tuple.__new__
 
 
@@ -150,6 +151,10 @@ class JournalWriter:
 
     def join(self, peers: Mapping[int, Peer], now_s: float) -> None:
         self.file.add([JOIN, now_s, self._peers_join.delta(peers)])
+
+    def window(self, start_s: float, stop_s: float) -> None:
+        """The experiment's start and stop as this follower was told them (its clock)."""
+        self.file.add([WINDOW, start_s, stop_s])
 
     def close(self) -> None:
         self.file.close()

@@ -9,6 +9,7 @@ the series of what it would have commanded is the answer, open loop.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +19,7 @@ from agents.follower.journal import (
     JOIN,
     REGROUP,
     STEP,
+    WINDOW,
     Mirror,
     PeerCodec,
     read_sample,
@@ -26,6 +28,7 @@ from agents.follower.journal import (
 )
 from agents.follower.journal_file import Frames
 from agents.follower.membership import setup_for
+from agents.follower.replay_explain import JumpWatch
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Output
 from agents.scenario.model import Scenario
@@ -61,6 +64,18 @@ class Replay:
     difference: Difference | None = None
     stopped: str | None = None  # the journal ended early (a killed process): where
     series: Series = field(default_factory=Series)
+    jumps: JumpWatch = field(default_factory=JumpWatch)
+    # The experiment's start and stop on the follower's clock (the run's control words);
+    # the time axis of figures and the window of the largest jump
+    start_s: float = -math.inf
+    stop_s: float = math.inf
+
+    def steady_s(self, steady_from_s: float | None) -> float:
+        """Where the run's metrics start judging (its steady part), on this clock: the
+        window of the largest command jump, like the run's `command_jump_m_s`."""
+        if steady_from_s is not None:
+            return self.start_s + steady_from_s
+        return self.start_s + 0.5 * (self.stop_s - self.start_s)
 
     @property
     def reproduced(self) -> bool:
@@ -102,12 +117,17 @@ def replay(path: Path, scenario: Scenario, law: Law[Any], check: bool = True) ->
             found.series.regroups_s.append(found.series.t_s[-1] if found.series.t_s else 0.0)
         elif kind == JOIN:
             runner.join(joins.apply(rec[2]), rec[1])
+        elif kind == WINDOW:
+            found.start_s, found.stop_s = rec[1], rec[2]
         elif kind == STEP:
             now_s, command, own, tdelta, pdelta, done = rec[1:]
-            got = runner.step(now_s, command, read_sample(own), targets.apply(tdelta),
-                              peers.apply(pdelta))
+            mine, tmap, pmap = read_sample(own), targets.apply(tdelta), peers.apply(pdelta)
+            found.jumps.arrived(entry[0] for entry in pdelta[1])
+            got = runner.step(now_s, command, mine, tmap, pmap)
             if command:
                 _keep(found.series, now_s, got)
+                if found.steady_s(scenario.run.steady_from_s) <= now_s < found.stop_s:
+                    found.jumps.tick(now_s, found.series.u_m_s[-1], mine, tmap, pmap)
             if check and found.difference is None:
                 why = compare(got, done)
                 if why is not None:

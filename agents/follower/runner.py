@@ -156,6 +156,11 @@ class LawRunner:
         if self.journal is not None:
             self._journal(self.journal.regroup, new.members)
 
+    def window(self, start_s: float, stop_s: float) -> None:
+        """The experiment's start and stop (the run's control words): journaled only."""
+        if self.journal is not None:
+            self._journal(self.journal.window, start_s, stop_s)
+
     def join(self, peers: Mapping[int, Peer], now_s: float) -> None:
         """Joining a running swarm: continue from the neighbours' mean estimate."""
         if self.last_r is not None:

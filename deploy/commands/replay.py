@@ -107,7 +107,8 @@ def _counterfactual(path: Path, scenario: Scenario, found: Replay, run_dir: Path
     from deploy.replay_figure import counterfactual_figure
 
     out = args.figure or run_dir / f"replay-follower-{k}.png"
-    drawn = counterfactual_figure(found.series, asked.series, run_dir, k, label, out)
+    drawn = counterfactual_figure(found.series, asked.series, found.start_s, run_dir, k,
+                                  label, out)
     jump = max((abs(b - a) for a, b in zip(asked.series.u_m_s, asked.series.u_m_s[1:],
                                             strict=False)), default=0.0)
     print(f"  {label}, open loop: largest command jump {jump:.3f} m/s; figure: {drawn}")
@@ -126,6 +127,12 @@ def _say(found: Replay, k: int, took_s: float) -> None:
         print(f"{head}: reproduced bit for bit")
     if found.stopped:
         print(f"  the journal stops early: {found.stopped}")
+    jump = found.jumps.largest
+    if jump is not None:
+        print(f"  largest command jump of the steady part {jump.size_m_s:.3f} m/s at "
+              f"{jump.t_s - found.start_s:.2f} s, {jump.before_m_s:.3f} -> "
+              f"{jump.after_m_s:.3f}: "
+              f"{jump.inputs}")
 
 
 def run(args: argparse.Namespace) -> int:
