@@ -109,9 +109,10 @@ def _counterfactual(path: Path, scenario: Scenario, found: Replay, run_dir: Path
     out = args.figure or run_dir / f"replay-follower-{k}.png"
     drawn = counterfactual_figure(found.series, asked.series, found.start_s, run_dir, k,
                                   label, out)
-    jump = max((abs(b - a) for a, b in zip(asked.series.u_m_s, asked.series.u_m_s[1:],
+    apart = max((abs(a - b) for a, b in zip(found.series.u_m_s, asked.series.u_m_s,
                                             strict=False)), default=0.0)
-    print(f"  {label}, open loop: largest command jump {jump:.3f} m/s; figure: {drawn}")
+    print(f"  {label}, open loop: its command up to {apart:.3f} m/s from the run's; "
+          f"figure: {drawn}")
 
 
 def _say(found: Replay, k: int, took_s: float) -> None:

@@ -1,5 +1,5 @@
 """A networked paper run with a pause and 10 % loss: every follower's journal replays its
-commands, estimates and published fields bit for bit; another gain draws its figure."""
+commands, estimates and published fields bit for bit; a softer controller gain draws its figure."""
 
 from __future__ import annotations
 
@@ -36,8 +36,11 @@ def test_every_follower_replays_bit_for_bit(tmp_path: Path) -> None:
     steps = [int(ln.split(": ")[1].split()[0]) for ln in lines]
     assert all(s > 500 for s in steps), steps
 
-    figure = tmp_path / "k_e.png"
-    other = _replay(str(out), "follower-1", "--set", "gains.k_e=4", "--figure", str(figure))
+    figure = tmp_path / "k_z.png"
+    other = _replay(str(out), "follower-1", "--set", "gains.k_z=1", "--figure", str(figure))
     assert other.returncode == 0, other.stdout + other.stderr
-    assert "reproduced bit for bit" in other.stdout and "gains.k_e=4, open loop" in other.stdout
+    assert "reproduced bit for bit" in other.stdout, other.stdout
+    # A softer controller gain commands otherwise while the ring forms
+    apart = float(other.stdout.split("gains.k_z=1, open loop: its command up to ")[1].split()[0])
+    assert apart > 0.01, other.stdout
     assert figure.stat().st_size > 10_000
