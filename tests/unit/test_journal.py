@@ -133,3 +133,28 @@ def test_a_peer_with_rated_fields_round_trips_exactly() -> None:
         back = codec.decode(msgpack.unpackb(msgpack.packb(codec.encode(peer))))
         assert back == peer and list(back.fields) == list(fields)
         assert all(type(back.fields[k]) is type(v) for k, v in fields.items())
+
+
+def test_enclose_replay_names_a_damaged_or_cut_journal(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from agents.follower import journal_file
+    from deploy.cli import main
+
+    monkeypatch.setattr(journal_file, "FLUSH_EVERY_S", 0.0)  # a frame per record
+    path = tmp_path / "journal" / "follower-0.journal"
+    path.parent.mkdir()
+    _fly(path, 150)
+    assert main(["replay", str(tmp_path), "follower-0"]) == 0
+    assert "reproduced bit for bit" in capsys.readouterr().out
+    whole = path.read_bytes()
+    path.write_bytes(whole[:-5])  # killed while writing its last frame
+    assert main(["replay", str(tmp_path), "--all"]) == 0
+    out = capsys.readouterr().out
+    assert "stops early" in out and "run reproduced" in out
+    damaged = bytearray(whole)
+    damaged[len(whole) // 2] ^= 0x55
+    path.write_bytes(bytes(damaged))
+    assert main(["replay", str(tmp_path), "follower-0"]) == 2
+    out = capsys.readouterr().out
+    assert "damaged" in out and str(path) in out and "byte" in out
