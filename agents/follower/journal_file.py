@@ -28,6 +28,19 @@ import msgpack
 from transport.errors import JournalError
 
 JOURNAL_VERSION = 1
+
+
+def enclose_version() -> str:
+    """This enclose's version (deploy.version's, read here: agents import nothing of
+    deploy).  A replay by another version need not reproduce: it is refused."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("enclose")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
 ZLIB_LEVEL = 1
 MAGIC = "enclose-journal"
 FLUSH_EVERY_S = 1.0
@@ -46,7 +59,8 @@ class FrameWriter:
         self._parts: list[bytes] = []
         self._next_flush_s = time.monotonic() + FLUSH_EVERY_S
         self.bytes_written = 0
-        self._write(self._pack({"magic": MAGIC, "version": JOURNAL_VERSION, **header}))
+        self._write(self._pack({"magic": MAGIC, "version": JOURNAL_VERSION,
+                                "enclose": enclose_version(), **header}))
 
     def add(self, record: object) -> None:
         self._parts.append(self._pack(record))
@@ -97,9 +111,12 @@ class Frames:
             raise JournalError(str(path), 0, f"unreadable header: {exc}") from None
         if not isinstance(header, dict) or header.get("magic") != MAGIC:
             raise JournalError(str(path), 0, "not an enclose journal")
-        if header.get("version") != JOURNAL_VERSION:
-            raise JournalError(str(path), 0, f"journal version {header.get('version')!r}, "
-                               f"this enclose reads version {JOURNAL_VERSION}")
+        mine = enclose_version()
+        if header.get("version") != JOURNAL_VERSION or header.get("enclose") != mine:
+            raise JournalError(
+                str(path), 0, f"written by enclose {header.get('enclose')!r} (journal "
+                f"version {header.get('version')!r}), this is enclose {mine!r} (journal "
+                f"version {JOURNAL_VERSION}): replay it with the enclose that ran it")
         frames.header = header
         return frames
 

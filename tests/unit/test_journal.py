@@ -12,7 +12,7 @@ import msgpack
 import pytest
 
 from agents.follower.journal import JournalWriter, PeerCodec, journal_path
-from agents.follower.journal_file import JOURNAL_VERSION, Frames, FrameWriter
+from agents.follower.journal_file import JOURNAL_VERSION, Frames, FrameWriter, enclose_version
 from agents.follower.membership import setup_for
 from agents.follower.replay import replay
 from agents.follower.runner import LawRunner
@@ -104,14 +104,18 @@ def test_a_damaged_frame_is_named_by_offset(tmp_path: Path) -> None:
 
 def test_another_version_is_refused_naming_both(tmp_path: Path) -> None:
     path = tmp_path / "f.journal"
-    head = msgpack.packb({"magic": "enclose-journal", "version": JOURNAL_VERSION + 1})
     import zlib
 
-    path.write_bytes(struct.pack("<II", len(head), zlib.crc32(head)) + head)
-    with pytest.raises(JournalError) as err:
-        Frames.open(path)
-    assert f"version {JOURNAL_VERSION + 1}" in str(err.value)
-    assert f"version {JOURNAL_VERSION}" in str(err.value)
+    mine = enclose_version()
+    for version, enclose in ((JOURNAL_VERSION + 1, mine), (JOURNAL_VERSION, "0.0.1")):
+        head = msgpack.packb({"magic": "enclose-journal", "version": version,
+                              "enclose": enclose})
+        path.write_bytes(struct.pack("<II", len(head), zlib.crc32(head)) + head)
+        with pytest.raises(JournalError) as err:
+            Frames.open(path)
+        assert f"journal version {version}" in str(err.value)
+        assert f"enclose {enclose!r}" in str(err.value)
+        assert f"this is enclose {mine!r} (journal version {JOURNAL_VERSION})" in str(err.value)
 
 
 def test_a_restarted_process_writes_the_next_part(tmp_path: Path) -> None:
