@@ -102,7 +102,8 @@ def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mav-vehicle-base", type=int, default=14580,
                         help="vehicle v listens on BASE+v (PX4 SITL: 14580)")
     parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="32-byte MAVLink 2 signing key: sign everything sent to the vehicle")
+                        help="this vehicle's 32-byte MAVLink 2 signing key: sign everything "
+                        "sent to it, refuse what it did not sign")
     parser.add_argument("--mav-vehicle-host", default=None, metavar="ADDR",
                         help="the vehicle's address when it is on another host (default: "
                         "127.0.0.1); the adapter then listens on every address")
@@ -161,7 +162,9 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
         watch, keeper = VehicleWatch(), OffboardKeeper(mav)
 
         def extra() -> dict[str, int]:
-            signing = {k: v for k, v in mav.counters.items() if k.startswith("signing_")}
+            # What the adapter refused or dropped (signatures, flood): agents.mavlink.rx_gate.
+            signing = {k: v for k, v in mav.counters.items()
+                       if k.startswith(("signing_", "rx_"))}
             return {"overruns": ticker.overruns, "ticks": ticker.ticks,
                     "offboard_requests": keeper.requests,
                     **mav.clock_counters(), **signing, **node.counters()}

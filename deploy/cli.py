@@ -21,9 +21,10 @@ COMMANDS: dict[str, str] = {
     "sim": "deploy.cmd_sim",
     "sweep": "deploy.sweep",
     "keys": "deploy.run_secrets",
+    "vehicle-key": "deploy.run_secrets",
     "host": "deploy.cmd_host",
 }
-COMMAND_MODULES: tuple[str, ...] = tuple(COMMANDS.values())
+COMMAND_MODULES: tuple[str, ...] = tuple(dict.fromkeys(COMMANDS.values()))  # each once
 
 
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:

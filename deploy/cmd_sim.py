@@ -47,9 +47,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="vehicle i listens on BASE+i (PX4 SITL: 14580)")
     parser.add_argument("--send-base-port", type=int, default=14540,
                         help="vehicle i sends telemetry to SEND_BASE+i (PX4 SITL: 14540)")
-    parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="32-byte MAVLink 2 signing key: vehicles drop unsigned or badly "
-                        "signed messages (default: unsigned, so any ground station connects)")
+    keys = parser.add_mutually_exclusive_group()
+    keys.add_argument("--signing-key", default=None, metavar="FILE",
+                      help="32-byte MAVLink 2 signing key of every vehicle: they drop unsigned "
+                      "or badly signed messages (default: unsigned, so any ground station "
+                      "connects)")
+    keys.add_argument("--signing-secret", default=None, metavar="FILE",
+                      help="32-byte run secret: each vehicle enforces signing with its own "
+                      "key derived from it (`enclose vehicle-key FILE SYSID` prints one)")
     parser.add_argument("--duration-s", type=float, default=None,
                         help="stop after this much simulated time (default: until Ctrl-C)")
 
@@ -65,7 +70,9 @@ def build_simulator(args: argparse.Namespace) -> Simulator:
     cfg = SimConfig(rate_hz=args.rate_hz, telemetry_hz=args.telemetry_hz,
                     flavour=args.flavour or vehicle.flavour, host=args.host,
                     listen_base_port=args.base_port, send_base_port=args.send_base_port,
-                    signing_key=None if args.signing_key is None else load_key(args.signing_key))
+                    signing_key=None if args.signing_key is None else load_key(args.signing_key),
+                    signing_secret=None if args.signing_secret is None
+                    else load_key(args.signing_secret))
     return Simulator(spawn, vehicle, home, cfg)
 
 

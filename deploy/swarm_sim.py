@@ -151,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
         host=args.mav_host,
         listen_base_port=args.base_port,
         send_base_port=args.send_base_port,
-        signing_key=None if args.signing_key is None else load_key(args.signing_key),
+        signing_secret=None if args.signing_secret is None else load_key(args.signing_secret),
     )
     keys = SwarmKeys(args.swarm)
     with stop_on_signals() as stop, open_bus(args) as bus:
@@ -230,8 +230,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="address the vehicles listen on (another host's agents: its "
                         "own address, or 0.0.0.0); telemetry also goes to whoever sends")
     parser.add_argument("--send-base-port", type=int, default=14540)
-    parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="MAVLink 2 signing key the vehicles enforce")
+    parser.add_argument("--signing-secret", default=None, metavar="FILE",
+                        help="the run's 32-byte MAVLink secret: each vehicle enforces signing "
+                        "with its own key derived from it (agents.mavlink.signing)")
     return process_main(parser, argv, run, lambda _a: "sim")
 
 
