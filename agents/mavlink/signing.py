@@ -163,7 +163,7 @@ class SignatureVerifier:
         """The verdict `check` would give the first frame of datagram `data` (`malformed`
         when it starts with no whole frame), without moving any stream."""
         n = len(data)
-        if n < 8 or data[0] not in (STX_V2, STX_V1):
+        if n < (12 if data[:1] == b"\xfd" else 8) or data[0] not in (STX_V2, STX_V1):
             reason: str | None = "malformed"
         elif data[0] == STX_V1:
             reason = None if data[5] in self.allowed_unsigned else "unsigned"
