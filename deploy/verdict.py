@@ -19,6 +19,7 @@ from rich.text import Text
 
 from deploy.cpu_load import load_line, memory_line, overrun_line
 from deploy.json_files import read_json
+from deploy.refusals import refusal_lines
 
 # metrics.json key -> (label, unit, run.json key of its bound)
 BOUNDED = (
@@ -55,7 +56,7 @@ class Verdict:
     checks: tuple[Check, ...]
     error: str | None  # no metrics: why
     metrics: dict[str, Any]
-    processes: tuple[str, ...]  # what died, restarted, was faulted or failed
+    processes: tuple[str, ...]  # what died, restarted, was faulted or failed, or refused
     links: str | None
     live_url: str | None
     files: tuple[str, ...]
@@ -161,7 +162,7 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
     ticks = _dict(load.get("ticks"))
     return Verdict(
         title, run_dir, checks, None if error is None else str(error), metrics,
-        process_lines(launch), link_summary(metrics),
+        process_lines(launch) + refusal_lines(launch.get("status")), link_summary(metrics),
         live if isinstance(live, str) and live else None,
         tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
         bool(launch), load_line(load), overrun_line(ticks), memory_line(load),

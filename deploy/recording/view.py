@@ -10,7 +10,8 @@ panels work without set-up:
   `agents.core.metrics.error_series`);
 - `/links` (JSON `enclose.LiveLinks`): per link age and delivered ratio
   (`deploy.recording.live_links`), once a recorder tick;
-- `/status` (JSON `enclose.LiveStatus`): each process's state and the member set, each tick;
+- `/status` (JSON `enclose.LiveStatus`): each process's state, what it refused on its
+  MAVLink link (`refused`, deploy.refusals) and the member set, each tick;
 - `/log` (`foxglove.Log`, protobuf): a line per process state or membership change.
 """
 
@@ -28,6 +29,7 @@ from agents.core.timeseries import RunSeries
 from deploy.recording.live_links import LinkTracker
 from deploy.recording.mcap_log import RawFrame, RawSchema
 from deploy.recording.scene import LinkView, scene_update, timestamp
+from deploy.refusals import refusals
 from deploy.rundir import RunInfo
 from transport.messages import FollowerState, Message, ProcessStatus, RunControl, TruthSnapshot
 
@@ -171,8 +173,8 @@ class LiveView:
             self._members = members
             self._log(f"members {sorted(members)}", fm.LogLevel.Info, now_s, "membership")
         ns = int(now_s * _NS)
-        procs = [{"name": k, "state": s.state, "detail": s.detail}
-                 for k, s in sorted(self.processes.items())]
+        procs = [{"name": k, "state": s.state, "detail": s.detail,
+                  "refused": refusals(s.counters)} for k, s in sorted(self.processes.items())]
         return [*self.frames(),
                 _json(LINKS_TOPIC, {"links": [k.as_json() for k in self.links.links()]}, ns),
                 _json(STATUS_TOPIC, {"processes": procs,

@@ -155,7 +155,8 @@ def test_view_throttles_the_scene_and_logs_state_changes(paper: Scenario) -> Non
     assert b"follower-1 failed (boom)" in logs[0] and b"members [0, 2, 3]" in logs[1]
     status = json.loads(next(f.data for f in frames if f.topic == STATUS_TOPIC))
     assert status["members"] == [0, 2, 3]
-    assert status["processes"] == [{"name": "follower-1", "state": "failed", "detail": "boom"}]
+    assert status["processes"] == [{"name": "follower-1", "state": "failed", "detail": "boom",
+                                    "refused": {}}]
     assert json.loads(next(f.data for f in frames if f.topic == LINKS_TOPIC)) == {"links": []}
 
 
