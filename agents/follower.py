@@ -9,12 +9,12 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from agents.errors import EncloseError
 from agents.follower_node import FollowerNode
 from agents.mavlink.adapter import MavlinkAdapter
 from agents.process import add_bus_arguments, load_run_scenario, process_main
 from agents.vehicle_loop import add_vehicle_arguments, fly
 from transport.bus import Bus
+from transport.errors import EncloseError
 from transport.impairment import ImpairedBus
 
 

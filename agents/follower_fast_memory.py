@@ -11,7 +11,7 @@ from types import MappingProxyType
 from typing import NamedTuple
 
 from agents.follower_setup import FollowerSetup
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 
 class Sample(NamedTuple):

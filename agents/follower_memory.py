@@ -74,7 +74,7 @@ class FollowerMemory:
     last_r: Sample | None = None
     carry_m: FloatArray = field(default_factory=lambda: np.zeros(2))
     rebase_pending: bool = False
-    # Order 2 (agents.scenario.Gains.estimator_order): the velocity stage's own running
+    # Order 2 (agents.scenario.model.Gains.estimator_order): the velocity stage's own running
     # sum and flow per neighbour (d, 2), and the estimate rv_i it published last.
     vel_sums_m_s: FloatArray | None = None
     vel_rates_m_s2: FloatArray | None = None

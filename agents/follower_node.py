@@ -27,7 +27,7 @@ from agents.follower_fast_membership import join_running, regroup, standing_esti
 from agents.liveness import MembershipWatch
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.process import StatusReporter
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 from transport.bus import Bus, Subscription
 from transport.checks import DEFAULT_LIMITS, newer
 from transport.codec import encode

@@ -16,7 +16,7 @@ from agents.core.controller_one import ControlGains
 from agents.core.estimator_one import EstimatorParams
 from agents.core.params import control_gains, estimator_params
 from agents.membership import membership
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 # numpy only for the lock-step engine's matrices: the follower process forms its ring
 # from `weight_row` and `edge_fraction` and must not import numpy (issue 15).

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from agents.core.metrics import ErrorSeries, error_series
 from agents.core.timeseries import RunSeries
 from agents.membership import membership
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 FloatArray = NDArray[np.float64]
 

@@ -5,16 +5,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from agents.scenario import (
-    AGENT_SCHEDS,
-    ESTIMATORS,
-    LINK_PROTOCOLS,
-    LOSS_MODELS,
-    ZENOH_RUNTIMES,
-    Scenario,
-)
-from agents.scenario_checks import check_estimator_order
-from agents.scenario_network import IMPAIRMENT_KEYS, impairment
+from agents.scenario.checks import check_estimator_order
+from agents.scenario.model import ESTIMATORS, Scenario
+from agents.scenario.network import IMPAIRMENT_KEYS, impairment
+from transport.network_schema import AGENT_SCHEDS, LINK_PROTOCOLS, LOSS_MODELS, ZENOH_RUNTIMES
 
 FLAGS = {key: "--" + key.replace("_", "-") for key in IMPAIRMENT_KEYS}
 

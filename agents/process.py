@@ -17,17 +17,18 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from types import FrameType
 
-from agents.errors import EncloseError
 from agents.network_args import add_network_arguments, apply_network_arguments
 from agents.phases import mark
-from agents.scenario import NetworkConfig, Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 from transport.bus import Bus
 from transport.clock_sync import parse_clock_hosts
 from transport.codec import encode
 from transport.credentials import Identity
+from transport.errors import EncloseError
 from transport.keys import SwarmKeys
 from transport.messages import ProcessStatus, Stamper
+from transport.network_schema import NetworkConfig
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
@@ -81,7 +82,7 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
 def load_run_scenario(args: argparse.Namespace) -> Scenario:
     """The scenario named on the command line, with the command line's network overrides;
     checked over the whole run unless the entry point set `whole_run_checks=False`
-    (agents.follower: see agents.scenario_checks.check_admissible)."""
+    (agents.follower: see agents.scenario.checks.check_admissible)."""
     whole_run = getattr(args, "whole_run_checks", True)
     return apply_network_arguments(load_scenario(args.scenario, whole_run), args)
 

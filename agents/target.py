@@ -17,13 +17,13 @@ from collections.abc import Sequence
 import numpy as np
 
 from agents.core.profiles import TargetMotion
-from agents.errors import EncloseError
 from agents.mavlink.adapter import MavlinkAdapter
 from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, process_main
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 from agents.vehicle_loop import add_vehicle_arguments, fly
 from transport.bus import Bus
 from transport.decoder import Decoder
+from transport.errors import EncloseError
 from transport.keys import SwarmKeys
 from transport.messages import RunControl
 

@@ -9,7 +9,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Protocol
 
-from agents.errors import MavlinkError
 from agents.liveness import StallGuard
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter, VehicleState
 from agents.mavlink.modes import HOLD_MODE, OFFBOARD_MODE
@@ -25,8 +24,9 @@ from agents.process import (
     open_bus,
     stop_on_signals,
 )
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 from transport.bus import Bus, Token
+from transport.errors import MavlinkError
 from transport.keys import SwarmKeys
 
 log = logging.getLogger(__name__)

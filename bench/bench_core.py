@@ -19,8 +19,8 @@ import numpy as np
 
 from agents.core.lockstep import simulate_lockstep
 from agents.core.metrics import Metrics, compute_metrics, error_series
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 
 EPS_RHO_M, EPS_DELTA = 0.0999, 0.0199
 RATES_HZ = (1000.0, 100.0, 50.0, 20.0, 10.0, 5.0, 2.0)

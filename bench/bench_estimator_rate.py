@@ -17,8 +17,8 @@ import numpy as np
 
 from agents.core.lockstep import simulate_lockstep
 from agents.core.metrics import compute_metrics, error_series
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 
 EPS_M, EPS_DELTA = 0.0999, 0.0199
 CONTROL_DT_S = 0.02

@@ -4,7 +4,7 @@ process floods its MAVLink port with badly signed datagrams?
     python bench/bench_flood.py [--seconds 10] [--repeat 3] [--only NAME ...]
     python bench/bench_flood.py --legacy /path/to/older/checkout   # the same, older code
 
-Per run, three processes: the simulator (`deploy.cmd_sim`, one signing vehicle), a victim
+Per run, three processes: the simulator (`deploy.commands.sim`, one signing vehicle), a victim
 agent (this script with --victim: the project's MavlinkAdapter flying vehicle 1 at 50 Hz
 on the project's Ticker, velocity setpoints each tick, as a follower's loop does without
 its law) and a flooder (tests/integration/mav_insider.py: datagrams of frames signed with
@@ -136,7 +136,7 @@ def one_run(level: tuple[str, str, int, int], seconds: float, code: Path,
         signing, key = keys(tmp, legacy)
         vbase, abase = free_port_block(1), free_port_block(1)
         with (tmp / "sim.log").open("wb") as log:
-            sim = subprocess.Popen([sys.executable, "-m", "deploy.cmd_sim", "--vehicles", "1",
+            sim = subprocess.Popen([sys.executable, "-m", "deploy.commands.sim", "--vehicles", "1",
                                     "--base-port", str(vbase), "--send-base-port", str(abase),
                                     *signing], stdout=log, stderr=subprocess.STDOUT, env=env)
         vic = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--victim",

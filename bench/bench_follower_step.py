@@ -23,9 +23,9 @@ import numpy as np
 
 from agents import follower_fast as fast
 from agents import follower_logic as ref
-from agents.scenario import NetworkConfig
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from transport.messages import FollowerState, Header
+from transport.network_schema import NetworkConfig
 
 
 def _per_call_us(fn: Callable[[], Any], calls: int, repeat: int) -> float:

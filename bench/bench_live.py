@@ -21,8 +21,8 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 from deploy.recording.live_server import LiveServer
 from deploy.recording.loop import Recorder
 from tests.recorder_synth import SynthRun

@@ -35,7 +35,7 @@ from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.modes import do_set_mode_params
 from agents.mavlink.signing import SignatureVerifier, signing_timestamp
 from agents.mavlink.wire import decode_datagram, encode, new_codec, sign_outgoing, signature_ok
-from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 
 KEY = bytes(range(1, 33))

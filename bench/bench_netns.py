@@ -25,10 +25,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 from deploy.json_files import read_json as read_json_or_none
-from deploy.netns import probe
+from deploy.netns.namespace import probe
 
 METRICS = ("estimator_error_m", "radius_error_m", "angle_error", "command_jump_m_s")
 COLUMNS = ("link", "os_loss", "exit", "link_s", "kernel_loss", *METRICS, "nbr_rx_share",

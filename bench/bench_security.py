@@ -26,7 +26,7 @@ from pathlib import Path
 
 from agents.mavlink.signing import signing_timestamp
 from agents.mavlink.wire import decode_datagram, new_codec, sign_outgoing
-from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario.model import HomeConfig, VehicleConfig
 from deploy.cpu_load import process_cpu_s
 from deploy.ports import free_tcp_port
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned

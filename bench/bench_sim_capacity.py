@@ -83,7 +83,7 @@ def drive(n: int, seconds: float, listen_base: int, send_base: int, setpoints: b
     sp = setpoint_bytes(n)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "deploy.cmd_sim", "--vehicles", str(n), "--base-port",
+        [sys.executable, "-m", "deploy.commands.sim", "--vehicles", str(n), "--base-port",
          str(listen_base), "--send-base-port", str(send_base), "--rate-hz", str(rate_hz),
          "--telemetry-hz", str(telemetry_hz), "--duration-s", str(seconds + 1.0)],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 from tests.integration.test_sim_fuzz import PER_DATAGRAM, Fuzzer
 

@@ -29,8 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from agents.core.lockstep import simulate_lockstep
 from agents.core.metrics import Metrics, compute_metrics, error_series
 from agents.core.timeseries import RunSeries
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 from tests.swarm_harness import run_swarm, with_estimator
 
 EPS_M, EPS_DELTA = 0.0999, 0.0199

@@ -8,21 +8,21 @@ import logging
 import sys
 from collections.abc import Sequence
 
-from agents.errors import EncloseError
 from agents.phases import mark
+from transport.errors import EncloseError
 
 # Each module exposes `register(subparsers)`, which adds its subparser and sets `func(args) -> int`.
-# Keyed by the command it registers: `enclose run` imports only deploy.cmd_run (not the
+# Keyed by the command it registers: `enclose run` imports only deploy.commands.run (not the
 # plotting and lock-step modules of the others: ~1.5 s of imports before the swarm starts).
 COMMANDS: dict[str, str] = {
-    "simulate": "deploy.cmd_simulate",
-    "run": "deploy.cmd_run",
+    "simulate": "deploy.commands.simulate",
+    "run": "deploy.commands.run",
     "report": "deploy.report",
-    "sim": "deploy.cmd_sim",
-    "sweep": "deploy.sweep",
+    "sim": "deploy.commands.sim",
+    "sweep": "deploy.sweep.command",
     "keys": "deploy.run_secrets",
     "vehicle-key": "deploy.run_secrets",
-    "host": "deploy.cmd_host",
+    "host": "deploy.commands.host",
 }
 COMMAND_MODULES: tuple[str, ...] = tuple(dict.fromkeys(COMMANDS.values()))  # each once
 

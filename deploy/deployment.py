@@ -34,8 +34,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.errors import ConfigError
 from transport.access import process_names
+from transport.errors import ConfigError
 from transport.keys import validate_name
 
 DEFAULT_ROUTER_PORT = 7447

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from agents.scenario_faults import FaultSpec
+from agents.scenario.faults import FaultSpec
 from deploy.supervisor import Child, Supervisor
 
 log = logging.getLogger("enclose.run")

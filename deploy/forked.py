@@ -27,7 +27,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from agents import phases
-from agents.errors import DeployError
+from transport.errors import DeployError
 
 
 def trim_heap() -> None:

@@ -20,8 +20,8 @@ import logging
 import time
 from pathlib import Path
 
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario, shipped_text
+from agents.scenario.model import Scenario
 from deploy.deployment import Deployment
 from deploy.launch import Launch
 from deploy.run_secrets import RunSecrets
@@ -160,8 +160,7 @@ def _sender(name: str) -> str:
 def _source(scenario: str) -> str:
     if scenario.endswith(".toml"):
         return Path(scenario).read_text()
-    from importlib import resources
-    return (resources.files("agents") / "scenarios" / f"{scenario}.toml").read_text()
+    return shipped_text(scenario)
 
 
 def _links(dep: Deployment, s: Scenario) -> str:

@@ -1,6 +1,6 @@
 """One `enclose run` on this machine: start the swarm's processes, link, fly, stop, report.
 
-`deploy.cmd_run` parses the command line and hands over to `Launch.execute`; how the run
+`deploy.commands.run` parses the command line and hands over to `Launch.execute`; how the run
 ends (the processes stopped in order, launch.json, the exit code) is `deploy.launch_end`,
 and its ports are chosen by `deploy.ports.run_ports`.
 """
@@ -14,11 +14,10 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from agents.errors import DeployError
 from agents.network_args import network_overrides
 from agents.phases import mark
-from agents.scenario import Scenario
-from agents.scenario_faults import parse_fault_flag
+from agents.scenario.faults import parse_fault_flag
+from agents.scenario.model import Scenario
 from deploy.cpu_load import CpuSampler
 from deploy.faults import FaultRunner
 from deploy.json_files import write_json_atomic
@@ -32,6 +31,7 @@ from deploy.run_secrets import RunSecrets
 from deploy.supervisor import Child, Supervisor
 from transport.bus import Bus
 from transport.codec import encode
+from transport.errors import DeployError
 from transport.keys import SwarmKeys
 from transport.messages import RunControl, Stamper
 from transport.zenoh_bus import ZenohBus

@@ -5,7 +5,7 @@ from __future__ import annotations
 import socket
 from collections.abc import Sequence
 
-from agents.errors import DeployError
+from transport.errors import DeployError
 from transport.zenoh_config import loopback_endpoint
 
 HOST = "127.0.0.1"

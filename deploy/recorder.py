@@ -23,7 +23,6 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from agents.errors import EncloseError
 from agents.phases import log_phases, mark
 from agents.process import (
     add_bus_arguments,
@@ -36,6 +35,7 @@ from agents.process import (
 from deploy.recording.live_defaults import DEFAULT_HOST
 from deploy.recording.live_server import LiveServer
 from deploy.recording.loop import Recorder
+from transport.errors import EncloseError
 
 log = logging.getLogger("deploy.recorder")
 

@@ -12,7 +12,6 @@ import numpy as np
 
 from agents.core.metrics import Metrics, compute_metrics, error_series
 from agents.core.timeseries import RunSeries
-from agents.errors import EncloseError
 from deploy.figures import performance_figure, trajectory_figure
 from deploy.figures_links import LINKS_PNG, link_health_figure
 from deploy.marks import run_marks
@@ -26,6 +25,7 @@ from deploy.rundir import (
     write_metrics,
     write_series,
 )
+from transport.errors import EncloseError
 
 log = logging.getLogger(__name__)
 MAX_CSV_RATE_HZ = 100.0

@@ -22,8 +22,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from agents.errors import DeployError
 from deploy.supervisor import Child, Supervisor
+from transport.errors import DeployError
 
 log = logging.getLogger("enclose.run")
 RESTART_POLICIES = ("on-failure", "never")

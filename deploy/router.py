@@ -19,9 +19,9 @@ import sys
 import threading
 from collections.abc import Sequence
 
-from agents.errors import EncloseError
 from agents.process import stop_on_signals
 from transport.credentials import Identity
+from transport.errors import EncloseError
 from transport.keys import SwarmKeys
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig

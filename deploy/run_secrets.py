@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.errors import ConfigError
 from agents.mavlink.signing import (
     load_key,
     vehicle_key,
@@ -30,9 +29,10 @@ from agents.mavlink.signing import (
     write_key,
     write_raw_key,
 )
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.forked import call_forked
 from transport.credentials import Identity, identity_file, make_credentials
+from transport.errors import ConfigError
 from transport.keys import SwarmKeys
 
 log = logging.getLogger("enclose.secrets")

@@ -12,8 +12,8 @@ import numpy as np
 
 from agents.core.metrics import ErrorSeries, Metrics
 from agents.core.timeseries import RunSeries
-from agents.errors import EncloseError
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
+from transport.errors import EncloseError
 
 SERIES_FILE = "series.csv"
 METRICS_FILE = "metrics.json"

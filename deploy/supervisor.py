@@ -15,9 +15,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from agents.errors import DeployError
 from deploy.forked import ForkedProcess, fork_is_safe, fork_main, trim_heap
 from deploy.zygote import Zygote
+from transport.errors import DeployError
 
 log = logging.getLogger(__name__)
 Clock = Callable[[], float]

@@ -30,7 +30,7 @@ from agents.process import (
     process_main,
     stop_on_signals,
 )
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from transport.bus import Bus

@@ -27,7 +27,7 @@ BOUNDED = (
     ("radius_error_m", "radius error |e_rho|", "m", "eps_rho_m"),
     ("angle_error", "angle error |e_delta|", "", "eps_delta"),
 )
-PAPER_BOUNDS = {"eps_rho_m": 0.0999, "eps_delta": 0.0199}  # agents.scenario defaults
+PAPER_BOUNDS = {"eps_rho_m": 0.0999, "eps_delta": 0.0199}  # agents.scenario.model defaults
 FILES = ("metrics.json", "series.csv", "performance.png", "trajectory.png", "links.png",
          "recording.mcap", "launch.json", "logs")
 

@@ -32,8 +32,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from agents.errors import DeployError
 from deploy.forked import ForkedProcess, fork_pid, trim_heap
+from transport.errors import DeployError
 
 PR_SET_PDEATHSIG, PR_SET_CHILD_SUBREAPER = 1, 36  # linux/prctl.h
 

@@ -35,7 +35,7 @@ from agents.mavlink.rx_gate import VEHICLE_BUDGET, RxGate
 from agents.mavlink.signing import IFLAG_SIGNED, SignatureVerifier
 from agents.mavlink.wire import MAVLinkMessage as Msg
 from agents.mavlink.wire import decode_datagram, encode, new_codec, sign_outgoing, signature_ok
-from agents.scenario import HomeConfig
+from agents.scenario.model import HomeConfig
 from sim_backend import commands, protocols
 from sim_backend import telemetry as tm
 from sim_backend.autopilot import SEVERITY_WARNING, Autopilot

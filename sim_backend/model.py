@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.scenario import VehicleConfig
+from agents.scenario.model import VehicleConfig
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

@@ -12,7 +12,7 @@ import struct
 from dataclasses import dataclass
 
 from agents.mavlink.modes import PX4
-from agents.scenario import VehicleConfig
+from agents.scenario.model import VehicleConfig
 
 MAV_PARAM_TYPE_INT32 = 6
 MAV_PARAM_TYPE_REAL32 = 9

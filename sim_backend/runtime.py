@@ -24,9 +24,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from agents.errors import SimulatorError
 from agents.mavlink.modes import FLAVOURS
-from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend import model
 from sim_backend.autopilot import Autopilot, ControlRow
 from sim_backend.endpoint import VehicleEndpoint
@@ -36,6 +35,7 @@ from sim_backend.sim_values import grid_spawn_ned as grid_spawn_ned  # re-export
 from sim_backend.sim_values import spawn_points_ned as spawn_points_ned  # re-exported
 from sim_backend.telemetry import Row
 from sim_backend.timesync import ClockService
+from transport.errors import SimulatorError
 
 log = logging.getLogger(__name__)
 TickHook = Callable[[float, model.FleetState], None]

@@ -14,7 +14,7 @@ import numpy as np
 
 from agents.frames import enu_to_ned
 from agents.mavlink.signing import vehicle_key
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 
 @dataclass(frozen=True)

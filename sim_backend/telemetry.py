@@ -16,7 +16,7 @@ from agents.mavlink.modes import (
     encode_custom_mode,
 )
 from agents.mavlink.wire import encode, encode_fields, encode_payload
-from agents.scenario import HomeConfig
+from agents.scenario.model import HomeConfig
 
 MSG_HEARTBEAT = 0
 MSG_SYS_STATUS = 1

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 from transport.keys import SwarmKeys
 from transport.messages import (
     FollowerState,

@@ -24,7 +24,8 @@ from agents.follower_logic import (
     observe_target,
     ready,
 )
-from agents.scenario import NetworkConfig, Scenario
+from agents.scenario.model import Scenario
+from transport.network_schema import NetworkConfig
 
 # r, pos, flow towards each neighbour, and (estimator order 2) rv and velocity flows
 Published = tuple[Sample, Sample, dict[int, Sample], Sample, dict[int, Sample]]

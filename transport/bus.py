@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import Protocol, Self
 
-from agents.errors import TransportError
+from transport.errors import TransportError
 
 Clock = Callable[[], float]
 

@@ -28,9 +28,9 @@ import logging
 import threading
 from collections.abc import Callable
 
-from agents.errors import CodecError, ConfigError, TransportError
 from transport.bus import Bus
 from transport.codec import decode, encode
+from transport.errors import CodecError, ConfigError, TransportError
 from transport.keys import SwarmKeys, parse_key
 from transport.messages import ClockProbe, Stamper
 from transport.peer_clock import PROCESS_BOOK, ClockBook, exchange_sample

@@ -27,9 +27,9 @@ from typing import Any
 
 import msgpack
 
-from agents.errors import CodecError
 from transport import codec_fast
 from transport.codec_twins import TWINS
+from transport.errors import CodecError
 from transport.messages import (
     PROCESS_STATES,
     RUN_COMMANDS,

@@ -23,8 +23,8 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from agents.errors import ConfigError
 from transport.access import process_names
+from transport.errors import ConfigError
 from transport.keys import SwarmKeys, validate_name
 
 

@@ -17,10 +17,10 @@ from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from agents.errors import CodecError
 from transport.bus import Received, Subscription
 from transport.checks import Limits, check
 from transport.codec import decode
+from transport.errors import CodecError
 from transport.fastbuild import build
 from transport.keys import parse_key
 from transport.messages import FollowerState, Message, TargetObservation

@@ -2,7 +2,7 @@
 
 `ImpairedBus(bus, network, receiver=i)` is what follower i talks through.  Its
 subscriptions drain the real ones and then, per link (sender, i) -- see
-`transport.link_stats.link_of` -- apply the link's `agents.scenario.LinkImpairment`:
+`transport.link_stats.link_of` -- apply the link's `agents.scenario.model.LinkImpairment`:
 - loss: independent (Bernoulli `loss`) or Gilbert-Elliott, a two-state chain with
   P(bad->good) = 1/burst_len and P(good->bad) = loss / (burst_len (1 - loss)), so the
   long-run loss is `loss` and losses come in bursts of mean `burst_len`; a message is lost
@@ -38,7 +38,6 @@ from collections import deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from agents.scenario import LinkImpairment, NetworkConfig
 from transport.bus import (
     DEFAULT_CAPACITY,
     AliveWatch,
@@ -51,6 +50,7 @@ from transport.bus import (
     Token,
 )
 from transport.link_stats import Link, link_of
+from transport.network_schema import LinkImpairment, NetworkConfig
 
 MAX_WAITING = 16  # held-back messages per link; beyond, a message goes normally
 _DRAW_BLOCK = 256

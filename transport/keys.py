@@ -13,7 +13,7 @@ import re
 from dataclasses import dataclass
 from functools import lru_cache
 
-from agents.errors import ConfigError
+from transport.errors import ConfigError
 
 ROOT = "enclose"
 # Zenoh reserves `*`, `$`, `#`, `?` and `/` separates chunks; a strict whitelist is simpler.

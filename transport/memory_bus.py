@@ -15,7 +15,6 @@ import threading
 import time
 from collections import deque
 
-from agents.errors import TransportError
 from transport.bus import (
     DEFAULT_CAPACITY,
     AliveEvent,
@@ -24,6 +23,7 @@ from transport.bus import (
     Congestion,
     Received,
 )
+from transport.errors import TransportError
 from transport.keys import key_matches, validate_concrete
 
 

@@ -15,10 +15,10 @@ from typing import TypeVar, Union
 
 import zenoh
 
-from agents.errors import TransportError
 from transport.bus import DEFAULT_CAPACITY, AliveEvent, BusBase, Clock, Congestion, Received
 from transport.clock import process_clock
 from transport.clock_sync import ClockSync
+from transport.errors import TransportError
 from transport.fastbuild import build
 from transport.keys import SwarmKeys, validate_concrete
 from transport.zenoh_config import RUNTIME_SETTINGS, ZenohConfig, build_zenoh_config

@@ -25,9 +25,9 @@ from pathlib import Path
 
 import zenoh
 
-from agents.errors import ConfigError
-from agents.scenario import LINK_PROTOCOLS, ZENOH_RUNTIMES
 from transport.credentials import Identity
+from transport.errors import ConfigError
+from transport.network_schema import LINK_PROTOCOLS, ZENOH_RUNTIMES
 
 LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
 # Zenoh's runtime, as ZENOH_RUNTIME (read once per process, when its first session opens).

@@ -26,7 +26,7 @@ else:
 @dataclass(frozen=True)
 class EstimatorParams:
     """k_e and alpha1 of the paper; `step_fraction` caps one step's flow (0: plain Euler);
-    `order` 2 adds the velocity stage (agents.scenario.Gains.estimator_order)."""
+    `order` 2 adds the velocity stage (agents.scenario.model.Gains.estimator_order)."""
 
     k_e: float
     alpha1: float

@@ -29,7 +29,7 @@ from agents.core.geometry import rate_cap
 from agents.core.params import control_gains, estimator_params
 from agents.core.profiles import TargetMotion
 from agents.core.timeseries import RunSeries
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 FloatArray = NDArray[np.float64]
 ProgressFn = Callable[[float], None]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from agents.core.controller_one import ControlGains
 from agents.core.estimator_one import EstimatorParams
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 
 
 def control_gains(scenario: Scenario) -> ControlGains:

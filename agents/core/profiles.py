@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.scenario import Scenario, TargetSpec
+from agents.scenario.model import Scenario, TargetSpec
 
 FloatArray = NDArray[np.float64]
 

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from agents.errors import LinkLostError, MavlinkError
+from transport.errors import LinkLostError, MavlinkError
 
 if TYPE_CHECKING:  # the follower's process runs without numpy (issue 15)
     import numpy as np

@@ -18,9 +18,9 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from agents.errors import CommandRejectedError, MavlinkError
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.mavlink.modes import ARDUPILOT, OFFBOARD_MODE, do_set_mode_params
+from transport.errors import CommandRejectedError, MavlinkError
 
 log = logging.getLogger(__name__)
 

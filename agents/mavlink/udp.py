@@ -6,8 +6,8 @@ import contextlib
 import socket
 import struct
 
-from agents.errors import MavlinkError
 from agents.mavlink.timemap import SO_TIMESTAMPNS
+from transport.errors import MavlinkError
 
 SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)  # Linux; Python does not export it
 _U32 = struct.Struct("I")

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.core.timeseries import RunSeries
-from agents.errors import DeployError
+from transport.errors import DeployError
 from transport.messages import FollowerState, Message, RunControl, TruthSnapshot
 
 FloatArray = NDArray[np.float64]

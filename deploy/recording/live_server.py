@@ -15,9 +15,9 @@ import logging
 
 import foxglove
 
-from agents.errors import DeployError
 from deploy.recording.live_defaults import DEFAULT_HOST, DEFAULT_PORT
 from deploy.recording.view import ViewFrame
+from transport.errors import DeployError
 
 log = logging.getLogger(__name__)
 PORT_TRIES = 20

@@ -15,9 +15,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from agents.errors import CodecError, TransportError
 from agents.liveness import MembershipWatch
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.link_history import LinkHistory
@@ -33,6 +32,7 @@ from transport.bus import Bus, Congestion
 from transport.checks import RECORDER_LIMITS
 from transport.codec import encode
 from transport.decoder import Decoder
+from transport.errors import CodecError, TransportError
 from transport.keys import SwarmKeys
 from transport.messages import Message, ProcessStatus, Stamper
 

@@ -8,14 +8,14 @@ from pathlib import Path
 from typing import Any
 
 from agents.core.metrics import Metrics
-from agents.errors import DeployError
 from agents.membership_metrics import membership_phases, phase_report
-from agents.scenario import Scenario
+from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import Assembly, RunAssembler, assembly_extra
 from deploy.recording.link_history import LINKS_CSV, LinkHistory
 from deploy.report import write_run_outputs
 from deploy.rundir import METRICS_FILE, RunInfo
+from transport.errors import DeployError
 
 log = logging.getLogger(__name__)
 RUN_KIND = "networked"

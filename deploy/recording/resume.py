@@ -22,9 +22,9 @@ import msgpack
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 
-from agents.errors import CodecError
 from deploy.recording.mcap_log import RawFrame, RawSchema, schema_name
 from transport.codec import CODEC_VERSION, SCHEMAS, decode
+from transport.errors import CodecError
 from transport.messages import Message as BusMessage
 
 log = logging.getLogger(__name__)

@@ -67,7 +67,7 @@ def start_sim(*extra: str, vehicles: int = 1, console_script: bool = False) -> S
     if console_script:
         cmd = [str(Path(sys.executable).with_name("enclose")), "sim"]
     else:
-        cmd = [sys.executable, "-m", "deploy.cmd_sim"]
+        cmd = [sys.executable, "-m", "deploy.commands.sim"]
     cmd += ["--vehicles", str(vehicles), "--base-port", str(listen_base),
             "--send-base-port", str(send_base), *extra]
     with log.open("wb") as out:

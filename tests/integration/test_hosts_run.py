@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.netns_hosts import unavailable
+from deploy.netns.hosts import unavailable
 from tests.integration.runs import spawned
 
 pytestmark = pytest.mark.integration

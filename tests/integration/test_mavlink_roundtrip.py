@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from agents.errors import CommandRejectedError, LinkLostError
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.startup import StartupTimeouts, command, start_offboard, wait_until
 from tests.integration.sim_process import start_sim
+from transport.errors import CommandRejectedError, LinkLostError
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
 TIMEOUTS = StartupTimeouts(heartbeat_s=10.0, takeoff_s=15.0)

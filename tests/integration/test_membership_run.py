@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 
 from agents.membership_metrics import PhaseErrors, phase_errors
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.rundir import read_series
 from tests.integration.runs import pid_alive, spawned, wait_for
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.netns import TABLE, destroy, lossy_namespace, namespaces, probe
+from deploy.netns.namespace import TABLE, destroy, lossy_namespace, namespaces, probe
 from tests.integration.runs import pid_alive, spawned
 
 pytestmark = pytest.mark.integration

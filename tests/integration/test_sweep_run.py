@@ -17,10 +17,10 @@ from pathlib import Path
 
 import pytest
 
-from deploy.sweep import run_sweep
-from deploy.sweep_parallel import StopSignals
-from deploy.sweep_runner import TIMEOUT_EXIT, SubprocessRunner
-from deploy.sweep_spec import load_sweep
+from deploy.sweep.command import run_sweep
+from deploy.sweep.parallel import StopSignals
+from deploy.sweep.runner import TIMEOUT_EXIT, SubprocessRunner
+from deploy.sweep.spec import load_sweep
 from tests.integration.runs import pid_alive, run_pids, spawned, wait_for
 
 pytestmark = pytest.mark.integration

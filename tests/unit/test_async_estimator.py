@@ -18,7 +18,6 @@ from hypothesis import strategies as st
 from agents.core import fastloop
 from agents.core.lockstep import estimator_substeps, simulate_lockstep
 from agents.core.metrics import compute_metrics, error_series
-from agents.errors import ScenarioError
 from agents.follower_logic import (
     FollowerMemory,
     FollowerSetup,
@@ -29,9 +28,10 @@ from agents.follower_logic import (
     observe_target,
     ready,
 )
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario, parse_scenario
+from agents.scenario.file import load_scenario, parse_scenario
+from agents.scenario.model import Scenario
 from tests.unit.test_closed_loop import SIX
+from transport.errors import ScenarioError
 
 EPS_M, EPS_DELTA = 0.0999, 0.0199
 

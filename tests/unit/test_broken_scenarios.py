@@ -9,9 +9,10 @@ from pathlib import Path
 
 import pytest
 
+from agents.scenario.file import shipped_text
 from deploy.cli import main
 
-PAPER = (Path(__file__).parents[2] / "agents" / "scenarios" / "paper.toml").read_text()
+PAPER = shipped_text("paper")
 
 
 def edit(old: str, new: str) -> str:

@@ -8,11 +8,11 @@ import msgpack
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.errors import CodecError
 from transport.bus import Received
 from transport.checks import DEFAULT_LIMITS, check, newer
 from transport.codec import decode, encode
 from transport.decoder import Decoder
+from transport.errors import CodecError
 from transport.keys import SwarmKeys
 from transport.messages import FollowerState, Header, RunControl, TargetObservation
 

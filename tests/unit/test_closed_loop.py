@@ -9,7 +9,7 @@ import pytest
 
 from agents.core.lockstep import simulate_lockstep
 from agents.core.metrics import compute_metrics, error_series, settle_time
-from agents.scenario_file import load_scenario, parse_scenario
+from agents.scenario.file import load_scenario, parse_scenario, shipped_text
 
 
 def metrics_of(scenario, dt_s: float, duration_s: float):  # type: ignore[no-untyped-def]
@@ -40,9 +40,7 @@ def test_plain_euler_dithers_where_the_step_limited_law_does_not() -> None:
 
 
 def load_scenario_text() -> str:
-    from pathlib import Path
-
-    return (Path(__file__).parents[2] / "agents" / "scenarios" / "paper.toml").read_text()
+    return shipped_text("paper")
 
 
 SIX = """

@@ -29,7 +29,7 @@ from agents.core.geometry import (
     sig,
     wrap_2pi,
 )
-from agents.scenario import ccw_order, successor_is_cycle
+from agents.scenario.model import ccw_order, successor_is_cycle
 
 RNG = np.random.default_rng(7)
 

@@ -6,10 +6,10 @@ from typing import Any
 
 import pytest
 
-from agents.errors import ConfigError
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.deployment import dump_deployment, parse_deployment, split_over_hosts
 from deploy.host_launch import _links
+from transport.errors import ConfigError
 
 pytestmark = pytest.mark.timeout(30)
 

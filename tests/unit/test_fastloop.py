@@ -9,7 +9,7 @@ import pytest
 
 from agents.core import fastloop
 from agents.core.lockstep import simulate_lockstep
-from agents.scenario_file import load_scenario, parse_scenario
+from agents.scenario.file import load_scenario, parse_scenario
 from tests.unit.test_closed_loop import SIX
 
 pytestmark = pytest.mark.skipif(not fastloop.HAVE_NUMBA, reason="numba not installed")

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from agents.errors import ScenarioError
-from agents.scenario_faults import FaultSpec, parse_fault_flag, parse_faults
-from agents.scenario_file import parse_scenario
+from agents.scenario.faults import FaultSpec, parse_fault_flag, parse_faults
+from agents.scenario.file import parse_scenario
 from deploy.faults import FaultRunner
 from deploy.supervisor import Supervisor
+from transport.errors import ScenarioError
 
 pytestmark = pytest.mark.timeout(30)
 BASE = (

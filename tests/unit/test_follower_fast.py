@@ -24,7 +24,7 @@ from agents import follower_fast as fast
 from agents import follower_fast_membership as fast_m
 from agents import follower_logic as ref
 from agents import follower_membership as ref_m
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from tests.swarm_harness import with_estimator
 from transport.messages import FollowerState, Header
 

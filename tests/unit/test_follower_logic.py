@@ -15,7 +15,7 @@ from agents.follower_logic import (
     observe_target,
     ready,
 )
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from tests.swarm_harness import run_swarm
 
 

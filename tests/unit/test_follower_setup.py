@@ -3,22 +3,20 @@ and what a follower process leaves out of a scenario's checks (issue 15: lean pr
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agents.core.estimator import edge_fractions, observation_weights
-from agents.errors import InadmissibleError
 from agents.follower_setup import FollowerSetup
 from agents.membership import membership
-from agents.scenario import ccw_order
-from agents.scenario_file import load_scenario, parse_scenario
+from agents.scenario.file import load_scenario, parse_scenario, shipped_text
+from agents.scenario.model import ccw_order
+from transport.errors import InadmissibleError
 
 SCENARIOS = {name: load_scenario(name) for name in ("paper", "ring16")}
-PAPER_TEXT = (Path(__file__).parents[2] / "agents" / "scenarios" / "paper.toml").read_text()
+PAPER_TEXT = shipped_text("paper")
 
 
 @settings(max_examples=60, deadline=None)

@@ -7,7 +7,6 @@ import itertools
 import numpy as np
 import pytest
 
-from agents.scenario import LinkImpairment, NetworkConfig
 from transport.bus import Bus, Received
 from transport.codec import encode
 from transport.impairment import ImpairedBus, ImpairedSubscription
@@ -15,6 +14,7 @@ from transport.keys import SwarmKeys
 from transport.link_stats import LinkDecoder, link_of
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import FollowerState, Header, RunControl
+from transport.network_schema import LinkImpairment, NetworkConfig
 
 K = SwarmKeys("imp")
 PERIOD_S = 0.02

@@ -15,10 +15,10 @@ from pathlib import Path
 import pytest
 
 from agents import phases
-from agents.errors import DeployError
 from deploy.forked import call_forked, fork_main
 from transport.bus import Received
 from transport.codec import encode
+from transport.errors import DeployError
 from transport.keys import SwarmKeys
 from transport.link_stats import LinkDecoder
 from transport.messages import FollowerState, Header, RunControl
@@ -45,7 +45,7 @@ def imported_by(code: str) -> set[str]:
 FOLLOWER_SET_UP = """
 import agents.follower
 from agents.follower_fast import FastSetup
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from transport.impairment import ImpairedBus
 from transport.keys import SwarmKeys
 from transport.link_stats import AgeHistogram
@@ -108,7 +108,7 @@ vehicle.close()
 TARGET_SET_UP = """
 import agents.target
 from agents.core.profiles import TargetMotion
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 TargetMotion(load_scenario("paper", whole_run=False), horizon_s=10.0).state(1.0)
 """
 FULL_DIALECT = "pymavlink.dialects.v20.common"

@@ -12,9 +12,8 @@ from typing import Any
 import pytest
 from foxglove import messages as fm
 
-from agents.errors import DeployError
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 from deploy import live_args
 from deploy.recording.live_links import LinkTracker, health
 from deploy.recording.live_server import LiveServer, is_loopback
@@ -39,6 +38,7 @@ from deploy.recording.view import (
 from deploy.rundir import RunInfo
 from tests.foxglove_client import foxglove_client, protobuf_class
 from tests.recorder_synth import SynthRun
+from transport.errors import DeployError
 from transport.keys import SwarmKeys
 from transport.messages import FollowerState, Header, ProcessStatus, TruthSnapshot
 

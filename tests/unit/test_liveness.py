@@ -13,7 +13,7 @@ import pytest
 from agents.follower import FollowerNode
 from agents.liveness import REFRESH_MAX_S, REFRESH_S, MembershipWatch, StallGuard, TokenSet
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from transport.codec import encode
 from transport.keys import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub

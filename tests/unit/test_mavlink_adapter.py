@@ -9,12 +9,12 @@ from collections.abc import Iterator
 
 import pytest
 
-from agents.errors import LinkLostError, MavlinkError
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.modes import encode_custom_mode
 from agents.mavlink.offboard import OffboardKeeper
 from agents.mavlink.timemap import SO_TIMESTAMPNS, BootClockMap, kernel_arrival_s
 from agents.mavlink.wire import decode_datagram, new_codec
+from transport.errors import LinkLostError, MavlinkError
 
 ADDR = ("127.0.0.1", 14580)
 

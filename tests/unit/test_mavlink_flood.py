@@ -16,7 +16,7 @@ from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.rx_gate import ADAPTER_BUDGET, VEHICLE_BUDGET, RxBudget, RxGate
 from agents.mavlink.signing import SignatureVerifier, signing_timestamp, vehicle_key
 from agents.mavlink.wire import encode, new_codec, sign_outgoing
-from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.endpoint import MAX_PEERS
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 

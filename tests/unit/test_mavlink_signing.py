@@ -11,7 +11,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.errors import ConfigError
 from agents.mavlink.signing import (
     TICKS_PER_S,
     SignatureVerifier,
@@ -21,8 +20,9 @@ from agents.mavlink.signing import (
     write_key,
 )
 from agents.mavlink.wire import new_codec, sign_outgoing
-from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
+from transport.errors import ConfigError
 
 KEY = bytes(range(1, 33))
 NOW_S = 1_800_000_000.0
@@ -236,7 +236,7 @@ def test_struct_packed_telemetry_verifies_in_stock_pymavlink() -> None:
     """Every stream the simulator packs by struct, signed, passes stock pymavlink's check."""
     from pymavlink.dialects.v20 import common as mavlink2
 
-    from agents.scenario import HomeConfig
+    from agents.scenario.model import HomeConfig
     from sim_backend import telemetry as tm
 
     mav = signer(sysid=3)

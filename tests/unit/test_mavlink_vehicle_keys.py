@@ -22,7 +22,7 @@ from agents.mavlink.signing import (
     vehicle_passphrase,
 )
 from agents.mavlink.wire import encode, new_codec, sign_outgoing
-from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario.model import HomeConfig, VehicleConfig
 from deploy.run_secrets import MAVLINK_SECRET_FILE, RunSecrets, signing_key_file, write_mavlink_keys
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 

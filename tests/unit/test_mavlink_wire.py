@@ -46,7 +46,7 @@ def test_garbage_truncation_and_bad_crc_counted() -> None:
 
 def test_struct_packed_status_messages_equal_pymavlink_objects() -> None:
     """The simulator's 1-5 Hz streams packed by struct are the bytes pymavlink packs."""
-    from agents.scenario import HomeConfig
+    from agents.scenario.model import HomeConfig
     from sim_backend import telemetry as tm
 
     home = HomeConfig()

@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.errors import InadmissibleError
 from agents.membership import membership, ring_order
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario, parse_scenario
+from agents.scenario.file import load_scenario, parse_scenario
+from agents.scenario.model import Scenario
+from transport.errors import InadmissibleError
 
 PAPER = load_scenario("paper")
 RING16 = load_scenario("ring16")

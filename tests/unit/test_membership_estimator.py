@@ -25,8 +25,8 @@ from agents.follower_logic import (
     reference,
 )
 from agents.follower_membership import join_running, regroup, with_missing
-from agents.scenario import NetworkConfig
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from transport.network_schema import NetworkConfig
 
 DT = 0.02
 TARGETS = np.array([[0.0, 0.0], [6.0, 4.0]])  # still: the LAP is their mean

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from agents.errors import ConfigError, DeployError
-from deploy import netns, netns_run
+from deploy.netns import namespace as netns
+from deploy.netns import run as netns_run
 from deploy.ports import rendezvous_endpoint
+from transport.errors import ConfigError, DeployError
 from transport.zenoh_config import ZenohConfig, build_zenoh_config, loopback_endpoint
 
 

@@ -6,9 +6,9 @@ import argparse
 
 import pytest
 
-from agents.errors import ScenarioError
 from agents.network_args import add_network_arguments, apply_network_arguments, network_overrides
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from transport.errors import ScenarioError
 
 
 def parse(*argv: str) -> argparse.Namespace:

@@ -17,7 +17,7 @@ import pytest
 from agents.core.controller import ControlGains, enclosing_control, enclosing_control_one
 from agents.core.lockstep import simulate_lockstep
 from agents.core.metrics import compute_metrics, error_series
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 
 GAINS = ControlGains(2.0, 3.0, 2.0, 3.0, 8.0, 0.2, 0.25)
 

@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from agents.errors import ConfigError
 from transport.bus import Received
 from transport.checks import DEFAULT_LIMITS
 from transport.clock import SkewedClock, clock_env, process_clock
@@ -23,6 +22,7 @@ from transport.clock_sync import (
 )
 from transport.codec import decode, encode
 from transport.decoder import Decoder
+from transport.errors import ConfigError
 from transport.messages import ClockProbe, FollowerState, Header, RunControl
 from transport.peer_clock import ClockBook, PeerClock, exchange_sample
 

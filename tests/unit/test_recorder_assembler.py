@@ -12,15 +12,15 @@ import pytest
 
 from agents.core.metrics import worst
 from agents.core.timeseries import RunSeries
-from agents.errors import DeployError
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 from deploy.recording.assembler import RunAssembler, align_latest
 from deploy.recording.outputs import write_final_outputs
 from deploy.recording.progress import live_errors
 from deploy.report import write_run_outputs
 from deploy.rundir import RunInfo
 from tests.recorder_synth import SynthRun, formation_m, lap_m, targets_m
+from transport.errors import DeployError
 from transport.keys import SwarmKeys
 from transport.messages import FollowerState, Header, Stamper, TruthSnapshot
 

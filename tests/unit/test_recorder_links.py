@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.recording.links import link_report
 from deploy.recording.loop import Recorder
 from tests.recorder_synth import SynthRun

@@ -9,8 +9,8 @@ import msgpack
 import pytest
 from mcap.reader import make_reader
 
-from agents.scenario import Scenario
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 from deploy.recording.loop import MCAP_FILE, Recorder
 from deploy.report import regenerate_figures
 from tests.recorder_synth import SynthRun

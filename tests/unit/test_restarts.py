@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from agents.errors import DeployError
 from deploy.restarts import RestartPolicy, Watchdog, how_it_ended
 from deploy.supervisor import Supervisor
+from transport.errors import DeployError
 
 pytestmark = pytest.mark.timeout(30)
 

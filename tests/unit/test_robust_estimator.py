@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from agents.core.estimator import link_balance
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from tests.swarm_harness import run_swarm, with_estimator
 
 RNG = np.random.default_rng(5)

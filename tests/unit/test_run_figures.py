@@ -12,7 +12,7 @@ import pytest
 
 from agents.core.lockstep import simulate_lockstep
 from agents.core.metrics import error_series
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.figures import performance_figure, trajectory_figure
 from deploy.figures_links import link_health_figure
 from deploy.marks import Mark, event_marks, run_marks

@@ -10,11 +10,11 @@ import pytest
 
 from agents.core.params import control_gains
 from agents.core.profiles import TargetMotion
-from agents.errors import ConfigError, InadmissibleError, ScenarioError
-from agents.scenario_file import load_scenario, parse_scenario
+from agents.scenario.file import load_scenario, parse_scenario, shipped_text
 from tests.unit.test_closed_loop import load_scenario_text
+from transport.errors import ConfigError, InadmissibleError, ScenarioError
 
-PAPER = (Path(__file__).parents[2] / "agents" / "scenarios" / "paper.toml").read_text()
+PAPER = shipped_text("paper")
 
 
 def test_paper_case_defaults() -> None:

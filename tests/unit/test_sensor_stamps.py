@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.swarm_sim import SensorPublisher, sensor_every_ticks, sim_tick_hz
 from sim_backend.model import FleetState
 from sim_backend.runtime import spawn_points_ned

@@ -13,7 +13,7 @@ from collections.abc import Iterator
 import pytest
 
 from agents.mavlink.wire import new_codec
-from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 from sim_backend.setpoint import decode_setpoint
 from tests.mavlink_fuzz import queued_datagrams

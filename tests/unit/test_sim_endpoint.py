@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from agents.mavlink.wire import decode_datagram, new_codec
-from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 
 

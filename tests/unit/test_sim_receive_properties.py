@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from agents.mavlink.wire import new_codec
-from agents.scenario import HomeConfig, VehicleConfig
+from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 from tests.mavlink_fuzz import (
     HANDLED_CLASSES,

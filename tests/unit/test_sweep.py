@@ -10,13 +10,13 @@ from typing import Any
 
 import pytest
 
-from agents.errors import ConfigError
 from deploy.cli import main
-from deploy.sweep import run_sweep
-from deploy.sweep_figures import error_against
-from deploy.sweep_progress import SweepProgress, clock_text
-from deploy.sweep_spec import SweepSpec, load_sweep, parse_sweep
-from deploy.sweep_table import collect
+from deploy.sweep.command import run_sweep
+from deploy.sweep.figures import error_against
+from deploy.sweep.progress import SweepProgress, clock_text
+from deploy.sweep.spec import SweepSpec, load_sweep, parse_sweep
+from deploy.sweep.table import collect
+from transport.errors import ConfigError
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -113,7 +113,7 @@ def test_faults_and_restart_policies_sweep_like_network_flags(tmp_path: Path) ->
 def test_repeats_give_one_cell_per_seed_and_paths_are_relative_to_the_file(
     tmp_path: Path,
 ) -> None:
-    scen = Path(__file__).parents[2] / "agents" / "scenarios" / "paper.toml"
+    scen = Path(__file__).parents[2] / "agents" / "scenario" / "shipped" / "paper.toml"
     (tmp_path / "paper.toml").write_text(scen.read_text())
     spec = parse_sweep(doc(repeats=2, seed0=7, scenario="paper.toml"), tmp_path / "s.toml")
     assert spec.scenario == str(tmp_path / "paper.toml")

@@ -11,17 +11,17 @@ from pathlib import Path
 
 import pytest
 
-from agents.errors import DeployError
 from deploy.cli import main
 from deploy.port_slots import PORTS_PER_SLOT, port_slot, slot_ports
 from deploy.ports import parse_port_range, ports_in_range
-from deploy.sweep import run_sweep
-from deploy.sweep_cluster import localise, pack, unpack
-from deploy.sweep_parallel import StopSignals
-from deploy.sweep_progress import SweepProgress
-from deploy.sweep_runner import RUN_EXTRA_FLAGS, placement_flags
-from deploy.sweep_spec import load_sweep
+from deploy.sweep.cluster import localise, pack, unpack
+from deploy.sweep.command import run_sweep
+from deploy.sweep.parallel import StopSignals
+from deploy.sweep.progress import SweepProgress
+from deploy.sweep.runner import RUN_EXTRA_FLAGS, placement_flags
+from deploy.sweep.spec import load_sweep
 from tests.unit.test_sweep import SWEEP, FakeRunner, rows, sweep_file
+from transport.errors import DeployError
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from agents.core.profiles import TargetMotion
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from agents.target import reference, tracking_command
 
 pytestmark = pytest.mark.timeout(30)

@@ -19,7 +19,7 @@ from agents.follower_fast import FastSetup
 from agents.follower_fast import FollowerMemory as FastMemory
 from agents.follower_fast import observe_target as observe_fast
 from agents.follower_logic import FollowerMemory, FollowerSetup, observe_target
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 
 PERIOD_S = 0.05
 TAU_S, ACCEL_TAU_S = 0.1, 0.5

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from agents.errors import ConfigError
+from transport.errors import ConfigError
 from transport.keys import KeyInfo, SwarmKeys, key_matches, parse_key, validate_concrete
 
 K = SwarmKeys("s1")

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from agents.errors import ConfigError
-from agents.scenario import ZENOH_RUNTIMES
+from transport.errors import ConfigError
+from transport.network_schema import ZENOH_RUNTIMES
 from transport.zenoh_config import (
     LINK_BUFFER_BYTES,
     RUNTIME_SETTINGS,

@@ -9,8 +9,8 @@ from pathlib import Path
 from rich.console import Console
 from rich.text import Text
 
-from deploy.sweep_spec import SweepSpec
-from deploy.sweep_table import Row
+from deploy.sweep.spec import SweepSpec
+from deploy.sweep.table import Row
 
 BOUNDED = (("estimator_error_m", "m", "rho"), ("radius_error_m", "m", "rho"),
            ("angle_error", "", "delta"))

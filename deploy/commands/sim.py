@@ -1,6 +1,6 @@
 """`enclose sim [SCENARIO | --vehicles N]`: the vehicle simulator alone, for any MAVLink GCS/SDK.
 
-Also runnable as `python -m deploy.cmd_sim ...` (same options) without the other subcommands.
+Also runnable as `python -m deploy.commands.sim ...` (same options) without the other subcommands.
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ from collections.abc import Sequence
 from types import FrameType
 from typing import Any
 
-from agents.errors import EncloseError
 from agents.mavlink.modes import FLAVOURS
 from agents.mavlink.signing import load_key
-from agents.scenario import HomeConfig, VehicleConfig
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
+from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned, spawn_points_ned
+from transport.errors import EncloseError
 
 log = logging.getLogger("enclose.sim")
 

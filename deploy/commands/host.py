@@ -14,12 +14,12 @@ import signal
 from pathlib import Path
 from typing import Any
 
-from agents.errors import DeployError
-from deploy.cmd_run import _interrupt
+from deploy.commands.run import _interrupt
 from deploy.deployment import load_deployment
 from deploy.host_launch import HostLaunch
 from deploy.restarts import add_supervision_arguments
 from deploy.verdict import add_json_argument
+from transport.errors import DeployError
 
 
 def register(sub: Any) -> None:

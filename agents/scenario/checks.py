@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 
-from agents.errors import InadmissibleError, ScenarioError
-from agents.scenario import Scenario, TargetSpec
+from agents.scenario.model import Scenario, TargetSpec
+from transport.errors import InadmissibleError, ScenarioError
 
 SPEED_TOL_M_S = 1e-9
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 from dataclasses import fields, replace
 from typing import Any
 
-from agents.errors import ScenarioError
-from agents.scenario import (
+from agents.scenario.model import ESTIMATORS
+from transport.errors import ScenarioError
+from transport.network_schema import (
     AGENT_SCHEDS,
-    ESTIMATORS,
     LINK_PROTOCOLS,
     LOSS_MODELS,
     ZENOH_RUNTIMES,

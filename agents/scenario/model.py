@@ -2,7 +2,7 @@
 
 Positions are in the local ENU plane (x east, y north) in metres.  Follower and
 target numbers in TOML files are 1-based, as in the paper; everything in code
-is 0-based.  Validation happens once, in `agents.scenario_file`, and every
+is 0-based.  Validation happens once, in `agents.scenario.file`, and every
 error names the offending field.
 """
 
@@ -13,7 +13,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from agents.scenario_faults import FaultSpec
+from agents.scenario.faults import FaultSpec
+from transport.network_schema import NetworkConfig
 
 # numpy only where the lock-step engine asks for matrices: a follower process loads a
 # Scenario too and must not import numpy (issue 15: <= 50 MB per follower).
@@ -25,12 +26,6 @@ if TYPE_CHECKING:
 
 PROFILE_KINDS = ("paper_v1", "paper_v2", "constant", "circle", "random_walk")
 ESTIMATORS = ("paper", "robust")
-LINK_PROTOCOLS = ("tcp", "udp")
-# How each process runs Zenoh (transport.zenoh_config.RUNTIME_SETTINGS): "split", its own
-# threads for receiving, sending and the rest; "one_thread", all of it on one.
-ZENOH_RUNTIMES = ("split", "one_thread")
-AGENT_SCHEDS = ("normal", "batch")
-LOSS_MODELS = ("independent", "gilbert_elliott")
 REBALANCE = ("scale", "keep")
 
 
@@ -146,49 +141,8 @@ class HomeConfig:
 
 
 @dataclass(frozen=True)
-class LinkImpairment:
-    """What one directed link does to each message: seeded, applied at the receiver."""
-
-    delay_ms: float = 0.0
-    jitter_ms: float = 0.0  # std of a zero-mean normal added to the delay (clipped at 0)
-    loss: float = 0.0  # long-run fraction of messages lost
-    loss_model: str = "independent"  # or gilbert_elliott: bursts, mean length burst_len
-    burst_len: float = 1.0  # mean number of messages lost in a row (gilbert_elliott)
-    duplicate: float = 0.0  # probability a delivered message arrives twice
-    reorder: float = 0.0  # probability a message is held back behind the next one
-
-    @property
-    def is_identity(self) -> bool:
-        return self == LinkImpairment()
-
-
-@dataclass(frozen=True)
-class NetworkConfig:
-    """Estimator variant, Zenoh link protocol and runtime, impairment of the follower links."""
-
-    # The link-sum estimator survives pauses, loss and delay with no lasting offset;
-    # "paper" (the paper's integrated Phi) stays selectable to reproduce the paper.
-    estimator: str = "robust"
-    link: str = "tcp"
-    default: LinkImpairment = field(default_factory=LinkImpairment)
-    links: tuple[tuple[int, int, LinkImpairment], ...] = ()  # (from, to) 0-based overrides
-    seed: int = 0
-    zenoh_runtime: str = "split"
-    # "batch": followers, targets and the recorder run SCHED_BATCH (agents.process
-    # apply_agent_sched): their wake-ups no longer preempt the simulator, which stands for
-    # the physical world, on a machine they oversubscribe (ring64 on 2 cores).
-    agent_sched: str = "normal"
-
-    def impairment(self, sender: int, receiver: int) -> LinkImpairment:
-        for src, dst, spec in self.links:
-            if (src, dst) == (sender, receiver):
-                return spec
-        return self.default
-
-
-@dataclass(frozen=True)
 class Scenario:
-    """Everything one run needs; built only by `agents.scenario_file`."""
+    """Everything one run needs; built only by `agents.scenario.file`."""
 
     name: str
     beta_m_s: float
@@ -202,7 +156,7 @@ class Scenario:
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     home: HomeConfig = field(default_factory=HomeConfig)
     network: NetworkConfig = field(default_factory=NetworkConfig)
-    faults: tuple[FaultSpec, ...] = ()  # injected by the launcher (agents.scenario_faults)
+    faults: tuple[FaultSpec, ...] = ()  # injected by the launcher (agents.scenario.faults)
 
     @property
     def n(self) -> int:

@@ -1,9 +1,9 @@
 """The parsers of a scenario file's tables: targets, graph, pattern, gains, run, vehicle, home.
 
-Apart from the loader (agents.scenario_file), which reads the file and assembles the
+Apart from the loader (agents.scenario.file), which reads the file and assembles the
 `Scenario` from what these return, so that each table's rules are read in one place;
-`[network]` and `[[faults]]` have their own modules (agents.scenario_network,
-agents.scenario_faults).
+`[network]` and `[[faults]]` have their own modules (agents.scenario.network,
+agents.scenario.faults).
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from agents.errors import InadmissibleError, ScenarioError
-from agents.scenario import (
+from agents.scenario.fields import Table, follower_numbers, known_keys, number, positive, vec2
+from agents.scenario.model import (
     PROFILE_KINDS,
     REBALANCE,
     Gains,
@@ -25,7 +25,7 @@ from agents.scenario import (
     full_turn_ok,
     successor_from_order,
 )
-from agents.scenario_fields import Table, follower_numbers, known_keys, number, positive, vec2
+from transport.errors import InadmissibleError, ScenarioError
 
 
 def parse_targets(raw: Any, n: int) -> tuple[TargetSpec, ...]:

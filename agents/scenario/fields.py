@@ -1,7 +1,7 @@
 """The field readers of a scenario file: numbers, pairs, tables, follower numbers.
 
-Apart from the loader (agents.scenario_file) and the per-table parsers
-(agents.scenario_tables), which both read through them, so that a field is read and
+Apart from the loader (agents.scenario.file) and the per-table parsers
+(agents.scenario.tables), which both read through them, so that a field is read and
 its error worded in one place.
 """
 
@@ -12,7 +12,7 @@ from collections.abc import Iterable
 from fractions import Fraction
 from typing import Any
 
-from agents.errors import ScenarioError
+from transport.errors import ScenarioError
 
 Table = dict[str, Any]
 

@@ -9,12 +9,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.errors import ConfigError, ScenarioError
-from agents.scenario import ESTIMATORS, LINK_PROTOCOLS, LinkImpairment
-from agents.scenario_faults import parse_fault_flag
-from agents.scenario_file import load_scenario
-from agents.scenario_network import IMPAIRMENT_KEYS, choice, impairment
+from agents.scenario.faults import parse_fault_flag
+from agents.scenario.file import load_scenario
+from agents.scenario.model import ESTIMATORS
+from agents.scenario.network import IMPAIRMENT_KEYS, choice, impairment
 from deploy.restarts import RESTART_POLICIES
+from transport.errors import ConfigError, ScenarioError
+from transport.network_schema import LINK_PROTOCOLS, LinkImpairment
 
 # The network flags of `enclose run`, as sweep keys (--impair-seed comes from seed0 + repeat).
 # `fault` ("AT_S:ACTION:TARGET[:DURATION_S]" or "none") and `restart` sweep like them.

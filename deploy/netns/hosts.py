@@ -8,7 +8,7 @@ processes as clients of their host's router, each host's processes on their own 
 (`--host-offsets`), MAVLink from the other hosts to the simulator over the links.
 `--host-delay-ms` delays every follower link across hosts at its receiving end (the
 impairment layer: this kernel has no netem).  Every namespace is removed afterwards,
-whatever happens (deploy.netns.destroy; stale ones of dead launchers at the next start).
+whatever happens (deploy.netns.namespace.destroy; stale ones of dead launchers at the next start).
 """
 
 from __future__ import annotations
@@ -21,13 +21,13 @@ import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
-from agents.errors import DeployError
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.deployment import Deployment, HostSpec, dump_deployment, split_over_hosts
-from deploy.netns import _tool, clean_stale, destroy, install_tools
-from deploy.netns import unavailable as netns_unavailable
-from deploy.netns_run import run_forwarding_signals
+from deploy.netns.namespace import _tool, clean_stale, destroy, install_tools
+from deploy.netns.namespace import unavailable as netns_unavailable
+from deploy.netns.run import run_forwarding_signals
 from transport.clock import clock_env
+from transport.errors import DeployError
 
 log = logging.getLogger("enclose.hosts")
 SUBNET = "10.77.0"

@@ -1,6 +1,6 @@
 """`enclose sweep SWEEP_FILE`: a grid of real `enclose run`s, resumable; one after the other
-by default, `--jobs N` at a time here (deploy.sweep_parallel), or on a Dask cluster
-(`--cluster`, deploy.sweep_cluster).
+by default, `--jobs N` at a time here (deploy.sweep.parallel), or on a Dask cluster
+(`--cluster`, deploy.sweep.cluster).
 
 Each cell has its own run directory under the sweep directory; a cell whose directory holds
 good metrics and clean exit codes is done and skipped on the next invocation. The table and
@@ -25,16 +25,16 @@ from typing import Any
 
 from rich.console import Console
 
-from agents.errors import ConfigError
 from deploy.json_files import read_json
-from deploy.sweep_figures import write_figures
-from deploy.sweep_parallel import StopSignals, run_parallel
-from deploy.sweep_progress import SweepProgress
-from deploy.sweep_runner import HOST_FILE, CellRunner, SubprocessRunner
-from deploy.sweep_spec import Cell, SweepSpec, load_sweep
-from deploy.sweep_summary import write_summary
-from deploy.sweep_table import RECORD, CellState, cell_state, collect, write_tables
-from deploy.sweep_verdict import print_sweep_verdict
+from deploy.sweep.figures import write_figures
+from deploy.sweep.parallel import StopSignals, run_parallel
+from deploy.sweep.progress import SweepProgress
+from deploy.sweep.runner import HOST_FILE, CellRunner, SubprocessRunner
+from deploy.sweep.spec import Cell, SweepSpec, load_sweep
+from deploy.sweep.summary import write_summary
+from deploy.sweep.table import RECORD, CellState, cell_state, collect, write_tables
+from deploy.sweep.verdict import print_sweep_verdict
+from transport.errors import ConfigError
 
 log = logging.getLogger("enclose.sweep")
 STARTUP_S = 15.0  # a cell's start-up and shutdown, for the ETA before any cell has run
@@ -96,7 +96,7 @@ def _main(args: argparse.Namespace) -> int:
 
 
 def _on_cluster(spec: SweepSpec, args: argparse.Namespace) -> int:
-    from deploy.sweep_cluster import ClusterRunner, connect  # the optional extra
+    from deploy.sweep.cluster import ClusterRunner, connect  # the optional extra
 
     signals = StopSignals()
     with connect(args.cluster) as client:

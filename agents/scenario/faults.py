@@ -20,7 +20,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from agents.errors import ScenarioError
+from transport.errors import ScenarioError
 
 FAULT_ACTIONS = ("kill", "pause", "restart", "leave")
 FAULT_KEYS = ("at_s", "action", "target", "duration_s")

@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 
-from deploy.sweep_spec import Cell
+from deploy.sweep.spec import Cell
 
 log = logging.getLogger("enclose.sweep")
 POLL_S = 0.5

@@ -1,7 +1,7 @@
 """`enclose run --netns` itself: its flags, and the whole run as an inner `enclose run`
-in a lossy namespace (deploy.netns), reported in RUN_DIR/netns.json.
+in a lossy namespace (deploy.netns.namespace), reported in RUN_DIR/netns.json.
 
-Apart from the namespace machinery (deploy.netns), which `--hosts` (deploy.netns_hosts)
+Apart from the namespace machinery (deploy.netns.namespace), which `--hosts` (deploy.netns.hosts)
 shares and which knows nothing of a run's command line or its files.
 """
 
@@ -18,9 +18,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
 
-from agents.errors import DeployError
 from agents.network_args import network_overrides
-from deploy.netns import MAVLINK_PORTS, lossy_namespace
+from deploy.netns.namespace import MAVLINK_PORTS, lossy_namespace
+from transport.errors import DeployError
 
 log = logging.getLogger("enclose.netns")
 

@@ -1,7 +1,7 @@
 """Load a scenario from TOML and validate it once; every error names its field.
 
 The loader and the assembly of a `Scenario`; each table is parsed in
-agents.scenario_tables, each field read in agents.scenario_fields.
+agents.scenario.tables, each field read in agents.scenario.fields.
 """
 
 from __future__ import annotations
@@ -10,13 +10,12 @@ import math
 import tomllib
 from pathlib import Path
 
-from agents.errors import InadmissibleError, ScenarioError
-from agents.scenario import Scenario
-from agents.scenario_checks import check_admissible
-from agents.scenario_faults import parse_faults
-from agents.scenario_fields import Table, positive, table_of, vec2
-from agents.scenario_network import network
-from agents.scenario_tables import (
+from agents.scenario.checks import check_admissible
+from agents.scenario.faults import parse_faults
+from agents.scenario.fields import Table, positive, table_of, vec2
+from agents.scenario.model import Scenario
+from agents.scenario.network import network
+from agents.scenario.tables import (
     parse_edges,
     parse_gains,
     parse_home,
@@ -26,16 +25,17 @@ from agents.scenario_tables import (
     parse_targets,
     parse_vehicle,
 )
+from transport.errors import InadmissibleError, ScenarioError
 
 DEFAULT_SCENARIO = "paper"
 
 
 def load_scenario(source: str | Path | None = None, whole_run: bool = True) -> Scenario:
     """A shipped scenario by name (default: the paper's case) or a TOML file by path;
-    `whole_run`: see `agents.scenario_checks.check_admissible`."""
+    `whole_run`: see `agents.scenario.checks.check_admissible`."""
     if source is None or (isinstance(source, str) and not source.endswith(".toml")):
         name = source or DEFAULT_SCENARIO
-        return parse_scenario(_shipped(name), origin=name, whole_run=whole_run)
+        return parse_scenario(shipped_text(name), origin=name, whole_run=whole_run)
     path = Path(source)
     try:
         text = path.read_text(encoding="utf-8")
@@ -44,16 +44,16 @@ def load_scenario(source: str | Path | None = None, whole_run: bool = True) -> S
     return parse_scenario(text, origin=str(path), whole_run=whole_run)
 
 
-def _shipped(name: str) -> str:
+def shipped_text(name: str) -> str:
     """The text of a shipped scenario.  From the package's folder when it is one (as pip
     installs it): importlib.resources costs a follower 1.4 MB of imports (tempfile,
     shutil, compressors; issue 15: <= 50 MB per follower); it serves zipped installs."""
-    path = Path(__file__).with_name("scenarios") / f"{name}.toml"
+    path = Path(__file__).with_name("shipped") / f"{name}.toml"
     if path.is_file():
         return path.read_text(encoding="utf-8")
     from importlib import resources
 
-    ref = resources.files("agents") / "scenarios" / f"{name}.toml"
+    ref = resources.files("agents.scenario") / "shipped" / f"{name}.toml"
     if not ref.is_file():
         raise ScenarioError("scenario", f"no shipped scenario named {name!r}")
     return ref.read_text(encoding="utf-8")

@@ -10,11 +10,11 @@ from pathlib import Path
 from typing import Any
 
 from agents.core.lockstep import ENGINES, simulate_lockstep
-from agents.errors import ScenarioError
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.report import write_run_outputs
 from deploy.rundir import RunInfo
 from deploy.verdict import add_json_argument, announce
+from transport.errors import ScenarioError
 
 log = logging.getLogger(__name__)
 

@@ -9,15 +9,15 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from agents.errors import DeployError
 from agents.network_args import add_network_arguments, apply_network_arguments
-from agents.scenario_file import load_scenario
+from agents.scenario.file import load_scenario
 from deploy.launch import Launch
 from deploy.live_args import add_live_arguments
-from deploy.netns_hosts import add_hosts_arguments, run_on_hosts
-from deploy.netns_run import add_netns_arguments, netns_requested, run_in_namespace
+from deploy.netns.hosts import add_hosts_arguments, run_on_hosts
+from deploy.netns.run import add_netns_arguments, netns_requested, run_in_namespace
 from deploy.restarts import add_supervision_arguments
 from deploy.verdict import add_json_argument
+from transport.errors import DeployError
 
 
 def register(sub: Any) -> None:
@@ -74,7 +74,7 @@ def _main(args: argparse.Namespace) -> int:
     swarm = args.swarm or f"{scenario.name}-{stamp}".replace("_", "-")
     previous = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as cleanly as Ctrl-C
     try:
-        if args.hosts is not None:  # K namespaced hosts: deploy.netns_hosts
+        if args.hosts is not None:  # K namespaced hosts: deploy.netns.hosts
             return run_on_hosts(args, out, swarm, duration)
         if netns_requested(args):  # the same run, launched again inside a lossy namespace
             return run_in_namespace(args, out, swarm, duration)

@@ -30,9 +30,9 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from agents.errors import DeployError
-from deploy.sweep_parallel import StopSignals
-from deploy.sweep_runner import CELL_LOG, STOP_GRACE_S, SubprocessRunner
+from deploy.sweep.parallel import StopSignals
+from deploy.sweep.runner import CELL_LOG, STOP_GRACE_S, SubprocessRunner
+from transport.errors import DeployError
 
 log = logging.getLogger("enclose.sweep")
 CONNECT_TIMEOUT_S = 30.0

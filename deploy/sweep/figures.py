@@ -19,8 +19,8 @@ from matplotlib.axes import Axes
 from matplotlib.colors import LogNorm, Normalize
 from matplotlib.ticker import FuncFormatter
 
-from deploy.sweep_spec import SweepSpec, Value, format_value
-from deploy.sweep_table import DELIVERED, METRICS, Row
+from deploy.sweep.spec import SweepSpec, Value, format_value
+from deploy.sweep.table import DELIVERED, METRICS, Row
 
 log = logging.getLogger("enclose.sweep")
 Point = tuple[Value, ...]

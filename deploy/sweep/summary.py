@@ -12,8 +12,8 @@ import statistics
 from collections.abc import Sequence
 from pathlib import Path
 
-from deploy.sweep_spec import SweepSpec, Value, format_value
-from deploy.sweep_table import DELIVERED, METRICS, Row, write_csv_atomic
+from deploy.sweep.spec import SweepSpec, Value, format_value
+from deploy.sweep.table import DELIVERED, METRICS, Row, write_csv_atomic
 
 SUMMARY_CSV = "results_summary.csv"
 

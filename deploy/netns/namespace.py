@@ -13,7 +13,7 @@ table with it) whatever happens, and one left by a crashed launcher whose PID is
 is removed at the next start.
 
 This module makes, watches and removes namespaces (also for `--hosts`:
-deploy.netns_hosts); the run inside one, and its netns.json, is deploy.netns_run.
+deploy.netns.hosts); the run inside one, and its netns.json, is deploy.netns.run.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
-from agents.errors import DeployError
 from deploy.ports import PX4_SITL_BASES
+from transport.errors import DeployError
 
 log = logging.getLogger("enclose.netns")
 PREFIX = "enclose-"
