@@ -10,12 +10,14 @@ on the project's Ticker, velocity setpoints each tick, as a follower's loop does
 its law) and a flooder (tests/integration/mav_insider.py: datagrams of frames signed with
 a key nobody holds, in the vehicle's name).  Each level floods the agent's port or the
 vehicle's at R datagrams/s of B bytes.  Reported per level (median of the runs, worst in
-brackets): the victim's late ticks (20 ms slots of the measured window in which no tick
-started: a tick a period or more late, every slot of a stall counted),
+brackets): the victim's late ticks (20 ms slots of the Ticker's grid in which no tick
+started: a tick a period or more late, as the Ticker's overruns, every slot of a stall
+counted),
 its poll time p99 and max, its CPU (% of one core), whether it kept the link and the
 vehicle armed in offboard, its refusal and drop counters; the simulator's late ticks and
 CPU over the flood.  `--legacy DIR` runs the simulator and the victim from another
-checkout (one signing key for every vehicle, as before keys per vehicle) for a before/after.
+checkout (one signing key for every vehicle, as before keys per vehicle) for a before/after,
+e.g. `git archive <commit> | tar -x -C /tmp/before`.
 """
 
 from __future__ import annotations
@@ -65,12 +67,14 @@ def victim(args: argparse.Namespace) -> int:
             bad_ticks += not (state.link_ok and state.armed and state.mode == "OFFBOARD")
         t1 = os.times()
     polls.sort()
-    # A 20 ms slot of the run without a tick started in it: a tick late by a period or more
-    # (the Ticker counts a long stall as one overrun; here it costs every slot it spans).
-    slots = round(args.seconds / PERIOD_S)
-    hit = {int((t - starts[0]) / PERIOD_S) for t in starts}
+    # A slot of the Ticker's grid (k * 20 ms on the clock) in which no tick started: its
+    # tick came a period or more late (the Ticker's overrun), or never (the Ticker counts
+    # a long stall as one overrun; here it costs every slot it spans).
+    first, last = int(starts[0] / PERIOD_S), int(time.monotonic() / PERIOD_S)
+    hit = {int(t / PERIOD_S) for t in starts}
     report = {"ticks": ticker.ticks, "overruns": ticker.overruns, "bad_ticks": bad_ticks,
-              "late_pct": 100 * max(0, slots - len(hit)) / slots,
+              "late_pct": 100 * (last - first - len(hit & set(range(first, last)))) /
+              max(1, last - first),
               "poll_p99_ms": 1e3 * polls[int(0.99 * (len(polls) - 1))],
               "poll_max_ms": 1e3 * polls[-1],
               "cpu_pct": 100 * (t1.user + t1.system - t0.user - t0.system) / args.seconds,
