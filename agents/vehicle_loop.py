@@ -163,8 +163,9 @@ def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, veh
 
         def extra() -> dict[str, int]:
             # What the adapter refused or dropped (signatures, flood): agents.mavlink.rx_gate.
+            # Not "rx_": that prefix names a link's counters (deploy.recording.links).
             signing = {k: v for k, v in mav.counters.items()
-                       if k.startswith(("signing_", "rx_"))}
+                       if k.startswith(("signing_", "mav_"))}
             return {"overruns": ticker.overruns, "ticks": ticker.ticks,
                     "offboard_requests": keeper.requests,
                     **mav.clock_counters(), **signing, **node.counters()}

@@ -79,7 +79,7 @@ def victim(args: argparse.Namespace) -> int:
               "poll_max_ms": 1e3 * polls[-1],
               "cpu_pct": 100 * (t1.user + t1.system - t0.user - t0.system) / args.seconds,
               **{k: v for k, v in ad.counters.items()
-                 if k.startswith(("signing_", "rx_", "bad_packets"))}}
+                 if k.startswith(("signing_", "mav_", "bad_packets"))}}
     Path(args.out).write_text(json.dumps(report))
     return 0
 
@@ -142,12 +142,13 @@ def one_run(level: tuple[str, str, int, int], seconds: float, code: Path,
         with (tmp / "sim.log").open("wb") as log:
             sim = subprocess.Popen([sys.executable, "-m", "deploy.commands.sim", "--vehicles", "1",
                                     "--base-port", str(vbase), "--send-base-port", str(abase),
-                                    *signing], stdout=log, stderr=subprocess.STDOUT, env=env)
+                                    *signing], stdout=log, stderr=subprocess.STDOUT, env=env,
+                                   cwd=code)  # `-m` puts the working directory first
         vic = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--victim",
                                 "--local-port", str(abase), "--vehicle-port", str(vbase),
                                 "--key", str(key), "--seconds", str(seconds),
                                 "--ready", str(tmp / "ready"), "--out", str(tmp / "v.json")],
-                               env=env)
+                               env=env, cwd=code)
         flood = None
         try:
             wait_file(tmp / "ready", vic, 60.0)
@@ -170,7 +171,7 @@ def one_run(level: tuple[str, str, int, int], seconds: float, code: Path,
     return {**out, "sim_cpu_pct": sim_cpu,
             "sim_late_pct": 100 * s.get("overruns", 0) / max(1, s.get("ticks", 1)),
             "sim_refused": sum(v for k, v in s.items() if k.startswith("signing_rejected_")),
-            "sim_budget_spent": s.get("rx_budget_spent", 0),
+            "sim_budget_spent": s.get("mav_budget_spent", 0),
             "flood_dps": fl["flood_sent"] / seconds,
             "flood_mb_s": fl["flood_bytes"] / seconds / 1e6,
             "flood_errors": fl["flood_errors"]}
@@ -189,7 +190,7 @@ def row(name: str, runs: list[dict[str, Any]]) -> str:
     return (f"| {name} | {cell(runs, 'flood_mb_s', '{:.1f}')} | {cell(runs, 'late_pct')} | "
             f"{cell(runs, 'poll_p99_ms')} | {cell(runs, 'poll_max_ms', '{:.1f}')} | "
             f"{cell(runs, 'cpu_pct', '{:.0f}')} | {kept} | {refused} / "
-            f"{runs[-1].get('rx_kernel_drops', 0)} / {runs[-1].get('rx_flood_drops', 0)} | "
+            f"{runs[-1].get('mav_kernel_drops', 0)} / {runs[-1].get('mav_flood_drops', 0)} | "
             f"{cell(runs, 'sim_late_pct')} | {cell(runs, 'sim_cpu_pct', '{:.0f}')} | "
             f"{runs[-1]['sim_refused']} |")
 

@@ -6,7 +6,7 @@ view's status.
   wrong_key, future, replay, malformed; agents.mavlink.signing);
 - `signing_wrong_key_vehicle_<sysid>`: of those, the ones signed with vehicle sysid's key
   (the sender, as far as a vehicle can tell: whoever holds that vehicle's key);
-- `rx_flood_drops`: datagrams cut at a tick's parse budget; `rx_kernel_drops`: datagrams the
+- `mav_flood_drops`: datagrams cut at a tick's parse budget; `mav_kernel_drops`: datagrams the
   kernel dropped on a full socket buffer (agents.mavlink.rx_gate, agents.mavlink.udp);
 - `peers_refused`: signed senders refused a place in a vehicle's full peer table.
 """
@@ -18,7 +18,9 @@ from typing import Any
 
 REJECTED = "signing_rejected_"
 WRONG_KEY = "signing_wrong_key_vehicle_"
-DROPS = ("rx_flood_drops", "rx_kernel_drops", "peers_refused")
+DROPS = {"mav_flood_drops": "datagrams cut at the parse budget",
+         "mav_kernel_drops": "dropped unread by the kernel",
+         "peers_refused": "signed peers refused (table full)"}
 
 
 def _count(v: Any) -> int:
@@ -50,7 +52,7 @@ def refusal_text(counters: Mapping[str, Any], n_followers: int) -> str | None:
         why = ", ".join(f"{k} {v}" for k, v in sorted(reasons.items()))
         keys = f": {', '.join(sorted(owners))}'s key" if owners else ""
         parts.append(f"refused {sum(reasons.values())} MAVLink frames ({why}{keys})")
-    parts += [f"{k.replace('_', ' ')} {found[k]}" for k in DROPS if k in found]
+    parts += [f"{found[k]} {label}" for k, label in DROPS.items() if k in found]
     return ", ".join(parts) or None
 
 

@@ -221,7 +221,7 @@ class Simulator:
             if i not in self._resting:
                 self._selector.unregister(ep.sock)
                 self._resting.append(i)
-            self.counters["rx_budget_spent"] += 1
+            self.counters["mav_budget_spent"] += 1
             return False
         try:
             data, addr = ep.sock.recvfrom(65535)

@@ -146,7 +146,7 @@ class MavlinkAdapter:
                 self.counters["rx_errors"] += 1
                 break
             if anc and (dropped := kernel_drops(anc)) is not None:
-                self.counters["rx_kernel_drops"] = dropped
+                self.counters["mav_kernel_drops"] = dropped
             admitted = gate.admit(data, addr)
             if admitted:
                 self._datagram(admitted, addr, kernel_arrival_s(anc, time.time(), self.clock()))

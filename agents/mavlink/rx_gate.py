@@ -9,8 +9,8 @@ kernel drops what overflows its buffer).  With signing on, each datagram is firs
 by its first frame alone (`SignatureVerifier.screen`, one hash): a refused one is dropped
 unparsed and counted under its reason (signing_rejected_<reason>), so a flood of badly
 signed datagrams costs a read and a hash each.  A datagram that would take the tick past
-its parse budget is cut there: its tail is dropped and counted (`rx_flood_drops`,
-`rx_flood_bytes`).  Refusals are logged at most once per LOG_EVERY_S per receiver, with
+its parse budget is cut there: its tail is dropped and counted (`mav_flood_drops`,
+`mav_flood_bytes`).  Refusals are logged at most once per LOG_EVERY_S per receiver, with
 their count, reasons and the last sender.
 """
 
@@ -106,8 +106,8 @@ class RxGate:
                 return None
         room = self.budget.parse_bytes - self.parsed_bytes
         if len(data) > room:
-            self.counters["rx_flood_drops"] += 1
-            self.counters["rx_flood_bytes"] += len(data) - max(0, room)
+            self.counters["mav_flood_drops"] += 1
+            self.counters["mav_flood_bytes"] += len(data) - max(0, room)
             self.refusals.note("over budget", sender)
             data = data[:max(0, room)]
         self.parsed_bytes += len(data)

@@ -87,4 +87,4 @@ def test_an_insider_with_one_vehicles_key_moves_no_other_vehicle(tmp_path: Path)
     assert sent >= 0.8 * FLOOD_DPS * ATTACK_S
     refused = ad.counters["signing_rejected_bad_signature"]
     assert refused > 0 and ad.counters["bad_packets"] == 0, ad.counters
-    assert 0.8 * sent <= refused + ad.counters["rx_kernel_drops"] <= sent, ad.counters
+    assert 0.8 * sent <= refused + ad.counters["mav_kernel_drops"] <= sent, ad.counters

@@ -79,9 +79,11 @@ def test_a_poll_parses_at_most_its_byte_budget() -> None:
     ad.poll()
     parsed, size = ADAPTER_BUDGET.parse_bytes, len(bigs[0])
     assert sock.reads == -(-parsed // size)  # it stops once the budget is spent
-    assert ad.counters["rx_flood_drops"] == (1 if parsed % size else 0)
-    assert ad.counters["rx_flood_bytes"] == sock.reads * size - parsed
+    assert ad.counters["mav_flood_drops"] == (1 if parsed % size else 0)
+    assert ad.counters["mav_flood_bytes"] == sock.reads * size - parsed
     assert ad.telemetry_seen and ad.counters["signing_rejected_replay"] == 0
+    # "rx_<x>" in a follower's status is link x's count (deploy.recording.links): not ours.
+    assert not [k for k in ad.counters if k.startswith("rx_")]
 
 
 def test_gate_cuts_at_the_budget_and_screens_first() -> None:
@@ -94,7 +96,7 @@ def test_gate_cuts_at_the_budget_and_screens_first() -> None:
     assert gate.admit(good, None) == good and gate.open
     cut = gate.admit(good * 2, None)
     assert cut is not None and len(cut) == 100 - len(good) and not gate.open
-    assert counters["signing_rejected_malformed"] == 1 and counters["rx_flood_drops"] == 1
+    assert counters["signing_rejected_malformed"] == 1 and counters["mav_flood_drops"] == 1
     gate.new_tick()
     assert gate.open and gate.parsed_bytes == 0
 
@@ -189,7 +191,7 @@ def test_a_flooded_vehicle_costs_one_budget_a_tick_and_the_others_are_served(
         signed_sim.receive_until(time.monotonic() + 0.3)
         c = signed_sim.counters
         assert c["signing_rejected_wrong_key"] == VEHICLE_BUDGET.datagrams
-        assert c["rx_budget_spent"] >= 1 and c["commands"] == 1
+        assert c["mav_budget_spent"] >= 1 and c["commands"] == 1
         signed_sim.step_once()  # the tick ends; the next one's budget takes the rest
         signed_sim.receive_until(time.monotonic() + 0.3)
         assert c["signing_rejected_wrong_key"] == 2 * VEHICLE_BUDGET.datagrams

@@ -13,9 +13,9 @@ from deploy.verdict import print_verdict, read_verdict
 
 SIM = {"state": "done", "ticks": 900, "signing_rejected_unsigned": 2500,
        "signing_rejected_wrong_key": 20, "signing_wrong_key_vehicle_3": 20,
-       "rx_budget_spent": 4, "peers_refused": 0}
-FOLLOWER = {"state": "done", "signing_rejected_bad_signature": 91000, "rx_flood_drops": 2,
-            "rx_kernel_drops": 17}
+       "mav_budget_spent": 4, "peers_refused": 0}
+FOLLOWER = {"state": "done", "signing_rejected_bad_signature": 91000, "mav_flood_drops": 2,
+            "mav_kernel_drops": 17}
 
 
 def test_only_nonzero_refusal_counters_count() -> None:
@@ -29,8 +29,9 @@ def test_the_wrong_keys_owner_is_named() -> None:
     assert vehicle_owner(3, 4) == "follower-2" and vehicle_owner(6, 4) == "target-1"
     assert refusal_text(SIM, 4) == ("refused 2520 MAVLink frames (unsigned 2500, wrong_key 20: "
                                     "follower-2's key)")
-    assert refusal_text(FOLLOWER, 4) == ("refused 91000 MAVLink frames (bad_signature 91000), "
-                                         "rx flood drops 2, rx kernel drops 17")
+    assert refusal_text(FOLLOWER, 4) == (
+        "refused 91000 MAVLink frames (bad_signature 91000), 2 datagrams cut at the parse "
+        "budget, 17 dropped unread by the kernel")
 
 
 def test_the_verdict_shows_each_refusing_process(tmp_path: Path) -> None:
