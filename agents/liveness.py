@@ -19,6 +19,20 @@ around a restarted rendezvous), so while a scenario follower is missing the watc
 declared again, whose history gives the tokens alive now: after REFRESH_S, then at
 doubling intervals up to REFRESH_MAX_S (a follower that died for good costs little).
 
+Tokens are names anyone on the bus may declare where access control does not stop them
+(`--insecure`, udp links, a router's certificate), so they are checked, not trusted:
+- a token whose key is malformed or names no follower of the scenario (index >= n,
+  a sign, a non-ASCII digit, a leading zero) is ignored and counted (`tokens_rejected`);
+- a flapping token is rate-limited: the changes seen between two reads of the set (one
+  loop tick) count as one, their net effect (a member that leaves and returns within it
+  was never out), and a member changes at most FLAP_MAX_CHANGES times in FLAP_WINDOW_S;
+  a further change is held back (`tokens_held`), the member kept in its last state, until
+  the window allows one more -- then it takes its token's state of that moment.
+FLAP_MAX_CHANGES = 4 in FLAP_WINDOW_S = 10 s: a crash and its restart are 2 changes, a
+stalled loop's withdrawal and return 2 more, so one real incident is always seen at once;
+each change costs every follower a regroup (a new ring, new subscriptions) and the swarm a
+transient, and a token toggled as fast as a process can is seen at most 4 times in 10 s.
+
 `TokenSet` is pure (time is an argument); `MembershipWatch` feeds it from a Bus.
 """
 
@@ -27,30 +41,73 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from transport.bus import Bus, Token
 from transport.keys import SwarmKeys, parse_key
+from transport.ratelog import RateLimitedLog
 
 log = logging.getLogger(__name__)
 STALL_S = 5.0
 REFRESH_S = 2.0
 REFRESH_MAX_S = 30.0
+FLAP_WINDOW_S = 10.0
+FLAP_MAX_CHANGES = 4
 
 
 @dataclass
 class TokenSet:
     """Followers with a live token, and when to ask Zenoh again for the ones missing."""
 
-    expected: frozenset[int] = frozenset()  # the scenario's followers
-    tokens: set[int] = field(default_factory=set)
+    expected: frozenset[int] = frozenset()  # the scenario's followers: no other is taken
+    tokens: set[int] = field(default_factory=set)  # the members, as applied
     refresh_after_s: float = REFRESH_S
     _next_refresh_s: float | None = None
+    raw: set[int] = field(default_factory=set)  # the tokens alive, as the bus says
+    rejected: int = 0  # tokens naming no follower of the scenario
+    held: int = 0  # token events not applied at once: the flap limit held their follower
+    _changes: dict[int, deque[float]] = field(default_factory=dict)  # applied, per follower
+    _pending: set[int] = field(default_factory=set)  # noted, not applied yet
+    _held: set[int] = field(default_factory=set)  # pending for the flap limit
 
-    def token(self, index: int, alive: bool) -> None:
+    def token(self, index: int, alive: bool, now_s: float = 0.0) -> None:
+        """One token event, applied at once (as far as the flap limit allows)."""
+        self.note(index, alive)
+        self.settle(now_s)
+
+    def note(self, index: int, alive: bool) -> None:
+        """One token event, applied by the next `settle`."""
+        if index not in self.expected:
+            self.rejected += alive  # its vanishing is no second offence
+            return
+        (self.raw.add if alive else self.raw.discard)(index)
+        self._pending.add(index)
+        self.held += index in self._held
+
+    def settle(self, now_s: float) -> None:
+        """Apply the noted changes the flap limit allows; keep the others pending."""
+        for index in sorted(self._pending):
+            if self._apply(index, now_s):
+                self._pending.discard(index)
+                self._held.discard(index)
+            elif index not in self._held:
+                self._held.add(index)
+                self.held += 1
+
+    def _apply(self, index: int, now_s: float) -> bool:
+        """True when `index`'s member state is its token's (now, or already)."""
+        alive = index in self.raw
+        if alive == (index in self.tokens):
+            return True
+        times = self._changes.setdefault(index, deque(maxlen=FLAP_MAX_CHANGES))
+        if len(times) == FLAP_MAX_CHANGES and now_s - times[0] < FLAP_WINDOW_S:
+            return False
+        times.append(now_s)
         (self.tokens.add if alive else self.tokens.discard)(index)
         self.refresh_after_s = REFRESH_S  # a change: a missing one may be on its way back
+        return True
 
     def due_refresh(self, now_s: float) -> bool:
         """True when the watch should be declared again (and the next time is set)."""
@@ -70,22 +127,40 @@ class TokenSet:
 class MembershipWatch:
     """The follower member set as seen through one Bus: the followers' tokens."""
 
-    def __init__(self, bus: Bus, keys: SwarmKeys, n_followers: int = 0) -> None:
+    def __init__(self, bus: Bus, keys: SwarmKeys, n_followers: int) -> None:
         self.bus, self.keys = bus, keys
         self.tracker = TokenSet(frozenset(range(n_followers)))
         self.watch = bus.watch_alive(keys.alive_of("follower"))
         self.refreshes = 0
+        self.log = RateLimitedLog(log)
 
     def members(self, now_s: float) -> frozenset[int]:
         for ev in self.watch.drain_events():
-            info = parse_key(ev.key)
-            if info is not None and info.index is not None:
-                self.tracker.token(info.index, ev.alive)
+            index = self._follower(ev.key)
+            if index is not None:
+                self.tracker.note(index, ev.alive)
+            elif ev.alive:
+                self.tracker.rejected += 1
+                self.log.warning("token", "ignored a liveliness token on %r: no follower of "
+                                          "this swarm", ev.key[:160])
+        self.tracker.settle(now_s)
         if self.tracker.due_refresh(now_s):
             self.refreshes += 1
             self.watch.close()
             self.watch = self.bus.watch_alive(self.keys.alive_of("follower"))
         return frozenset(self.tracker.tokens)
+
+    def _follower(self, key: str) -> int | None:
+        """The follower whose token `key` is, if it is one of the scenario's."""
+        info = parse_key(key)
+        if info is None or info.kind != "alive" or info.role != "follower" \
+                or info.swarm != self.keys.swarm or info.index not in self.tracker.expected:
+            return None
+        return info.index
+
+    def counters(self) -> dict[str, int]:
+        """For the process's status: tokens ignored, and changes the flap limit held."""
+        return {"tokens_rejected": self.tracker.rejected, "tokens_held": self.tracker.held}
 
     def close(self) -> None:
         self.watch.close()

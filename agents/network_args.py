@@ -1,9 +1,11 @@
-"""Command-line overrides of the `[network]` table, for `enclose run` and its children."""
+"""Command-line overrides of the `[network]` table, for `enclose run` and its children:
+the flags, their typed `NetworkOptions`, and how they change a scenario."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+from dataclasses import dataclass
 
 from agents.scenario.checks import check_estimator_order
 from agents.scenario.model import ESTIMATORS, Scenario
@@ -42,33 +44,57 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
                         "followers' status (lat_p50_us_f<j>; bench/bench_latency.py)")
 
 
-def network_overrides(args: argparse.Namespace) -> list[str]:
+@dataclass(frozen=True)
+class NetworkOptions:
+    """The network flags given on a command line (None: the scenario's own setting)."""
+
+    estimator: str | None = None
+    estimator_order: int | None = None
+    link: str | None = None
+    zenoh_runtime: str | None = None
+    agent_sched: str | None = None
+    impairment: tuple[tuple[str, float | str], ...] = ()  # (IMPAIRMENT_KEYS name, value)
+    impair_seed: int | None = None
+    latency_stamps: bool = False
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> NetworkOptions:
+        given = tuple((k, getattr(args, k)) for k in IMPAIRMENT_KEYS
+                      if getattr(args, k, None) is not None)
+        return cls(**{k: getattr(args, k, None) for k in _CHOICES}, impairment=given,
+                   impair_seed=getattr(args, "impair_seed", None),
+                   latency_stamps=bool(getattr(args, "latency_stamps", None)))
+
+
+_CHOICES = ("estimator", "estimator_order", "link", "zenoh_runtime", "agent_sched")
+
+
+def network_overrides(opts: NetworkOptions) -> list[str]:
     """The flags given, as argv for a child process."""
+    values = [(k, getattr(opts, k)) for k in _CHOICES]
+    values += [*opts.impairment, ("impair_seed", opts.impair_seed)]
     argv: list[str] = []
-    for dest in ("estimator", "estimator_order", "link", "zenoh_runtime", "agent_sched",
-                 *IMPAIRMENT_KEYS,
-                 "impair_seed"):
-        value = getattr(args, dest, None)
+    for dest, value in values:
         if value is not None:
             argv += ["--" + dest.replace("_", "-"), str(value)]
-    return argv + (["--latency-stamps"] if getattr(args, "latency_stamps", None) else [])
+    return argv + (["--latency-stamps"] if opts.latency_stamps else [])
 
 
-def apply_network_arguments(scenario: Scenario, args: argparse.Namespace) -> Scenario:
+def apply_network_arguments(scenario: Scenario, opts: NetworkOptions) -> Scenario:
     """`scenario` with the flags applied to its network (and to every per-link override)."""
-    given = {k: getattr(args, k) for k in IMPAIRMENT_KEYS if getattr(args, k, None) is not None}
+    given = dict(opts.impairment)
     net = scenario.network
     if given:
         default = impairment(given, "command line", net.default)
         links = tuple((s, d, impairment(given, "command line", spec)) for s, d, spec in net.links)
         net = dataclasses.replace(net, default=default, links=links)
     for dest in ("estimator", "link", "zenoh_runtime", "agent_sched"):
-        if getattr(args, dest, None) is not None:
-            net = dataclasses.replace(net, **{dest: getattr(args, dest)})
-    if getattr(args, "impair_seed", None) is not None:
-        net = dataclasses.replace(net, seed=args.impair_seed)
+        if getattr(opts, dest) is not None:
+            net = dataclasses.replace(net, **{dest: getattr(opts, dest)})
+    if opts.impair_seed is not None:
+        net = dataclasses.replace(net, seed=opts.impair_seed)
     # The velocity stage is the robust estimator's: `--estimator paper` is order 1.
-    order = getattr(args, "estimator_order", None)
+    order = opts.estimator_order
     if order is None:
         order = 1 if net.estimator == "paper" else scenario.gains.estimator_order
     gains = dataclasses.replace(scenario.gains, estimator_order=order)

@@ -1,4 +1,5 @@
-"""Plumbing every swarm process shares: arguments, the bus, signals, the tick loop, status.
+"""Plumbing every swarm process shares: its scenario, the bus, signals, the tick loop,
+status.  The command line itself is agents.process_options.
 
 Entry points (follower, target, simulator, recorder) only wire these together.
 """
@@ -16,97 +17,62 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from types import FrameType
+from typing import TypeVar
 
-from agents.network_args import add_network_arguments, apply_network_arguments
+from agents.law_args import apply_law_arguments
+from agents.lifeline import die_with_launcher
+from agents.network_args import apply_network_arguments
 from agents.phases import mark
+from agents.process_options import BusOptions
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 from transport.bus import Bus
-from transport.clock_sync import parse_clock_hosts
+from transport.clock_sync import clock_hosts_count, parse_clock_hosts
 from transport.codec import encode
 from transport.credentials import Identity
 from transport.errors import EncloseError
 from transport.keys import SwarmKeys
 from transport.messages import ProcessStatus, Stamper
 from transport.network_schema import NetworkConfig
+from transport.peer_clock import PROCESS_BOOK, ClockBook
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
 log = logging.getLogger(__name__)
 Clock = Callable[[], float]
+Options = TypeVar("Options")
 
 
-def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", default=None, help="scenario TOML or shipped name")
-    parser.add_argument("--swarm", default="enclose", help="swarm name (key prefix)")
-    parser.add_argument(
-        "--listen",
-        action="append",
-        default=[],
-        metavar="ENDPOINT",
-        help="Zenoh listen endpoint, e.g. tcp/127.0.0.1:7447 (repeatable)",
-    )
-    parser.add_argument(
-        "--connect",
-        action="append",
-        default=[],
-        metavar="ENDPOINT",
-        help="Zenoh endpoint to connect to (repeatable)",
-    )
-    parser.add_argument(
-        "--zenoh-config",
-        default=None,
-        metavar="JSON5",
-        help="your own Zenoh config file, used as the base",
-    )
-    parser.add_argument(
-        "--credentials",
-        default=None,
-        metavar="IDENTITY_JSON",
-        help="this process's identity file (transport.credentials): mTLS + access control; "
-        "without it the session is unauthenticated",
-    )
-    parser.add_argument("--mode", choices=("peer", "client"), default="peer",
-                        help="Zenoh mode: peer (one host) or client of this host's router")
-    parser.add_argument("--clock-host", type=int, default=None, metavar="K",
-                        help="this process runs on host K of a swarm over hosts whose "
-                        "clocks differ: map other hosts' stamps by their offsets, learnt "
-                        "from the routers' clock probes (transport.clock_sync)")
-    parser.add_argument("--clock-hosts", default="", metavar="S,S;S,..",
-                        help="with --clock-host: every host's sender ids (e.g. "
-                        "follower-0), hosts separated by ';' in router order")
-    parser.add_argument("--log-level", default="INFO")
-    add_network_arguments(parser)
+def load_run_scenario(opts: BusOptions, whole_run: bool = True) -> Scenario:
+    """The scenario named on the command line, with the command line's network and law
+    overrides; checked over the whole run unless `whole_run` is false (agents.follower.main:
+    see agents.scenario.checks.check_admissible).  A process calls it once and passes the
+    result on."""
+    scenario = apply_network_arguments(load_scenario(opts.scenario, whole_run), opts.network)
+    return apply_law_arguments(scenario, opts.law)
 
 
-def load_run_scenario(args: argparse.Namespace) -> Scenario:
-    """The scenario named on the command line, with the command line's network overrides;
-    checked over the whole run unless the entry point set `whole_run_checks=False`
-    (agents.follower: see agents.scenario.checks.check_admissible)."""
-    whole_run = getattr(args, "whole_run_checks", True)
-    return apply_network_arguments(load_scenario(args.scenario, whole_run), args)
-
-
-def open_bus(args: argparse.Namespace, arrival_stamps: bool = False) -> Bus:
+def open_bus(opts: BusOptions, network: NetworkConfig, arrival_stamps: bool = False) -> Bus:
     """The process's bus; with no --listen it listens on an OS-chosen port of the run's
-    link protocol (`[network] link`, or --link), so that every link of the mesh uses it.
-    `arrival_stamps`: stamp each sample's arrival (one-way latency, transport.link_stats)."""
-    network = load_run_scenario(args).network
+    link protocol (`network.link`: `[network] link`, or --link), so that every link of the
+    mesh uses it.  `arrival_stamps`: stamp each sample's arrival (one-way latency,
+    transport.link_stats)."""
     cfg = ZenohConfig(
-        listen=tuple(args.listen),
-        connect=tuple(args.connect),
-        user_config_path=args.zenoh_config,
+        listen=opts.listen,
+        connect=opts.connect,
+        user_config_path=opts.zenoh_config,
         link=network.link,
         runtime=network.zenoh_runtime,
-        identity=None if args.credentials is None else Identity.load(args.credentials),
-        mode=getattr(args, "mode", "peer"),
+        identity=None if opts.credentials is None else Identity.load(opts.credentials),
+        mode=opts.mode,
         arrival_stamps=arrival_stamps,
     )
     bus = ZenohBus(cfg)
     mark("bus_open")  # the session is up: its first link (TLS handshake included) is made
-    if getattr(args, "clock_host", None) is not None:
-        bus.start_clock_sync(SwarmKeys(args.swarm), f"router-{args.clock_host}",
-                             clock_of=parse_clock_hosts(args.clock_hosts))
+    if opts.clock_host is not None:
+        bus.start_clock_sync(SwarmKeys(opts.swarm), f"router-{opts.clock_host}",
+                             clock_hosts_count(opts.clock_hosts),
+                             clock_of=parse_clock_hosts(opts.clock_hosts))
     return bus
 
 
@@ -127,36 +93,40 @@ def apply_agent_sched(network: NetworkConfig) -> None:
 def process_main(
     parser: argparse.ArgumentParser,
     argv: Sequence[str] | None,
-    run: Callable[[argparse.Namespace], int],
-    name: Callable[[argparse.Namespace], str],
+    read: Callable[[argparse.Namespace], Options],
+    run: Callable[[Options], int],
+    name: Callable[[Options], str],
 ) -> int:
-    """Parse, set up logging, run; a named error becomes a logged line and exit code 2."""
+    """Parse into typed options (`read`), set up logging, run; a named error becomes a
+    logged line and exit code 2.  `log_level` is read from the parsed flags.  First of
+    all, die with the launcher that started us, if one did (agents.lifeline)."""
+    die_with_launcher()
     mark("main")  # the entry point's imports are done
     args = parser.parse_args(argv)
-    setup_logging(args.log_level, name(args))
+    opts = read(args)
+    setup_logging(args.log_level, name(opts))
     try:
-        return profiled(run, args, name(args))
+        return profiled(run, opts, name(opts))
     except EncloseError as exc:
-        logging.getLogger(f"enclose.{name(args)}").error("%s: %s", type(exc).__name__, exc)
+        logging.getLogger(f"enclose.{name(opts)}").error("%s: %s", type(exc).__name__, exc)
         return 2
 
 
-def profiled(run: Callable[[argparse.Namespace], int], args: argparse.Namespace,
-              name: str) -> int:
-    """`run`, under cProfile when ENCLOSE_PROFILE_DIR names a folder: the profile of each
-    process lands in <folder>/<name>.prof (read it with `python -m pstats`).
+def profiled(run: Callable[[Options], int], opts: Options, name: str) -> int:
+    """`run(opts)`, under cProfile when ENCLOSE_PROFILE_DIR names a folder: the profile of
+    each process lands in <folder>/<name>.prof (read it with `python -m pstats`).
 
     ENCLOSE_PROFILE_ONLY (names, comma-separated: `follower-3,sim`) profiles those alone:
     cProfile doubles a process's CPU, and 64 profiled followers starve 2 cores."""
     folder = os.environ.get("ENCLOSE_PROFILE_DIR")
     only = os.environ.get("ENCLOSE_PROFILE_ONLY", "")
     if not folder or (only and name not in {n.strip() for n in only.split(",")}):
-        return run(args)
+        return run(opts)
     import cProfile
 
     profiler = cProfile.Profile(time.thread_time)  # CPU, not wall: sleeps and preemption out
     try:
-        return profiler.runcall(run, args)
+        return profiler.runcall(run, opts)
     finally:
         os.makedirs(folder, exist_ok=True)
         profiler.dump_stats(os.path.join(folder, f"{name}.prof"))
@@ -244,6 +214,7 @@ class StatusReporter:
     period_s: float = 1.0
     counters: Counter[str] = field(default_factory=Counter)
     state: str = "starting"
+    clocks: ClockBook = PROCESS_BOOK
     _stamper: Stamper | None = None
     _last_s: float = -1e18
 
@@ -265,7 +236,8 @@ class StatusReporter:
         self._last_s = now
         if self._stamper is None:
             self._stamper = Stamper(f"{self.role}-{self.index}", self.bus.now_s)
-        counters = {**self.counters, **(extra or {})}
+        # Dropped clock probes (transport.peer_clock): non-zero only across hosts.
+        counters = {**self.counters, **(extra or {}), **self.clocks.counters()}
         msg = ProcessStatus(
             self._stamper.header(),
             self.role,

@@ -18,10 +18,13 @@ import numpy as np
 
 from agents.core.profiles import TargetMotion
 from agents.mavlink.adapter import MavlinkAdapter
-from agents.process import StatusReporter, add_bus_arguments, load_run_scenario, process_main
+from agents.process import StatusReporter, load_run_scenario, process_main
+from agents.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
 from agents.scenario.model import Scenario
-from agents.vehicle_loop import add_vehicle_arguments, fly
+from agents.vehicle_loop import fly
+from transport.access import sender_ids
 from transport.bus import Bus
+from transport.checks import DEFAULT_LIMITS
 from transport.decoder import Decoder
 from transport.errors import EncloseError
 from transport.keys import SwarmKeys
@@ -66,7 +69,8 @@ class TargetNode:
         self.speed_max_m_s = scenario.vehicle.max_speed_xy_m_s
         self.keys = SwarmKeys(swarm)
         self.control = bus.subscribe(self.keys.control())
-        self.decoder = Decoder(expect=(RunControl,))
+        self.decoder = Decoder(expect=(RunControl,), limits=DEFAULT_LIMITS,
+                               senders=sender_ids(scenario.n, scenario.m))
         self.status = StatusReporter(bus, self.keys, "target", index)
         self.start_s: float | None = None
         self.stop_s = math.inf
@@ -96,15 +100,15 @@ class TargetNode:
         self.control.close()
 
 
-def run(args: argparse.Namespace) -> int:
-    scenario = load_run_scenario(args)
-    if not 0 <= args.index < scenario.m:
+def run(opts: AgentOptions) -> int:
+    scenario = load_run_scenario(opts.bus)
+    if not 0 <= opts.index < scenario.m:
         raise EncloseError(f"--index must be within 0..{scenario.m - 1}")
 
     def make(bus: Bus, mav: MavlinkAdapter) -> TargetNode:
-        return TargetNode(scenario, args.index, bus, mav, args.swarm)
+        return TargetNode(scenario, opts.index, bus, mav, opts.bus.swarm)
 
-    return fly(args, scenario, "target", args.index, scenario.n + args.index, make)
+    return fly(opts, scenario, "target", scenario.n + opts.index, make)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -112,7 +116,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_bus_arguments(parser)
     parser.add_argument("--index", type=int, required=True, help="target number, 0-based")
     add_vehicle_arguments(parser)
-    return process_main(parser, argv, run, lambda a: f"target-{a.index}")
+    return process_main(parser, argv, AgentOptions.from_namespace, run,
+                        lambda o: f"target-{o.index}")
 
 
 if __name__ == "__main__":

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import logging
 import time
 from collections.abc import Callable
@@ -24,6 +23,7 @@ from agents.process import (
     open_bus,
     stop_on_signals,
 )
+from agents.process_options import AgentOptions
 from agents.scenario.model import Scenario
 from transport.bus import Bus, Token
 from transport.errors import MavlinkError
@@ -96,19 +96,6 @@ def _start_again(mav: MavlinkAdapter, altitude_m: float, stop: StopFlag, role: s
     return not stop.raised
 
 
-def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--mav-local-base", type=int, default=14540,
-                        help="the adapter of vehicle v binds BASE+v (PX4 SITL: 14540)")
-    parser.add_argument("--mav-vehicle-base", type=int, default=14580,
-                        help="vehicle v listens on BASE+v (PX4 SITL: 14580)")
-    parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="this vehicle's 32-byte MAVLink 2 signing key: sign everything "
-                        "sent to it, refuse what it did not sign")
-    parser.add_argument("--mav-vehicle-host", default=None, metavar="ADDR",
-                        help="the vehicle's address when it is on another host (default: "
-                        "127.0.0.1); the adapter then listens on every address")
-
-
 def _nothing() -> None:
     pass
 
@@ -122,21 +109,25 @@ def _declare_alive(bus: Bus, key: str, role: str) -> tuple[Token | StallGuard, C
     return bus.declare_token(key), _nothing
 
 
-def fly(args: argparse.Namespace, scenario: Scenario, role: str, index: int, vehicle: int,
+def fly(opts: AgentOptions, scenario: Scenario, role: str, vehicle: int,
         make_node: NodeFactory) -> int:
-    """Take off, declare the process linked, tick until stopped; returns the exit code."""
+    """Take off, declare the process linked, tick until stopped; returns the exit code.
+    `scenario` is the one the process loaded (with its command line's overrides)."""
+    index = opts.index
     apply_agent_sched(scenario.network)
-    cfg = AdapterConfig.px4_sitl(vehicle, args.mav_local_base, args.mav_vehicle_base)
-    if getattr(args, "mav_vehicle_host", None):  # a companion computer off the vehicle's host
-        cfg = replace(cfg, remote_host=args.mav_vehicle_host, local_host="0.0.0.0")
-    if args.signing_key is not None:  # link id: the vehicle's number, one stream per agent
-        cfg = replace(cfg, signing_key=load_key(args.signing_key), signing_link_id=vehicle & 0xFF)
-    keys = SwarmKeys(args.swarm)
+    mav_opts = opts.vehicle
+    cfg = AdapterConfig.px4_sitl(vehicle, mav_opts.mav_local_base, mav_opts.mav_vehicle_base)
+    if mav_opts.mav_vehicle_host:  # a companion computer off the vehicle's host
+        cfg = replace(cfg, remote_host=mav_opts.mav_vehicle_host, local_host="0.0.0.0")
+    if mav_opts.signing_key is not None:  # link id: the vehicle's number, one stream per agent
+        cfg = replace(cfg, signing_key=load_key(mav_opts.signing_key),
+                      signing_link_id=vehicle & 0xFF)
+    keys = SwarmKeys(opts.bus.swarm)
     # Position as often as the loop reads it, no more: each frame is a datagram to verify
     # and decode (a 20-Hz ring64 follower took 2.5 a tick at the 50 Hz default).
     timeouts = StartupTimeouts(telemetry_hz=scenario.run.rate_hz)
-    stamps = role == "follower" and bool(getattr(args, "latency_stamps", False))
-    with stop_on_signals() as stop, open_bus(args, stamps) as bus, \
+    stamps = role == "follower" and opts.bus.network.latency_stamps
+    with stop_on_signals() as stop, open_bus(opts.bus, scenario.network, stamps) as bus, \
             MavlinkAdapter(cfg, bus.now_s) as mav:
         node = make_node(bus, mav)
         node.status.set("starting")

@@ -52,10 +52,10 @@ def child(index: int, args: argparse.Namespace, cred: str | None, life_s: float)
                       runtime="one_thread", user_config_path=args.zenoh_config)
     with ZenohBus(cfg) as bus:
         deadline = time.monotonic() + life_s
-        if args.clock == "per-process":
-            bus.start_clock_sync(KEYS, name, probe=True)
+        if args.clock == "per-process":  # every process probes, as a router of its own
+            bus.start_clock_sync(KEYS, f"router-{index}", args.processes, probe=True)
         elif args.clock == "per-host":
-            bus.start_clock_sync(KEYS, "router-0", probe=hub)
+            bus.start_clock_sync(KEYS, "router-0", 1, probe=hub)
         if hub:
             while time.monotonic() < deadline:
                 time.sleep(0.5)

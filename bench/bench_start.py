@@ -32,6 +32,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from agents.phases import parse_phases
 from deploy.cpu_load import process_status_kb
+from deploy.pids import read_pids
 
 FOLLOWER_PHASES = ("spawn", "exec", "main", "bus_open", "node", "heartbeat", "position", "armed",
                    "takeoff_accepted", "at_altitude", "offboard", "linked")
@@ -61,12 +62,7 @@ def sample_memory(proc: subprocess.Popen[bytes], out: Path) -> dict[str, dict[st
     """Per child: max VmRSS, VmHWM, Pss and USS seen, in kB, until the run ends."""
     mem: dict[str, dict[str, int]] = {}
     while proc.poll() is None:
-        pids_file = out / "logs" / "pids.json"
-        try:
-            pids = json.loads(pids_file.read_text()) if pids_file.exists() else {}
-        except ValueError:
-            pids = {}
-        for name, pid in pids.items():
+        for name, pid in ((k, v.pid) for k, v in read_pids(out / "logs").items()):
             rss, hwm = process_status_kb(pid, "VmRSS"), process_status_kb(pid, "VmHWM")
             if rss is not None and hwm is not None:
                 m = mem.setdefault(name, {"rss_kb": 0, "hwm_kb": 0, "pss_kb": 0, "uss_kb": 0})

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from deploy.cpu_load import process_cpu_s, process_status_kb
+from deploy.pids import read_pids
 
 
 def rss_mb(pid: int) -> float | None:
@@ -48,16 +49,14 @@ def run_case(scenario: str, duration_s: float, out: Path, estimator: str) -> dic
     cpu: dict[str, float] = {}
     try:
         while proc.poll() is None:
-            pids_file = out / "logs" / "pids.json"
-            if pids_file.exists():
-                for name, pid in json.loads(pids_file.read_text()).items():
-                    if name.startswith("follower"):
-                        rss = rss_mb(pid)
-                        if rss is not None:
-                            peak[name] = max(peak.get(name, 0.0), rss)
-                    used = process_cpu_s(pid)
-                    if used is not None:  # the last reading before the process ends
-                        cpu[name] = used
+            for name, ident in read_pids(out / "logs").items():
+                if name.startswith("follower"):
+                    rss = rss_mb(ident.pid)
+                    if rss is not None:
+                        peak[name] = max(peak.get(name, 0.0), rss)
+                used = process_cpu_s(ident.pid)
+                if used is not None:  # the last reading before the process ends
+                    cpu[name] = used
             time.sleep(1.0)
     finally:
         if proc.poll() is None:

@@ -8,6 +8,7 @@ import logging
 import sys
 from collections.abc import Sequence
 
+from agents.lifeline import die_with_launcher
 from agents.phases import mark
 from transport.errors import EncloseError
 
@@ -20,11 +21,11 @@ COMMANDS: dict[str, str] = {
     "report": "deploy.report",
     "sim": "deploy.commands.sim",
     "sweep": "deploy.sweep.command",
-    "keys": "deploy.run_secrets",
-    "vehicle-key": "deploy.run_secrets",
+    "keys": "deploy.commands.keys",
+    "vehicle-key": "deploy.commands.vehicle_key",
     "host": "deploy.commands.host",
 }
-COMMAND_MODULES: tuple[str, ...] = tuple(dict.fromkeys(COMMANDS.values()))  # each once
+COMMAND_MODULES: tuple[str, ...] = tuple(COMMANDS.values())
 
 
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
@@ -42,6 +43,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()  # an inner launcher (deploy.netns.run) dies with the outer one
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser(argv).parse_args(argv)
     mark("imports")  # the subcommand's module is imported

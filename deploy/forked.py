@@ -1,6 +1,6 @@
 """Start a swarm process as a fork of the launcher (issue 15: fast start).
 
-`python -m agents.follower` spends most of its start-up importing (numpy, Zenoh,
+`python -m agents.follower.main` spends most of its start-up importing (numpy, Zenoh,
 pymavlink: ~0.4 s of CPU each; 16 followers on 2 cores queue for seconds).  The
 launcher imports a process's module once, then forks: the child is its own OS process
 (own PID, session, log, Zenoh session and sockets) that runs `module.main(argv)` at once,
@@ -27,6 +27,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from agents import phases
+from agents.lifeline import die_with
 from transport.errors import DeployError
 
 
@@ -67,10 +68,13 @@ class ForkedProcess:
             os.kill(self.pid, signum)
 
 
-def _child(run: Callable[[], int | None], log_path: Path | None, mode: int) -> None:
-    """In the child: its own session and output, default signals, then `run`; never returns."""
+def _child(run: Callable[[], int | None], log_path: Path | None, mode: int, parent: int,
+           via: int | None) -> None:
+    """In the child: bound to die with `parent` (agents.lifeline), its own session and
+    output, default signals, then `run`; never returns."""
     code: int | str | None = 1
     try:
+        die_with(parent, via)
         os.setsid()  # like start_new_session: a terminal's Ctrl-C reaches only the launcher
         if log_path is not None:
             fd = os.open(log_path, os.O_WRONLY | os.O_CREAT | mode, 0o644)
@@ -103,7 +107,10 @@ def _child(run: Callable[[], int | None], log_path: Path | None, mode: int) -> N
         os._exit(code if isinstance(code, int) else 1)
 
 
-def _fork(run: Callable[[], int | None], log_path: Path | None, mode: int) -> int:
+def _fork(run: Callable[[], int | None], log_path: Path | None, mode: int,
+          parent: int | None = None, via: int | None = None) -> int:
+    """Fork a child that dies with `parent` (default: this process; agents.lifeline)."""
+    parent = os.getpid() if parent is None else parent
     # What exists now is shared with the child: out of the collector's reach, its pages
     # stay shared instead of being copied when a collection touches every object.
     gc.freeze()
@@ -111,20 +118,22 @@ def _fork(run: Callable[[], int | None], log_path: Path | None, mode: int) -> in
     sys.stderr.flush()
     pid = os.fork()
     if pid == 0:
-        _child(run, log_path, mode)
+        _child(run, log_path, mode, parent, via)
     return pid
 
 
 def fork_pid(module: str, argv: Sequence[str], log_path: Path,
-             close_fds: Sequence[int] = ()) -> int:
+             close_fds: Sequence[int] = (), parent: int | None = None,
+             via: int | None = None) -> int:
     """Fork a child that runs `module.main(argv)` with its output in `log_path` (new
-    file), after closing `close_fds` (the caller's, which the child must not hold open)."""
+    file), after closing `close_fds` (the caller's, which the child must not hold open).
+    It dies with `parent` (default: this process), once `via` (if given) is gone."""
     def run() -> int:
         for fd in close_fds:
             os.close(fd)
         return int(importlib.import_module(module).main(list(argv)))
 
-    return _fork(run, log_path, os.O_TRUNC)
+    return _fork(run, log_path, os.O_TRUNC, parent, via)
 
 
 def fork_main(module: str, argv: Sequence[str], log_path: Path,

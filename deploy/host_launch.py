@@ -15,15 +15,18 @@ launcher then supervises several namespaced hosts.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 
-from agents.scenario.file import load_scenario, shipped_text
+from agents.scenario.file import load_scenario, parse_scenario, shipped_text
+from agents.scenario.law import pinned_law
 from agents.scenario.model import Scenario
 from deploy.deployment import Deployment
+from deploy.host_keys import HostSecrets, write_swarm_keys
 from deploy.launch import Launch
+from deploy.launch_options import LaunchOptions
 from deploy.run_secrets import RunSecrets
 from transport.clock import clock_env
 from transport.clock_sync import format_clock_hosts, parse_clock_hosts
@@ -32,35 +35,52 @@ from transport.zenoh_config import ZenohConfig
 
 log = logging.getLogger("enclose.host")
 IMPAIRED_SCENARIO = "scenario-hosts.toml"
+# The entry point of each kind of agent process (as deploy.launch starts them).
+AGENT_MODULES = {"follower": "agents.follower.main", "target": "agents.target"}
 
 
 class HostLaunch(Launch):
     # Every process starts through its host's prefix (netns, clock): none is forked.
     forks_followers = False
 
-    def __init__(self, dep: Deployment, local: tuple[int, ...], args: argparse.Namespace,
-                 out: Path, duration_s: float) -> None:
-        self.dep, self.local = dep, local
+    def __init__(self, dep: Deployment, local: tuple[int, ...], opts: LaunchOptions,
+                 out: Path, duration_s: float, every_host: bool = False) -> None:
+        """`every_host`: the hosts of `local` are run from here (--all): their credentials
+        are the folders of one `enclose keys` output (deploy.host_keys)."""
+        self.dep, self.local, self.every_host = dep, local, every_host
         scenario = load_scenario(dep.scenario)
         dep.check(scenario.n, scenario.m)
+        opts = replace(opts, scenario=dep.scenario)
         if dep.inter_host_delay_ms > 0:  # at each follower's receiving end (impairment)
             out.mkdir(parents=True, exist_ok=True)
             path = out / IMPAIRED_SCENARIO
-            path.write_text(_source(dep.scenario) + _links(dep, scenario))
-            dep_scenario = str(path)
-        else:
-            dep_scenario = dep.scenario
-        args.scenario = dep_scenario
-        super().__init__(load_scenario(dep_scenario), args, out, dep.swarm, duration_s)
+            # The copy is elsewhere: its [law] module, if any, must name its folder.
+            text = pinned_law(_source(dep.scenario), scenario.law) + _links(dep, scenario)
+            path.write_text(text)
+            # The file the processes load, read here from the same text.
+            scenario = parse_scenario(text, origin=str(path), base=path.parent)
+            opts = replace(opts, scenario=str(path))
+        super().__init__(scenario, opts, out, dep.swarm, duration_s)
         self.coordinator = dep.host_of("launcher") in local
         self.sim_address = dep.hosts[dep.host_of("sim")].address
 
     def make_secrets(self) -> RunSecrets:
-        if self.args.credentials_dir is not None:
-            return RunSecrets(Path(self.args.credentials_dir).resolve())
-        s = self.scenario
-        return RunSecrets.make(self.out, self.keys, s.n, s.m, self.args.insecure,
-                               n_routers=len(self.dep.hosts))
+        """Each local host's folder of `enclose keys` (deploy.host_keys): with --host, the
+        one given; with --all, the folders of the `enclose keys` output given, or of one
+        made fresh in the run directory (without the CA key: nobody adds hosts to it)."""
+        if self.opts.insecure:
+            return RunSecrets.make(self.out, self.keys, 0, 0, insecure=True)
+        given = self.opts.credentials_dir
+        if given is None:
+            s = self.scenario
+            root = write_swarm_keys(self.out / "credentials", self.dep, s.n, s.m,
+                                    keep_ca_key=False)
+            folders = {k: root[self.dep.hosts[k].name] for k in self.local}
+        elif self.every_host:
+            folders = {k: Path(given) / self.dep.hosts[k].name for k in self.local}
+        else:
+            folders = {self.local[0]: Path(given)}
+        return HostSecrets.of(self.dep, self.local, folders)
 
     def prefix(self, k: int) -> list[str]:
         host = self.dep.hosts[k]
@@ -83,14 +103,14 @@ class HostLaunch(Launch):
         return format_clock_hosts([[_sender(p) for p in h.processes] for h in self.dep.hosts])
 
     def router(self, k: int) -> str:
-        return self.dep.router_endpoint(k, secure=not self.args.insecure)
+        return self.dep.router_endpoint(k, secure=not self.opts.insecure)
 
     def start_all(self) -> None:
         for k in self.local:
-            argv = [*self.dep.router_argv(k, secure=not self.args.insecure),
+            argv = [*self.dep.router_argv(k, secure=not self.opts.insecure),
                     "--swarm", self.keys.swarm, *self.secrets.args_for(f"router-{k}")]
             if self.clocks_differ():
-                argv += ["--clock-id", f"router-{k}"]
+                argv += ["--clock-id", f"router-{k}", "--clock-routers", str(len(self.dep.hosts))]
             self.sup.start(f"router-{k}", "deploy.router", argv, prefix=self.prefix(k))
         mav = ["--mav-local-base", str(self.adapter_base),
                "--mav-vehicle-base", str(self.vehicle_base)]
@@ -105,7 +125,7 @@ class HostLaunch(Launch):
             self.sup.start(name, "deploy.swarm_sim", [
                 *argv, "--mav-host", "0.0.0.0", "--base-port", str(self.vehicle_base),
                 "--send-base-port", str(self.adapter_base),
-                "--noise-std-m", str(self.args.noise_std_m)], prefix=pre)
+                "--noise-std-m", str(self.opts.noise_std_m)], prefix=pre)
         elif name == "recorder":
             self.sup.start(name, "deploy.recorder",
                            [*argv, "--out", str(self.out), *self.recorder_sensor_argv()],
@@ -113,17 +133,17 @@ class HostLaunch(Launch):
         elif name != "launcher":
             role, _, idx = name.rpartition("-")
             extra = ["--mav-vehicle-host", self.sim_address] if remote else []
-            self.sup.start(name, f"agents.{role}", [*argv, *mav, *extra, "--index", idx],
+            self.sup.start(name, AGENT_MODULES[role], [*argv, *mav, *extra, "--index", idx],
                            prefix=pre)
 
     def open_bus(self) -> ZenohBus:
         k = self.dep.host_of("launcher")
         bus = ZenohBus(ZenohConfig(  # our clock: the environment's (transport.clock)
-            mode="client", connect=(self.router(k),), user_config_path=self.args.zenoh_config,
+            mode="client", connect=(self.router(k),), user_config_path=self.opts.zenoh_config,
             identity=self.secrets.identity("launcher"),
             runtime=self.scenario.network.zenoh_runtime))
         if self.clocks_differ():
-            bus.start_clock_sync(self.keys, f"router-{k}",
+            bus.start_clock_sync(self.keys, f"router-{k}", len(self.dep.hosts),
                                  clock_of=parse_clock_hosts(self.clock_hosts()))
         return bus
 

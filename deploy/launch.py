@@ -7,13 +7,13 @@ and its ports are chosen by `deploy.ports.run_ports`.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from agents.law_args import law_overrides
 from agents.network_args import network_overrides
 from agents.phases import mark
 from agents.scenario.faults import parse_fault_flag
@@ -22,6 +22,7 @@ from deploy.cpu_load import CpuSampler
 from deploy.faults import FaultRunner
 from deploy.json_files import write_json_atomic
 from deploy.launch_end import exit_code, launch_report, stop_in_order
+from deploy.launch_options import LaunchOptions
 from deploy.live_args import announce_live_url, pin_live_port, recorder_live_argv
 from deploy.ports import run_ports
 from deploy.restarts import RestartPolicy, Watchdog
@@ -29,6 +30,7 @@ from deploy.run_board import BoardView, LiveBoard
 from deploy.run_monitor import StatusBoard, launch_view
 from deploy.run_secrets import RunSecrets
 from deploy.supervisor import Child, Supervisor
+from transport.access import sender_ids
 from transport.bus import Bus
 from transport.codec import encode
 from transport.errors import DeployError
@@ -51,23 +53,22 @@ class Launch:
     forks_followers = True
 
     def __init__(
-        self, scenario: Scenario, args: argparse.Namespace, out: Path, swarm: str, duration_s: float
+        self, scenario: Scenario, opts: LaunchOptions, out: Path, swarm: str, duration_s: float
     ) -> None:
-        self.scenario, self.args, self.out, self.duration_s = scenario, args, out, duration_s
+        self.scenario, self.opts, self.out, self.duration_s = scenario, opts, out, duration_s
         self.keys = SwarmKeys(swarm)
         self.sup = Supervisor(out / "logs")
         self.vehicle_base, self.adapter_base, self.endpoint = run_ports(
-            scenario.n + scenario.m, scenario.network.link, not args.insecure,
-            getattr(args, "port_range", None))
+            scenario.n + scenario.m, scenario.network.link, not opts.insecure, opts.port_range)
         self.secrets = RunSecrets(None)
         self.timings: dict[str, float] = {}
-        self.board = StatusBoard()
+        self.board = StatusBoard(sender_ids(scenario.n, scenario.m))
         # The statuses as the flight ended, before the processes stop: a vehicle whose
         # follower has stopped fails safe, so the final counts include the shutdown.
         self.status_at_stop: dict[str, Any] | None = None
-        self.policy = RestartPolicy(args.restart, args.max_restarts)
+        self.policy = RestartPolicy(opts.restart, opts.max_restarts)
         self.watchdog: Watchdog | None = None
-        flags = [parse_fault_flag(f, scenario.n, scenario.m) for f in args.fault]
+        flags = [parse_fault_flag(f, scenario.n, scenario.m) for f in opts.faults]
         self.faults = (*scenario.faults, *(f for f in flags if f is not None))
         self.injector: FaultRunner | None = None
         self.control_stamper: Stamper | None = None
@@ -77,16 +78,14 @@ class Launch:
         self.cpu = CpuSampler()  # what each process cost, sampled while flying
 
     def common(self) -> list[str]:
-        scen = self.args.scenario
-        scen = str(Path(scen).resolve()) if scen and scen.endswith(".toml") else (scen or "paper")
-        extra = ["--zenoh-config", self.args.zenoh_config] if self.args.zenoh_config else []
-        extra += network_overrides(self.args)
-        return ["--scenario", scen, "--swarm", self.keys.swarm, *extra]
+        extra = ["--zenoh-config", self.opts.zenoh_config] if self.opts.zenoh_config else []
+        extra += network_overrides(self.opts.network) + law_overrides(self.opts.law)
+        return ["--scenario", self.opts.scenario_ref(), "--swarm", self.keys.swarm, *extra]
 
     def recorder_sensor_argv(self) -> list[str]:
         """Noiseless target observations are the truth's target positions again: the
         recorder leaves them out (deploy.recording.loop)."""
-        return [] if getattr(self.args, "noise_std_m", 0.0) > 0.0 else ["--no-sensor"]
+        return [] if self.opts.noise_std_m > 0.0 else ["--no-sensor"]
 
     def start_all(self) -> None:
         c, s = self.common(), self.scenario
@@ -108,7 +107,7 @@ class Launch:
                 "--send-base-port",
                 str(self.adapter_base),
                 "--noise-std-m",
-                str(self.args.noise_std_m),
+                str(self.opts.noise_std_m),
                 *self.secrets.args_for("sim"),
             ],
             fork=True,
@@ -118,7 +117,7 @@ class Launch:
         # It imports what it alone needs (MCAP, its outputs) after the fork: not in the movers.
         self.sup.start(
             "recorder", "deploy.recorder",
-            [*joins, "--out", str(self.out), *sec("recorder"), *recorder_live_argv(self.args),
+            [*joins, "--out", str(self.out), *sec("recorder"), *recorder_live_argv(self.opts.live),
              *self.recorder_sensor_argv()],
             fork=True,
         )
@@ -129,7 +128,7 @@ class Launch:
             self.sup.start(f"target-{j}", "agents.target", argv, fork=True)
         for i in range(s.n):
             argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
-            self.sup.start(f"follower-{i}", "agents.follower", argv, fork=True)
+            self.sup.start(f"follower-{i}", "agents.follower.main", argv, fork=True)
 
     def expected_tokens(self) -> set[str]:
         k, s = self.keys, self.scenario
@@ -142,7 +141,7 @@ class Launch:
     def wait_linked(self, bus: Bus, t0: float) -> None:
         watch = bus.watch_alive(self.keys.all_alive())
         expected, shown = self.expected_tokens(), -1
-        deadline = t0 + self.args.link_timeout
+        deadline = t0 + self.opts.link_timeout_s
         while True:
             alive = watch.poll() & expected
             if alive == expected:
@@ -156,7 +155,7 @@ class Launch:
                     k.rsplit("/", 2)[-2] + "-" + k.rsplit("/", 1)[-1] for k in expected - alive
                 )
                 raise DeployError(
-                    f"not linked after {self.args.link_timeout:.0f} s: {', '.join(missing)}"
+                    f"not linked after {self.opts.link_timeout_s:.0f} s: {', '.join(missing)}"
                 )
             time.sleep(0.05)
 
@@ -218,7 +217,7 @@ class Launch:
                     len(self.expected_tokens()),
                     self.timings["link_s"],
                 )
-                self.live_url = announce_live_url(self.args, self.out)
+                self.live_url = announce_live_url(self.opts.live, self.out)
                 try:
                     self.fly(bus)
                 except KeyboardInterrupt:
@@ -245,13 +244,13 @@ class Launch:
 
     def make_secrets(self) -> RunSecrets:
         s = self.scenario
-        return RunSecrets.make_apart(self.out, self.keys, s.n, s.m, self.args.insecure,
+        return RunSecrets.make_apart(self.out, self.keys, s.n, s.m, self.opts.insecure,
                                      meanwhile=self.sup.preload)
 
     def open_bus(self) -> ZenohBus:
         """The launcher's own session (deploy.host_launch: a client of its host's router)."""
         return ZenohBus(ZenohConfig(
-            connect=(self.endpoint,), user_config_path=self.args.zenoh_config,
+            connect=(self.endpoint,), user_config_path=self.opts.zenoh_config,
             link=self.scenario.network.link, identity=self.secrets.identity("launcher"),
             runtime=self.scenario.network.zenoh_runtime))
 
@@ -300,7 +299,7 @@ class Launch:
 
     def _before_restart(self, child: Child) -> None:
         """A restarted recorder starts a new MCAP: keep the dead one's beside it.  A
-        restarted follower joins a running swarm (agents.follower --join)."""
+        restarted follower joins a running swarm (agents.follower.main --join)."""
         mcap = self.out / "recording.mcap"
         if child.name == "recorder" and mcap.exists():
             mcap.rename(self.out / f"recording-part{child.restarts + 1}.mcap")

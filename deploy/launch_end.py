@@ -63,6 +63,8 @@ def launch_report(launch: Launch) -> dict[str, Any]:
         "events": [] if launch.watchdog is None else launch.watchdog.events,
         "status": launch.board.as_dict(),
         "status_at_stop": launch.status_at_stop,
+        # What the launcher itself refused (statuses not from the process they name).
+        "launcher": launch.board.decoder.counters(),
         "load": load_report(launch),
     }
 
@@ -83,7 +85,7 @@ def exit_code(launch: Launch, interrupted: bool) -> int:
     for c in failed:
         log.error("%s exited with code %s (log: %s)", c.name, c.exit_code, c.log_path)
     title = f"enclose run {launch.scenario.name}"
-    announce(launch.out, title, getattr(launch.args, "json", False),
+    announce(launch.out, title, launch.opts.json,
              "interrupted" if interrupted else "")
     if interrupted:
         return 130

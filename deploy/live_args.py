@@ -13,6 +13,7 @@ import argparse
 import json
 import logging
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlparse
@@ -35,10 +36,23 @@ def add_live_arguments(p: Any) -> None:
                    "to anyone who can reach it)")
 
 
-def recorder_live_argv(args: argparse.Namespace) -> list[str]:
-    if getattr(args, "no_live", False) or not hasattr(args, "live_port"):
+@dataclass(frozen=True)
+class LiveOptions:
+    """Where the recorder serves the live view (the port, or the next free one)."""
+
+    port: int = DEFAULT_PORT
+    host: str = DEFAULT_HOST
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> LiveOptions | None:
+        """None with --no-live."""
+        return None if args.no_live else cls(args.live_port, args.live_host)
+
+
+def recorder_live_argv(live: LiveOptions | None) -> list[str]:
+    if live is None:
         return []  # `enclose host` has no live view: its recorder may be in a namespace
-    return ["--live-port", str(args.live_port), "--live-host", args.live_host]
+    return ["--live-port", str(live.port), "--live-host", live.host]
 
 
 def read_live_url(run_dir: Path, wait_s: float = URL_WAIT_S) -> str | None:
@@ -54,9 +68,9 @@ def read_live_url(run_dir: Path, wait_s: float = URL_WAIT_S) -> str | None:
         time.sleep(0.05)
 
 
-def announce_live_url(args: argparse.Namespace, run_dir: Path) -> str | None:
+def announce_live_url(live: LiveOptions | None, run_dir: Path) -> str | None:
     """Once all are linked: the live URL, logged with how to open it (None when off)."""
-    if not recorder_live_argv(args):
+    if live is None:
         return None
     url = read_live_url(run_dir)
     if url is None:

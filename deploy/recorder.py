@@ -21,17 +21,19 @@ import argparse
 import logging
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
+from agents.lifeline import die_with_launcher
 from agents.phases import log_phases, mark
 from agents.process import (
-    add_bus_arguments,
     apply_agent_sched,
     load_run_scenario,
     open_bus,
     profiled,
     stop_on_signals,
 )
+from agents.process_options import BusOptions, add_bus_arguments
 from deploy.recording.live_defaults import DEFAULT_HOST
 from deploy.recording.live_server import LiveServer
 from deploy.recording.loop import Recorder
@@ -40,7 +42,25 @@ from transport.errors import EncloseError
 log = logging.getLogger("deploy.recorder")
 
 
-def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+@dataclass(frozen=True)
+class RecorderOptions:
+    """The recorder process's command line."""
+
+    bus: BusOptions
+    out: Path
+    index: int = 0
+    live_port: int | None = None  # None: no live view; 0: any free port
+    live_host: str = DEFAULT_HOST
+    record_sensor: bool = True
+    verbose: bool = False
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> RecorderOptions:
+        return cls(BusOptions.from_namespace(args), args.out, args.index, args.live_port,
+                   args.live_host, args.record_sensor, args.verbose)
+
+
+def parse_options(argv: Sequence[str] | None) -> RecorderOptions:
     parser = argparse.ArgumentParser(prog="python -m deploy.recorder", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     add_bus_arguments(parser)
@@ -56,16 +76,16 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                         help="do not record the target observations (the launcher's choice "
                         "when the sensor is noiseless: the truth holds the same positions)")
     parser.add_argument("-v", "--verbose", action="store_true")
-    return parser.parse_args(argv)
+    return RecorderOptions.from_namespace(parser.parse_args(argv))
 
 
-def start_live(args: argparse.Namespace) -> LiveServer | None:
+def start_live(opts: RecorderOptions) -> LiveServer | None:
     """The live server, or None: asked for none, or none could start (the recording matters
     more than the view, so that is a warning, not an exit)."""
-    if args.live_port is None:
+    if opts.live_port is None:
         return None
     try:
-        live = LiveServer(args.live_host, args.live_port)
+        live = LiveServer(opts.live_host, opts.live_port)
     except EncloseError as exc:
         log.warning("no live view: %s", exc)
         return None
@@ -74,21 +94,22 @@ def start_live(args: argparse.Namespace) -> LiveServer | None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()  # agents.lifeline
     mark("main")
-    args = parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+    opts = parse_options(argv)
+    logging.basicConfig(level=logging.DEBUG if opts.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s recorder: %(message)s")
-    return profiled(_record, args, "recorder")
+    return profiled(_record, opts, "recorder")
 
 
-def _record(args: argparse.Namespace) -> int:
+def _record(opts: RecorderOptions) -> int:
     try:
-        scenario = load_run_scenario(args)
+        scenario = load_run_scenario(opts.bus)
         apply_agent_sched(scenario.network)
-        with stop_on_signals() as stop, open_bus(args) as bus:
-            live = start_live(args)
-            recorder = Recorder(bus, args.swarm, scenario, args.out, index=args.index, live=live,
-                                record_sensor=args.record_sensor)
+        with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus:
+            live = start_live(opts)
+            recorder = Recorder(bus, opts.bus.swarm, scenario, opts.out, index=opts.index,
+                                live=live, record_sensor=opts.record_sensor)
             mark("linked")  # its liveliness token is declared
             log_phases("recorder")
             try:
@@ -100,7 +121,7 @@ def _record(args: argparse.Namespace) -> int:
     except EncloseError as exc:
         log.error("%s: %s", type(exc).__name__, exc)
         return 2
-    log.info("outputs in %s", args.out)
+    log.info("outputs in %s", opts.out)
     return 0 if ok and recorder.stop_reason != "loop_error" else 1
 
 

@@ -1,69 +1,83 @@
-"""What each process refused on its MAVLink link, read from its status counters: the one
-place that knows which counters say so, for the verdict's processes line and the live
-view's status.
+"""What a run's processes refused from the bus, summed: one line for the verdict's
+processes row, one object for the live view's status.
 
-- `signing_rejected_<reason>`: frames refused by their signature (unsigned, bad_signature,
-  wrong_key, future, replay, malformed; agents.mavlink.signing);
-- `signing_wrong_key_vehicle_<sysid>`: of those, the ones signed with vehicle sysid's key
-  (the sender, as far as a vehicle can tell: whoever holds that vehicle's key);
-- `mav_flood_drops`: datagrams cut at a tick's parse budget; `mav_kernel_drops`: datagrams the
-  kernel dropped on a full socket buffer (agents.mavlink.rx_gate, agents.mavlink.udp);
-- `peers_refused`: signed senders refused a place in a vehicle's full peer table.
+Every process counts its refusals in its status counters (transport.decoder:
+`<kind>_rejected` and `rejected_from_<sender>` for its most rejected senders;
+agents.liveness: `tokens_rejected`, `tokens_held`); these sum them over processes.  A
+sender is the process whose key the input came on: with access control on, the one that
+put it, whatever it claimed.  On the MAVLink side (agents.mavlink.signing, .rx_gate):
+frames refused by their signature (`signing_rejected_<reason>`), datagrams over a tick's
+budget or dropped unread by the kernel, peers refused; a frame signed with another
+vehicle's key names the agent that holds that key (the simulator's
+`rejected_from_<agent>`, deploy.swarm_sim).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections import Counter
+from collections.abc import Iterable, Mapping
 from typing import Any
 
-REJECTED = "signing_rejected_"
-WRONG_KEY = "signing_wrong_key_vehicle_"
-DROPS = {"mav_flood_drops": "datagrams cut at the parse budget",
-         "mav_kernel_drops": "dropped unread by the kernel",
-         "peers_refused": "signed peers refused (table full)"}
+# (label, status counter) in the order shown.
+ROWS = (
+    ("statuses", "statuses_rejected"),
+    ("observations", "observations_rejected"),
+    ("states", "states_rejected"),
+    ("truth", "truth_rejected"),
+    ("control words", "control_rejected"),
+    ("tokens", "tokens_rejected"),
+    ("token changes held", "tokens_held"),
+    ("unsigned MAVLink frames", "signing_rejected_unsigned"),
+    ("badly signed MAVLink frames", "signing_rejected_bad_signature"),
+    ("MAVLink frames signed with another vehicle's key", "signing_rejected_wrong_key"),
+    ("MAVLink frames stamped ahead", "signing_rejected_future"),
+    ("replayed MAVLink frames", "signing_rejected_replay"),
+    ("malformed MAVLink datagrams", "signing_rejected_malformed"),
+    ("unreadable MAVLink frames", "signing_rejected_error"),
+    ("MAVLink datagrams over a tick's budget", "mav_flood_drops"),
+    ("MAVLink datagrams the kernel dropped", "mav_kernel_drops"),
+    ("MAVLink peers (table full)", "peers_refused"),
+)
+FROM_PREFIX = "rejected_from_"
+SENDERS_SHOWN = 3
 
 
 def _count(v: Any) -> int:
     return v if isinstance(v, int) and not isinstance(v, bool) and v > 0 else 0
 
 
-def refusals(counters: Mapping[str, Any]) -> dict[str, int]:
-    """The nonzero refusal counters of one process's status, by their name."""
-    return {k: _count(v) for k, v in counters.items()
-            if (k.startswith((REJECTED, WRONG_KEY)) or k in DROPS) and _count(v)}
+def refusals(counters: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
+    """{label: total} of the non-zero rows, and "from": {sender: total} of the
+    SENDERS_SHOWN senders most refused, over the processes' `counters`."""
+    rows: Counter[str] = Counter()
+    senders: Counter[str] = Counter()
+    for c in counters:
+        if not isinstance(c, Mapping):
+            continue
+        for label, name in ROWS:
+            rows[label] += _count(c.get(name))
+        for name, v in c.items():
+            if isinstance(name, str) and name.startswith(FROM_PREFIX):
+                senders[name[len(FROM_PREFIX):]] += _count(v)
+    out: dict[str, Any] = {label: rows[label] for label, _ in ROWS if rows[label]}
+    if senders:
+        out["from"] = dict(senders.most_common(SENDERS_SHOWN))
+    return out
 
 
-def vehicle_owner(sysid: int, n_followers: int) -> str:
-    """The agent that holds vehicle `sysid`'s key: follower i flies sysid i+1, target j
-    sysid n+j+1 (deploy.run_secrets)."""
-    index = sysid - 1
-    return f"follower-{index}" if index < n_followers else f"target-{index - n_followers}"
+def refusal_text(summed: Mapping[str, Any]) -> str | None:
+    """`refused 12 statuses, 3 tokens (from follower-2 15)`; None when nothing was."""
+    parts = [f"{summed[label]} {label}" for label, _ in ROWS if summed.get(label)]
+    if not parts:
+        return None
+    src = summed.get("from") or {}
+    by = f" (from {', '.join(f'{s} {n}' for s, n in src.items())})" if src else ""
+    return f"refused {', '.join(parts)}{by}"
 
 
-def refusal_text(counters: Mapping[str, Any], n_followers: int) -> str | None:
-    """`refused 2520 MAVLink frames (unsigned 2500, wrong_key 20: follower-2's key), ...`;
-    None when the process refused nothing."""
-    found = refusals(counters)
-    reasons = {k[len(REJECTED):]: v for k, v in found.items() if k.startswith(REJECTED)}
-    owners = [vehicle_owner(int(k[len(WRONG_KEY):]), n_followers) for k in found
-              if k.startswith(WRONG_KEY) and k[len(WRONG_KEY):].isdigit()]
-    parts = []
-    if reasons:
-        why = ", ".join(f"{k} {v}" for k, v in sorted(reasons.items()))
-        keys = f": {', '.join(sorted(owners))}'s key" if owners else ""
-        parts.append(f"refused {sum(reasons.values())} MAVLink frames ({why}{keys})")
-    parts += [f"{found[k]} {label}" for k, label in DROPS.items() if k in found]
-    return ", ".join(parts) or None
-
-
-def refusal_lines(status: Any) -> tuple[str, ...]:
-    """One line per process of launch.json's `status` that refused anything."""
-    if not isinstance(status, dict):
-        return ()
-    n = sum(1 for name in status if isinstance(name, str) and name.startswith("follower-"))
-    lines = []
-    for name, counters in sorted(status.items()):
-        text = refusal_text(counters, n) if isinstance(counters, dict) else None
-        if text is not None:
-            lines.append(f"{name}: {text}")
-    return tuple(lines)
+def launch_refusals(launch: Mapping[str, Any]) -> dict[str, Any]:
+    """The sums over launch.json: every process's final status, and the launcher's own."""
+    status = launch.get("status")
+    procs = list(status.values()) if isinstance(status, Mapping) else []
+    own = launch.get("launcher")
+    return refusals([*procs, *([own] if isinstance(own, Mapping) else [])])

@@ -18,7 +18,9 @@ import logging
 import sys
 import threading
 from collections.abc import Sequence
+from dataclasses import dataclass
 
+from agents.lifeline import die_with_launcher
 from agents.process import stop_on_signals
 from transport.credentials import Identity
 from transport.errors import EncloseError
@@ -29,7 +31,25 @@ from transport.zenoh_config import ZenohConfig
 log = logging.getLogger("deploy.router")
 
 
-def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+@dataclass(frozen=True)
+class RouterOptions:
+    """A router's command line."""
+
+    listen: tuple[str, ...]
+    connect: tuple[str, ...] = ()
+    credentials: str | None = None  # identity file
+    swarm: str = "enclose"
+    zenoh_config: str | None = None
+    clock_id: str | None = None  # router-K: probe the other routers' clocks
+    clock_routers: int = 1  # the swarm's routers, router-0..: whose probes count
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> RouterOptions:
+        return cls(tuple(args.listen), tuple(args.connect), args.credentials, args.swarm,
+                   args.zenoh_config, args.clock_id, args.clock_routers)
+
+
+def parse_options(argv: Sequence[str] | None) -> RouterOptions:
     parser = argparse.ArgumentParser(prog="python -m deploy.router", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--listen", action="append", required=True, metavar="ENDPOINT")
@@ -42,23 +62,28 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--clock-id", default=None, metavar="router-K",
                         help="probe the other routers' clocks as this host's clock "
                         "(transport.clock_sync): for hosts whose clocks differ")
-    return parser.parse_args(argv)
+    parser.add_argument("--clock-routers", type=int, default=1, metavar="K",
+                        help="with --clock-id: the swarm's routers are router-0..router-K-1 "
+                        "(probes from any other name are dropped)")
+    return RouterOptions.from_namespace(parser.parse_args(argv))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = parse_args(argv)
+    die_with_launcher()  # agents.lifeline
+    opts = parse_options(argv)
     logging.basicConfig(level=logging.INFO,
                         format="%(asctime)s %(levelname)s router: %(message)s")
     cfg = ZenohConfig(
-        mode="router", listen=tuple(args.listen), connect=tuple(args.connect),
-        user_config_path=args.zenoh_config,
-        identity=None if args.credentials is None else Identity.load(args.credentials))
+        mode="router", listen=opts.listen, connect=opts.connect,
+        user_config_path=opts.zenoh_config,
+        identity=None if opts.credentials is None else Identity.load(opts.credentials))
     try:
         with stop_on_signals() as stop, ZenohBus(cfg) as bus:
-            log.info("router %s of swarm %s: listen %s, connect %s", bus.zid, args.swarm,
-                     args.listen, args.connect)
-            if args.clock_id is not None:
-                bus.start_clock_sync(SwarmKeys(args.swarm), args.clock_id, probe=True)
+            log.info("router %s of swarm %s: listen %s, connect %s", bus.zid, opts.swarm,
+                     opts.listen, opts.connect)
+            if opts.clock_id is not None:
+                bus.start_clock_sync(SwarmKeys(opts.swarm), opts.clock_id, opts.clock_routers,
+                                     probe=True)
             idle = threading.Event()
             while not stop.raised:
                 idle.wait(0.2)

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 from deploy.run_board import BoardView, ProcessView
 from deploy.supervisor import Child
 from transport.bus import Subscription
+from transport.checks import DEFAULT_LIMITS
 from transport.decoder import Decoder
 from transport.messages import ProcessStatus
 
@@ -23,12 +24,15 @@ log = logging.getLogger("enclose.run")
 
 
 class StatusBoard:
-    """Each process's latest ProcessStatus (its final counters go to launch.json)."""
+    """Each process's latest ProcessStatus (its final counters go to launch.json).
 
-    def __init__(self) -> None:
+    A status counts only from the process it names, on its own key (transport.checks):
+    the table holds at most one entry per sender of the scenario (`senders`)."""
+
+    def __init__(self, senders: Collection[str]) -> None:
         self.subscription: Subscription | None = None
         self.latest: dict[str, ProcessStatus] = {}
-        self.decoder = Decoder(expect=(ProcessStatus,))
+        self.decoder = Decoder(expect=(ProcessStatus,), limits=DEFAULT_LIMITS, senders=senders)
 
     def collect(self) -> None:
         if self.subscription is None:

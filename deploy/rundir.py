@@ -34,6 +34,7 @@ class RunInfo:
     eps_rho_m: float
     eps_delta: float
     steady_from_s: float
+    law: str = "paper"  # the followers' law: a shipped name or a module reference
 
     @staticmethod
     def from_scenario(scenario: Scenario, kind: str, duration_s: float) -> RunInfo:
@@ -49,6 +50,7 @@ class RunInfo:
             eps_rho_m=scenario.run.eps_rho_m,
             eps_delta=scenario.run.eps_delta,
             steady_from_s=duration_s / 2.0 if steady is None else steady,
+            law=scenario.law.ref,
         )
 
 

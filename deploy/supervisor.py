@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import importlib
-import json
 import logging
 import os
 import signal
@@ -15,7 +14,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from agents.lifeline import launcher_env
 from deploy.forked import ForkedProcess, fork_is_safe, fork_main, trim_heap
+from deploy.pids import ProcessId, identify, write_pids
 from deploy.zygote import Zygote
 from transport.errors import DeployError
 
@@ -24,7 +25,7 @@ Clock = Callable[[], float]
 FORKED_MODULES = ("deploy.swarm_sim", "agents.target")
 # Forked by a fork server that imported only these (deploy.zygote): a follower must not
 # inherit the launcher's numpy and simulator pages (issue 15: <= 50 MB per follower).
-LEAN_MODULES = ("agents.follower",)
+LEAN_MODULES = ("agents.follower.main",)
 
 
 @dataclass
@@ -36,6 +37,7 @@ class Child:
     exit_code: int | None = None
     restarts: int = 0
     spawned_s: float | None = None  # CLOCK_MONOTONIC at the last spawn (agents.phases)
+    ident: ProcessId | None = None  # PID and start time of the last spawn (deploy.pids)
 
     @property
     def pid(self) -> int | None:
@@ -109,6 +111,8 @@ class Supervisor:
                                    close_fds=() if self.zygote is None else self.zygote.fds())
         else:
             self._spawn(child, "wb")
+        assert child.proc is not None
+        child.ident = identify(child.proc.pid)  # ours, not reaped: the PID is still it
         self.children.append(child)
         self._write_pids()
         log.debug("started %s pid %d: %s", name, child.pid, " ".join(child.argv))
@@ -119,6 +123,8 @@ class Supervisor:
         if child.poll() is None:
             raise ValueError(f"{child.name} is still running")
         self._spawn(child, "ab")
+        assert child.proc is not None
+        child.ident = identify(child.proc.pid)
         child.exit_code = None
         child.restarts += 1
         self._write_pids()
@@ -133,18 +139,16 @@ class Supervisor:
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
                 start_new_session=True,
-                env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                env={**os.environ, "PYTHONUNBUFFERED": "1", **launcher_env()},
             )
 
     def _write_pids(self) -> None:
-        """PIDs on disk as soon as they exist, so that an outside cleanup can find them
-        even if the launcher itself is killed."""
-        pids = {c.name: c.pid for c in self.children}
+        """PIDs and start times on disk as soon as they exist, so that an outside cleanup
+        can find them even if the launcher itself is killed (deploy.pids)."""
+        ids = {c.name: c.ident for c in self.children if c.ident is not None}
         if self.zygote is not None:
-            pids["zygote"] = self.zygote.proc.pid
-        tmp = self.log_dir / "pids.json.tmp"
-        tmp.write_text(json.dumps(pids, indent=2) + "\n")
-        tmp.replace(self.log_dir / "pids.json")
+            ids["zygote"] = self.zygote.ident
+        write_pids(self.log_dir, ids)
 
     def dead(self) -> list[Child]:
         """Children that exited with a non-zero code so far."""
@@ -181,6 +185,9 @@ class Supervisor:
 
 
 def _signal(child: Child, signum: int) -> None:
+    """Through the child's own handle, which polls first: a child is ours until we reap
+    it, so its PID cannot name another process here (restarts and faults signal the
+    same way; a cleanup from outside goes by PID and start time: deploy.pids)."""
     if child.proc is None:
         return
     with contextlib.suppress(ProcessLookupError):

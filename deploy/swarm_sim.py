@@ -13,7 +13,8 @@ import argparse
 import logging
 import math
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -24,13 +25,14 @@ from agents.membership import membership
 from agents.phases import log_phases, mark
 from agents.process import (
     StatusReporter,
-    add_bus_arguments,
     load_run_scenario,
     open_bus,
     process_main,
     stop_on_signals,
 )
+from agents.process_options import BusOptions, add_bus_arguments
 from agents.scenario.model import Scenario
+from deploy.run_secrets import agent_of_vehicle
 from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from transport.bus import Bus
@@ -123,6 +125,15 @@ def sensor_every_ticks(tick_hz: float, sensor_hz: float) -> int:
     return max(1, math.floor(tick_hz / sensor_hz + 1e-9))
 
 
+def wrong_key_senders(counters: Mapping[str, int], n: int) -> dict[str, int]:
+    """The agents whose vehicle keys signed frames sent to other vehicles, as the refusals
+    of deploy.refusals name senders: `rejected_from_<agent>` (one counter per key holder:
+    at most one per vehicle)."""
+    prefix = "signing_wrong_key_vehicle_"
+    return {f"rejected_from_{agent_of_vehicle(int(k[len(prefix):]), n)}": v
+            for k, v in counters.items() if k.startswith(prefix) and k[len(prefix):].isdigit()}
+
+
 MAX_DEFAULT_TICK_HZ = 50.0
 
 
@@ -141,28 +152,50 @@ def sim_tick_hz(control_hz: float) -> float:
     return control_hz * math.floor(MAX_DEFAULT_TICK_HZ / control_hz + 1e-9)
 
 
-def run(args: argparse.Namespace) -> int:
-    scenario = load_run_scenario(args)
-    tick_hz = args.rate_hz or sim_tick_hz(scenario.run.rate_hz)
+@dataclass(frozen=True)
+class SwarmSimOptions:
+    """The simulator process's command line (None rates: from the scenario)."""
+
+    bus: BusOptions
+    rate_hz: float | None = None
+    telemetry_hz: float | None = None
+    sensor_hz: float | None = None
+    noise_std_m: float = 0.0
+    seed: int = 0
+    base_port: int = 14580
+    mav_host: str = "127.0.0.1"
+    send_base_port: int = 14540
+    signing_secret: str | None = None  # the run's MAVLink secret: a key per vehicle
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> SwarmSimOptions:
+        return cls(BusOptions.from_namespace(args), args.rate_hz, args.telemetry_hz,
+                   args.sensor_hz, args.noise_std_m, args.seed, args.base_port, args.mav_host,
+                   args.send_base_port, args.signing_secret)
+
+
+def run(opts: SwarmSimOptions) -> int:
+    scenario = load_run_scenario(opts.bus)
+    tick_hz = opts.rate_hz or sim_tick_hz(scenario.run.rate_hz)
     cfg = SimConfig(
         rate_hz=tick_hz,
-        telemetry_hz=args.telemetry_hz or tick_hz,
+        telemetry_hz=opts.telemetry_hz or tick_hz,
         flavour=scenario.vehicle.flavour,
-        host=args.mav_host,
-        listen_base_port=args.base_port,
-        send_base_port=args.send_base_port,
-        signing_secret=None if args.signing_secret is None else load_key(args.signing_secret),
+        host=opts.mav_host,
+        listen_base_port=opts.base_port,
+        send_base_port=opts.send_base_port,
+        signing_secret=None if opts.signing_secret is None else load_key(opts.signing_secret),
     )
-    keys = SwarmKeys(args.swarm)
-    with stop_on_signals() as stop, open_bus(args) as bus:
+    keys = SwarmKeys(opts.bus.swarm)
+    with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus:
         sim = Simulator(spawn_points_ned(scenario), scenario.vehicle, scenario.home, cfg)
         sensor = SensorPublisher(
             scenario,
             bus,
             keys,
-            sensor_every_ticks(tick_hz, args.sensor_hz or scenario.run.rate_hz),
-            args.noise_std_m,
-            args.seed,
+            sensor_every_ticks(tick_hz, opts.sensor_hz or scenario.run.rate_hz),
+            opts.noise_std_m,
+            opts.seed,
             late_s=lambda t: sim.boot_time_s() - t,
         )
         status = StatusReporter(bus, keys, "sim", 0)
@@ -172,7 +205,8 @@ def run(args: argparse.Namespace) -> int:
             st = sim.stats
             return {"ticks": st.ticks, "overruns": st.overruns, "catch_ups": st.catch_ups,
                     "caught_up_ticks": st.caught_up_ticks, "resyncs": st.resyncs,
-                    **dict(sim.counters)}
+                    **dict(sim.counters), **wrong_key_senders(sim.counters, scenario.n),
+                    **sensor.liveness.counters()}
 
         def report(_t: float, _s: FleetState) -> None:
             if status.due():
@@ -233,7 +267,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--signing-secret", default=None, metavar="FILE",
                         help="the run's 32-byte MAVLink secret: each vehicle enforces signing "
                         "with its own key derived from it (agents.mavlink.signing)")
-    return process_main(parser, argv, run, lambda _a: "sim")
+    return process_main(parser, argv, SwarmSimOptions.from_namespace, run, lambda _o: "sim")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ from rich.text import Text
 
 from deploy.cpu_load import load_line, memory_line, overrun_line
 from deploy.json_files import read_json
-from deploy.refusals import refusal_lines
+from deploy.refusals import launch_refusals, refusal_text
 
 # metrics.json key -> (label, unit, run.json key of its bound)
 BOUNDED = (
@@ -56,7 +56,7 @@ class Verdict:
     checks: tuple[Check, ...]
     error: str | None  # no metrics: why
     metrics: dict[str, Any]
-    processes: tuple[str, ...]  # what died, restarted, was faulted or failed, or refused
+    processes: tuple[str, ...]  # what died, restarted, was faulted or failed
     links: str | None
     live_url: str | None
     files: tuple[str, ...]
@@ -67,6 +67,8 @@ class Verdict:
     memory: str | None = None  # peak resident memory per process (deploy.cpu_load)
     silent: tuple[int, ...] = ()  # 0-based followers that sent no state: not judged whole
     recording: str | None = None  # what the recorder lost, when it lost enough to matter
+    refused: dict[str, Any] | None = None  # bus input the processes refused (deploy.refusals)
+    law: str | None = None  # the followers' law and how often it failed in flight
 
     @property
     def inside(self) -> bool:
@@ -148,6 +150,27 @@ def silent_text(silent: tuple[int, ...], n: int | None) -> str:
     return f"follower{'s' if len(silent) > 1 else ''} {names} (0-based) sent no state{over}"
 
 
+def law_line(info: dict[str, Any], metrics: dict[str, Any],
+             launch: dict[str, Any]) -> str | None:
+    """The law the followers flew (run.json) and its failures: in flight, the followers'
+    `law_failures` counters as the flight ended (launch.json); in lock-step, metrics.json's."""
+    law = info.get("law")
+    if not isinstance(law, str):
+        return None
+    if launch:
+        status = _dict(launch.get("status_at_stop") or launch.get("status"))
+        counts = {name: _dict(c).get("law_failures") for name, c in status.items()
+                  if name.startswith("follower-")}
+    else:
+        counts = {"lock-step": metrics.get("law_failures")}
+    failed = {name: n for name, n in counts.items() if isinstance(n, int) and n > 0}
+    if not failed:
+        return f"{law} (no failure)" if launch or "law_failures" in metrics else law
+    worst = max(failed, key=lambda k: failed[k])
+    return (f"{law}: FAILED {sum(failed.values())} times, the vehicle held (most: {worst} "
+            f"{failed[worst]}; its log has the traceback)")
+
+
 def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
     metrics, info = _read(run_dir / "metrics.json"), _read(run_dir / "run.json")
     launch = _read(run_dir / "launch.json")
@@ -162,11 +185,12 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
     ticks = _dict(load.get("ticks"))
     return Verdict(
         title, run_dir, checks, None if error is None else str(error), metrics,
-        process_lines(launch) + refusal_lines(launch.get("status")), link_summary(metrics),
+        process_lines(launch), link_summary(metrics),
         live if isinstance(live, str) and live else None,
         tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
         bool(launch), load_line(load), overrun_line(ticks), memory_line(load),
-        silent_followers(metrics), recording_line(metrics),
+        silent_followers(metrics), recording_line(metrics), launch_refusals(launch),
+        law_line(info, metrics, launch),
     )
 
 
@@ -179,11 +203,13 @@ def verdict_json(v: Verdict) -> dict[str, Any]:
                    for c in v.checks},
         "silent_followers": list(v.silent),
         "processes": list(v.processes),
+        "refused": v.refused or {},
         "live_url": v.live_url,
         "load": v.load,
         "memory": v.memory,
         "late_ticks": v.ticks,
         "recording": v.recording,
+        "law": v.law,
         "run_dir": str(v.run_dir),
     }}
 
@@ -215,11 +241,14 @@ def print_verdict(console: Console, v: Verdict) -> None:
         console.print(grid)
     settle = _num(v.metrics.get("settle_time_s"))
     rows = [] if v.error else [("settle time", "never" if settle is None else f"{settle:.1f} s")]
+    rows += [("law", v.law)] if v.law else []
     if v.silent:
         n = len(v.metrics.get("followers") or {}) or None
         rows.append(("silent", silent_text(v.silent, n)))
     if v.networked:
-        rows.append(("processes", "; ".join(v.processes) or "none died, restarted or failed"))
+        said = [*v.processes] or ["none died, restarted or failed"]
+        refused = refusal_text(v.refused or {})
+        rows.append(("processes", "; ".join(said + ([refused] if refused else []))))
     rows += [("links", v.links)] if v.links else []
     rows += [("recording", v.recording)] if v.recording else []
     rows += [("late ticks", v.ticks)] if v.ticks else []

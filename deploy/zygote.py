@@ -22,32 +22,18 @@ python -m deploy.zygote LAUNCHER_PID MODULE... (started by deploy.supervisor, no
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import importlib
 import json
 import os
-import signal
 import subprocess
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from agents.lifeline import die_with, set_subreaper
 from deploy.forked import ForkedProcess, fork_pid, trim_heap
+from deploy.pids import identify
 from transport.errors import DeployError
-
-PR_SET_PDEATHSIG, PR_SET_CHILD_SUBREAPER = 1, 36  # linux/prctl.h
-
-
-def _prctl(option: int, value: int) -> bool:
-    try:
-        return int(ctypes.CDLL(None, use_errno=True).prctl(option, value, 0, 0, 0)) == 0
-    except (OSError, AttributeError):
-        return False
-
-
-def set_subreaper(on: bool) -> bool:
-    """Adopt (or stop adopting) this process's orphaned descendants; False where unsupported."""
-    return _prctl(PR_SET_CHILD_SUBREAPER, int(on))
 
 
 class Zygote:
@@ -65,6 +51,7 @@ class Zygote:
                 env={**os.environ, "PYTHONUNBUFFERED": "1"},
             )
         self._ready = False
+        self.ident = identify(self.proc.pid)
 
     def _answer(self) -> str:
         assert self.proc.stdout is not None
@@ -102,15 +89,17 @@ class Zygote:
         set_subreaper(False)
 
 
-def _double_fork(module: str, argv: list[str], log_path: Path) -> int:
+def _double_fork(module: str, argv: list[str], log_path: Path, launcher: int) -> int:
     """Fork a middle process that forks the child and exits: the child's parent becomes
-    the subreaper (the launcher) before we reap the middle one and answer."""
+    the subreaper (the launcher) before we reap the middle one and answer; the child
+    binds its life to the launcher's once adopted (agents.lifeline)."""
     read_end, write_end = os.pipe()
     middle = os.fork()
     if middle == 0:
         os.close(read_end)
         try:
-            pid = fork_pid(module, argv, log_path, close_fds=(write_end,))
+            pid = fork_pid(module, argv, log_path, close_fds=(write_end,), parent=launcher,
+                           via=os.getpid())
             os.write(write_end, f"{pid}\n".encode())
         finally:
             os._exit(0)
@@ -124,9 +113,8 @@ def _double_fork(module: str, argv: list[str], log_path: Path) -> int:
 def main(argv: Sequence[str]) -> int:
     # Killed with the launcher, whatever kills it: requests it had queued must not fork
     # followers that nobody will stop (an outside cleanup finds us in pids.json too).
-    _prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    if os.getppid() != int(argv[0]):
-        return 1  # the launcher died before we asked
+    launcher = int(argv[0])
+    die_with(launcher)
     for module in argv[1:]:
         importlib.import_module(module)
     trim_heap()
@@ -136,7 +124,8 @@ def main(argv: Sequence[str]) -> int:
             break
         try:
             req = json.loads(line)
-            pid = _double_fork(str(req["module"]), [str(a) for a in req["argv"]], Path(req["log"]))
+            pid = _double_fork(str(req["module"]), [str(a) for a in req["argv"]],
+                               Path(req["log"]), launcher)
         except (ValueError, KeyError, OSError) as exc:
             print(f"error: {type(exc).__name__}: {exc}", flush=True)
             continue

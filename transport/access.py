@@ -31,6 +31,19 @@ def process_names(n_followers: int, n_targets: int, n_routers: int = 0) -> list[
             + [f"router-{k}" for k in range(n_routers)])
 
 
+def sender_id(name: str) -> str:
+    """The sender id process `name` stamps its messages with: `follower-2`, `router-1`;
+    the processes of one (launcher, sim, recorder) carry index 0 (`sim-0`)."""
+    role, _, idx = name.rpartition("-")
+    return name if role and idx.isdigit() else f"{name}-0"
+
+
+def sender_ids(n_followers: int, n_targets: int, n_routers: int = 0) -> frozenset[str]:
+    """Every sender of a swarm run: whatever else a message claims is refused
+    (transport.decoder), so no table a receiver keeps per sender outgrows the scenario."""
+    return frozenset(map(sender_id, process_names(n_followers, n_targets, n_routers)))
+
+
 def own_keys(keys: SwarmKeys, name: str, n_followers: int) -> list[str]:
     """The keys process `name` may publish on (put, liveliness token)."""
     role, _, idx = name.rpartition("-")

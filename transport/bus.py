@@ -32,6 +32,9 @@ from transport.errors import TransportError
 Clock = Callable[[], float]
 
 DEFAULT_CAPACITY = 1024
+# Keys a watch keeps as alive.  Tokens are declared by whoever may on their keys: a swarm
+# has a few hundred at most, and beyond this a token is still an event but not remembered.
+MAX_ALIVE_KEYS = 4096
 
 
 class Congestion(enum.Enum):
@@ -140,6 +143,14 @@ class Bus(Protocol):
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None: ...
+
+
+def apply_alive(alive: set[str], ev: AliveEvent) -> None:
+    """A watch's alive set after `ev`, bounded by MAX_ALIVE_KEYS."""
+    if not ev.alive:
+        alive.discard(ev.key)
+    elif len(alive) < MAX_ALIVE_KEYS:
+        alive.add(ev.key)
 
 
 def wait_until_alive(

@@ -26,12 +26,12 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 
 from transport.bus import Bus
 from transport.codec import decode, encode
 from transport.errors import CodecError, ConfigError, TransportError
-from transport.keys import SwarmKeys, parse_key
+from transport.keys import SwarmKeys
 from transport.messages import ClockProbe, Stamper
 from transport.peer_clock import PROCESS_BOOK, ClockBook, exchange_sample
 
@@ -43,6 +43,11 @@ QUEUE = 256
 def format_clock_hosts(hosts: list[list[str]]) -> str:
     """The `--clock-hosts` argument: each host's sender ids, hosts in router order."""
     return ";".join(",".join(senders) for senders in hosts)
+
+
+def clock_hosts_count(spec: str) -> int:
+    """How many hosts (routers) a `--clock-hosts` argument names."""
+    return spec.count(";") + 1
 
 
 def parse_clock_hosts(spec: str) -> dict[str, str]:
@@ -60,23 +65,28 @@ def parse_clock_hosts(spec: str) -> dict[str, str]:
 class ClockListener:
     """What a received probe teaches a process on the host of router `own_clock_id`:
     a sample of the sender's clock against ours from its echo of our router's probe (the
-    router itself is such a process, whose probes they are)."""
+    router itself is such a process, whose probes they are).  Only the swarm's routers
+    (`routers`) are heard: any other sender is dropped and counted, so no table here or
+    in the book grows with names a sender makes up."""
 
-    def __init__(self, own_clock_id: str, book: ClockBook) -> None:
+    def __init__(self, own_clock_id: str, book: ClockBook, routers: Collection[str]) -> None:
         self.own_clock_id, self.book = own_clock_id, book
-        self.rejected = 0
+        self.routers = frozenset(routers)
 
     def receive(self, probe: ClockProbe, t4_s: float) -> None:
         peer = probe.header.sender_id
         if peer == self.own_clock_id:
             return  # our own host's clock
+        if peer not in self.routers:
+            self.book.drop("sender", peer)
+            return
         self.book.restart(peer, probe.epoch_s)
         for echoed, t1, t2 in probe.echoes:
             if echoed != self.own_clock_id:
                 continue
             sample = exchange_sample(t1, t2, probe.header.stamp_s, t4_s)
             if sample is None:
-                self.rejected += 1
+                self.book.drop("times", peer)
             else:
                 self.book.add(peer, probe.epoch_s, sample)
 
@@ -85,20 +95,22 @@ class ClockExchange:
     """A router's part: what to send (echoes of every probe heard), and what a received
     probe teaches (ClockListener, on our own id; injected clock)."""
 
-    def __init__(self, sender_id: str, clock: Callable[[], float], book: ClockBook) -> None:
+    def __init__(self, sender_id: str, clock: Callable[[], float], book: ClockBook,
+                 routers: Collection[str]) -> None:
         self.sender_id, self.clock, self.book = sender_id, clock, book
         self.epoch_s = clock()
         self.stamper = Stamper(sender_id, clock)
         self.heard: dict[str, tuple[float, float]] = {}  # peer -> (its stamp t1, our t2)
-        self.listener = ClockListener(sender_id, book)
+        self.listener = ClockListener(sender_id, book, routers)
 
     def probe(self) -> ClockProbe:
         echoes = tuple((peer, t1, t2) for peer, (t1, t2) in sorted(self.heard.items()))
         return ClockProbe(self.stamper.header(), self.epoch_s, echoes)
 
     def receive(self, probe: ClockProbe, t4_s: float) -> None:
-        if probe.header.sender_id != self.sender_id:
-            self.heard[probe.header.sender_id] = (probe.header.stamp_s, t4_s)
+        peer = probe.header.sender_id
+        if peer != self.sender_id and peer in self.listener.routers:
+            self.heard[peer] = (probe.header.stamp_s, t4_s)
         self.listener.receive(probe, t4_s)
 
     def forget(self, peer: str) -> None:
@@ -110,18 +122,21 @@ class ClockSync:
 
     `clock_id` is this host's router (`router-<k>`); `probe` is True on the router itself
     (it publishes probes), False on every other process of its host (it listens);
+    `n_routers` is the number of hosts (router-0 .. router-<n-1>: whose probes count);
     `clock_of` maps every sender to its host's router."""
 
-    def __init__(self, bus: Bus, keys: SwarmKeys, clock_id: str, probe: bool,
+    def __init__(self, bus: Bus, keys: SwarmKeys, clock_id: str, probe: bool, n_routers: int,
                  clock_of: dict[str, str] | None = None, book: ClockBook = PROCESS_BOOK,
                  period_s: float = PERIOD_S) -> None:
         role, _, index = clock_id.rpartition("-")
-        if not role or not index.isdigit():
-            raise ConfigError("clock_id", f"{clock_id!r} is not router-<k>")
+        if role != "router" or not index.isdigit() or not 0 <= int(index) < n_routers:
+            raise ConfigError("clock_id", f"{clock_id!r} is not router-<k>, k < {n_routers}")
         if clock_of is not None:
             book.set_hosts(clock_of)
-        self.exchange = ClockExchange(clock_id, bus.now_s, book) if probe else None
-        self.listener = self.exchange.listener if self.exchange else ClockListener(clock_id, book)
+        routers = [f"router-{k}" for k in range(n_routers)]
+        self.exchange = ClockExchange(clock_id, bus.now_s, book, routers) if probe else None
+        self.listener = (self.exchange.listener if self.exchange
+                         else ClockListener(clock_id, book, routers))
         self.period_s = period_s
         self._bus = bus
         self._out = bus.declare_publisher(keys.clock(role, int(index))) if probe else None
@@ -143,14 +158,16 @@ class ClockSync:
             self._stop.wait(self.period_s)
 
     def _receive(self, key: str, payload: bytes, t4_s: float) -> None:
+        # The subscription is `clock/router/*`: the key's last chunk names the router
+        # (compared as text: a key is whatever a publisher chose, never parsed into a number).
+        owner = "router-" + key.rpartition("/")[2]
         try:
             msg = decode(payload)
         except CodecError:
-            self.listener.rejected += 1
+            self.listener.book.drop("sender", owner)
             return
-        info = parse_key(key)
-        owner = None if info is None else f"{info.role}-{info.index}"
         if not isinstance(msg, ClockProbe) or msg.header.sender_id != owner:
+            self.listener.book.drop("sender", owner)
             return
         (self.listener if self.exchange is None else self.exchange).receive(msg, t4_s)
 

@@ -292,7 +292,7 @@ class ImpairedBus(ClosingContext):
     def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY,
                   stamp_arrival: bool = False) -> ImpairedSubscription:
         # What the impairment holds back is in flight, not queued at the receiver: a small
-        # receive queue (agents.follower_node.PEER_QUEUE) must not cap the emulated delay.
+        # receive queue (agents.follower.node.PEER_QUEUE) must not cap the emulated delay.
         held = max(capacity, DEFAULT_CAPACITY)
         inner = self.inner.subscribe(key_expr, capacity, stamp_arrival)
         return ImpairedSubscription(self, inner, held)

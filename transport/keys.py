@@ -17,13 +17,13 @@ from transport.errors import ConfigError
 
 ROOT = "enclose"
 # Zenoh reserves `*`, `$`, `#`, `?` and `/` separates chunks; a strict whitelist is simpler.
-_NAME_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+_NAME_RE = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # fullmatch: "$" would pass "a\n"
 _WILDCARDS = ("*", "$", "#", "?")
 
 
 def validate_name(name: str, field: str = "swarm") -> str:
     """Return `name` if it is a valid single key chunk, else raise ConfigError."""
-    if not isinstance(name, str) or not _NAME_RE.match(name):
+    if not isinstance(name, str) or not _NAME_RE.fullmatch(name):
         raise ConfigError(field, f"{name!r} must be 1-64 characters of [A-Za-z0-9_.-]")
     return name
 
@@ -131,20 +131,32 @@ class KeyInfo:
     index: int | None = None
 
 
+# One spelling per index: ASCII digits, no sign, no leading zero, below 10^9.  Keys come
+# from the network, and `str.isdigit` takes digits `int` refuses ("²") or reads ("٣").
+_INDEX_RE = re.compile(r"0|[1-9][0-9]{0,8}")
+_SUFFIXES = {"follower": ("state", "est"), "sensor": ("targets",)}
+
+
 # Every received message's key is parsed (its sender, its index): a process hears a few
 # dozen keys, so a cache answers; bounded, since keys come from the network.
 @lru_cache(maxsize=1024)
 def parse_key(key: str) -> KeyInfo | None:
-    """Decompose a concrete swarm key (e.g. to find the sender of a link); None if foreign."""
+    """Decompose a concrete swarm key (e.g. to find the sender of a link); None if foreign
+    or malformed.  Total: never raises, whatever the string."""
+    if not isinstance(key, str):
+        return None
     parts = key.split("/")
-    if len(parts) < 3 or parts[0] != ROOT:
+    if len(parts) < 3 or parts[0] != ROOT or not _NAME_RE.fullmatch(parts[1]):
         return None
     swarm, kind, rest = parts[1], parts[2], parts[3:]
     if kind in ("truth", "control") and not rest:
         return KeyInfo(swarm, kind)
-    if kind in ("follower", "sensor") and len(rest) == 2 and rest[0].isdigit():
+    if len(rest) != 2:
+        return None
+    if kind in _SUFFIXES and _INDEX_RE.fullmatch(rest[0]) and rest[1] in _SUFFIXES[kind]:
         return KeyInfo(swarm, kind, "follower", int(rest[0]))
-    if kind in ("status", "alive", "clock") and len(rest) == 2 and rest[1].isdigit():
+    if kind in ("status", "alive", "clock") and _NAME_RE.fullmatch(rest[0]) \
+            and _INDEX_RE.fullmatch(rest[1]):
         return KeyInfo(swarm, kind, rest[0], int(rest[1]))
     return None
 

@@ -7,7 +7,9 @@ A link is (sender, this receiver).  The sender of a sample comes from its key:
 - control, status, truth and liveliness keys belong to no link.
 
 `LinkDecoder` is a `transport.decoder.Decoder` that also tallies, per link, the messages
-that reach the agent.  Its `counters()` add, for each link L seen:
+that reach the agent (one tally per key it hears, and per link one for the processes
+gone from it: bounded by the scenario's senders when the decoder is given them).  Its
+`counters()` add, for each link L seen:
 - `rx_L`: unique messages (by sequence number) received;
 - `rx_dup_L`: further copies of a sequence number already received (duplicates);
 - `seq_first_L`, `seq_last_L`: lowest and highest sequence number received, so that the
@@ -29,6 +31,7 @@ that reach the agent.  Its `counters()` add, for each link L seen:
 from __future__ import annotations
 
 import math
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -36,6 +39,7 @@ from transport.bus import Received
 from transport.checks import Limits
 from transport.decoder import Decoder, Inbound
 from transport.keys import parse_key
+from transport.law_fields import FieldSpec
 from transport.messages import RunControl
 
 SENSOR = "sensor"
@@ -176,6 +180,21 @@ class LinkTally:
                     self.latencies = latency_histogram()
                 self.latencies.add(latency_s)
 
+    def absorb(self, other: LinkTally) -> None:
+        """Add `other`'s deliveries to this link's totals (another process on one link)."""
+        self.rx += other.rx
+        self.rx_dup += other.rx_dup
+        if other.seq_first is not None:
+            self.seq_first = other.seq_first if self.seq_first is None \
+                else min(self.seq_first, other.seq_first)
+        if other.seq_last is not None:
+            self.seq_last = other.seq_last if self.seq_last is None \
+                else max(self.seq_last, other.seq_last)
+        self.ages.merge(other.ages)
+        if other.latencies is not None:
+            self.latencies = self.latencies or latency_histogram()
+            self.latencies.merge(other.latencies)
+
     def _fresh(self, seq: int) -> bool:
         """Mark `seq` seen; False for a copy, or for one older than the window (arriving
         thousands of messages late, it can only be a copy).  The window's top is
@@ -206,9 +225,13 @@ class LinkDecoder(Decoder):
     """A Decoder that also tallies, per link, unique deliveries and their age."""
 
     def __init__(self, expect: tuple[type, ...] | None = None,
-                 limits: Limits | None = None) -> None:
-        super().__init__(expect, limits)
+                 limits: Limits | None = None, senders: Collection[str] | None = None,
+                 law_fields: Mapping[str, FieldSpec] | None = None) -> None:
+        super().__init__(expect, limits, senders=senders, law_fields=law_fields)
         self.tallies: dict[str, LinkTally] = {}  # per key
+        # Per link, what the processes gone from it delivered: one tally per link however
+        # often its sender leaves and returns (a flapping token must not grow this).
+        self.retired: dict[str, LinkTally] = {}
         self.ages_from_s = -float("inf")
 
     def decode(self, rec: Received) -> Inbound | None:
@@ -220,7 +243,7 @@ class LinkDecoder(Decoder):
             if (isinstance(msg, RunControl) and msg.command == "start"
                     and msg.start_stamp_s != self.ages_from_s):
                 self.ages_from_s = msg.start_stamp_s
-                for t in self.tallies.values():
+                for t in [*self.tallies.values(), *self.retired.values()]:
                     t.ages, t.latencies = AgeHistogram(), None
             tally = self.tallies.get(rec.key)
             if tally is None:
@@ -243,23 +266,13 @@ class LinkDecoder(Decoder):
         super().forget(key)
         tally = self.tallies.pop(key, None)
         if tally is not None:
-            self.tallies[f"{key}#{len(self.tallies)}"] = tally
+            self.retired.setdefault(tally.link, LinkTally(tally.link)).absorb(tally)
 
     def link_counters(self) -> dict[str, int]:
         """The per-link counters described in the module docstring."""
         merged: dict[str, LinkTally] = {}
-        for tally in self.tallies.values():
-            into = merged.setdefault(tally.link, LinkTally(tally.link))
-            into.rx += tally.rx
-            into.rx_dup += tally.rx_dup
-            for name in ("seq_first", "seq_last"):
-                mine, theirs = getattr(into, name), getattr(tally, name)
-                pick = min if name == "seq_first" else max
-                setattr(into, name, theirs if mine is None else pick(mine, theirs))
-            into.ages.merge(tally.ages)
-            if tally.latencies is not None:
-                into.latencies = into.latencies or latency_histogram()
-                into.latencies.merge(tally.latencies)
+        for tally in [*self.tallies.values(), *self.retired.values()]:
+            merged.setdefault(tally.link, LinkTally(tally.link)).absorb(tally)
         out: dict[str, int] = {}
         neighbours = latency_histogram()
         for name, t in sorted(merged.items()):

@@ -22,6 +22,7 @@ from transport.bus import (
     Clock,
     Congestion,
     Received,
+    apply_alive,
 )
 from transport.errors import TransportError
 from transport.keys import key_matches, validate_concrete
@@ -132,7 +133,7 @@ class MemoryAliveWatch:
             events = list(self.events)
             self.events.clear()
         for ev in events:
-            (self._alive.add if ev.alive else self._alive.discard)(ev.key)
+            apply_alive(self._alive, ev)
         return events
 
     def poll(self) -> frozenset[str]:

@@ -15,7 +15,15 @@ from typing import TypeVar, Union
 
 import zenoh
 
-from transport.bus import DEFAULT_CAPACITY, AliveEvent, BusBase, Clock, Congestion, Received
+from transport.bus import (
+    DEFAULT_CAPACITY,
+    AliveEvent,
+    BusBase,
+    Clock,
+    Congestion,
+    Received,
+    apply_alive,
+)
 from transport.clock import process_clock
 from transport.clock_sync import ClockSync
 from transport.errors import TransportError
@@ -156,7 +164,7 @@ class ZenohAliveWatch:
         events: list[AliveEvent] = []
         while (sample := self._sub.try_recv()) is not None:
             ev = AliveEvent(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
-            (self._alive.add if ev.alive else self._alive.discard)(ev.key)
+            apply_alive(self._alive, ev)
             events.append(ev)
         return events
 
@@ -227,12 +235,13 @@ class ZenohBus(BusBase):
         """Zenoh ids of the peers this session is linked to right now."""
         return [str(z) for z in self.session.info.peers_zid()]
 
-    def start_clock_sync(self, keys: SwarmKeys, clock_id: str, probe: bool = False,
+    def start_clock_sync(self, keys: SwarmKeys, clock_id: str, n_routers: int,
+                         probe: bool = False,
                          clock_of: dict[str, str] | None = None) -> ClockSync:
         """Estimate the other hosts' clock offsets from here on (transport.clock_sync):
-        `clock_id` is this host's router, `probe` True on the router itself."""
+        `clock_id` is this host's router (of `n_routers`), `probe` True on the router."""
         if self.clock_sync is None:
-            self.clock_sync = ClockSync(self, keys, clock_id, probe, clock_of)
+            self.clock_sync = ClockSync(self, keys, clock_id, probe, n_routers, clock_of)
         return self.clock_sync
 
     def close(self) -> None:

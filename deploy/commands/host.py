@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import argparse
 import signal
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from agents.network_args import NetworkOptions
 from deploy.commands.run import _interrupt
 from deploy.deployment import load_deployment
 from deploy.host_launch import HostLaunch
+from deploy.launch_options import LaunchOptions
 from deploy.restarts import add_supervision_arguments
 from deploy.verdict import add_json_argument
 from transport.errors import DeployError
@@ -31,8 +34,9 @@ def register(sub: Any) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds after the start")
     p.add_argument("--out", type=Path, default=Path("runs/host"), help="run directory")
     p.add_argument("--credentials", dest="credentials_dir", default=None, metavar="DIR",
-                   help="this host's copy of `enclose keys DIR --routers K` (default: fresh "
-                   "per run, which works only with --all)")
+                   help="this host's folder of `enclose keys OUT_DIR --deployment FILE` "
+                   "(OUT_DIR/<host>; with --all, OUT_DIR itself; default: fresh per run, "
+                   "which works only with --all)")
     p.add_argument("--noise-std-m", type=float, default=0.0, help="noise on target observations")
     p.add_argument("--zenoh-config", default=None, metavar="JSON5", help="your Zenoh config")
     p.add_argument("--link-timeout", type=float, default=120.0,
@@ -44,16 +48,40 @@ def register(sub: Any) -> None:
     p.set_defaults(func=_main)
 
 
+@dataclass(frozen=True)
+class HostOptions:
+    """`enclose host`'s command line (the scenario is the deployment file's)."""
+
+    launch: LaunchOptions
+    deployment: Path
+    host: str | None = None  # this host's name in the file; None: every host (--all)
+    duration_s: float | None = None  # None: the scenario's
+    out: Path = Path("runs/host")
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> HostOptions:
+        # No live view (its recorder may be in a namespace), no network flags.
+        launch = LaunchOptions.from_namespace(args, None, None, NetworkOptions(),
+                                              credentials_dir=args.credentials_dir)
+        return cls(launch, args.deployment, args.host, args.duration, args.out)
+
+
 def _main(args: argparse.Namespace) -> int:
-    dep = load_deployment(args.deployment)
-    local = tuple(range(len(dep.hosts))) if args.all else (dep.index_of(args.host),)
-    if not args.all and args.credentials_dir is None and not args.insecure:
+    return run(HostOptions.from_namespace(args))
+
+
+def run(opts: HostOptions) -> int:
+    dep = load_deployment(opts.deployment)
+    every = tuple(range(len(dep.hosts)))
+    local = every if opts.host is None else (dep.index_of(opts.host),)
+    if opts.host is not None and opts.launch.credentials_dir is None \
+            and not opts.launch.insecure:
         raise DeployError("--credentials DIR: hosts of one swarm must share its CA "
-                          "(`enclose keys DIR SCENARIO --swarm NAME --routers K`)")
-    args.scenario = dep.scenario
-    launch = HostLaunch(dep, local, args, args.out.resolve(), 1.0)
-    launch.duration_s = (launch.scenario.run.duration_s if args.duration is None
-                         else args.duration)
+                          "(`enclose keys OUT_DIR --deployment FILE`, then OUT_DIR/<host>)")
+    launch = HostLaunch(dep, local, opts.launch, opts.out.resolve(), 1.0,
+                        every_host=opts.host is None)
+    launch.duration_s = (launch.scenario.run.duration_s if opts.duration_s is None
+                         else opts.duration_s)
     if launch.duration_s <= 0:
         raise DeployError("--duration must be > 0")
     previous = signal.signal(signal.SIGTERM, _interrupt)

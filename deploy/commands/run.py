@@ -5,16 +5,19 @@ from __future__ import annotations
 import argparse
 import signal
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from agents.network_args import add_network_arguments, apply_network_arguments
+from agents.law_args import add_law_arguments, apply_law_arguments
+from agents.network_args import NetworkOptions, add_network_arguments, apply_network_arguments
 from agents.scenario.file import load_scenario
 from deploy.launch import Launch
-from deploy.live_args import add_live_arguments
-from deploy.netns.hosts import add_hosts_arguments, run_on_hosts
-from deploy.netns.run import add_netns_arguments, netns_requested, run_in_namespace
+from deploy.launch_options import LaunchOptions
+from deploy.live_args import LiveOptions, add_live_arguments
+from deploy.netns.hosts import HostsOptions, add_hosts_arguments, run_on_hosts
+from deploy.netns.run import NetnsOptions, add_netns_arguments, run_in_namespace
 from deploy.restarts import add_supervision_arguments
 from deploy.verdict import add_json_argument
 from transport.errors import DeployError
@@ -54,31 +57,58 @@ def register(sub: Any) -> None:
     add_json_argument(p)
     add_supervision_arguments(p)
     add_network_arguments(p)
+    add_law_arguments(p)
     add_netns_arguments(p)
     add_hosts_arguments(p)
     p.set_defaults(func=_main)
 
 
+@dataclass(frozen=True)
+class RunOptions:
+    """`enclose run`'s command line."""
+
+    launch: LaunchOptions
+    duration_s: float | None = None  # None: the scenario's
+    out: Path | None = None  # None: runs/run-<name>-<time>
+    swarm: str | None = None  # None: unique per run
+    netns: NetnsOptions | None = None  # --netns: the run in a lossy namespace
+    hosts: HostsOptions | None = None  # --hosts K: over namespaced hosts
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> RunOptions:
+        launch = LaunchOptions.from_namespace(
+            args, args.scenario, LiveOptions.from_namespace(args),
+            NetworkOptions.from_namespace(args), port_range=args.port_range)
+        return cls(launch, args.duration, args.out, args.swarm,
+                   NetnsOptions.from_namespace(args), HostsOptions.from_namespace(args))
+
+
 def _main(args: argparse.Namespace) -> int:
-    scenario = apply_network_arguments(load_scenario(args.scenario), args)  # fail early
-    duration = scenario.run.duration_s if args.duration is None else args.duration
+    return run(RunOptions.from_namespace(args))
+
+
+def run(opts: RunOptions) -> int:
+    launch = opts.launch
+    scenario = apply_network_arguments(load_scenario(launch.scenario), launch.network)
+    scenario = apply_law_arguments(scenario, launch.law)  # a bad law fails here, first
+    duration = scenario.run.duration_s if opts.duration_s is None else opts.duration_s
     if duration <= 0:
         raise DeployError("--duration must be > 0")
-    if scenario.network.link != "tcp" and not args.insecure:
+    if scenario.network.link != "tcp" and not launch.insecure:
         raise DeployError(
             f"network.link = {scenario.network.link!r} cannot be authenticated (Zenoh mTLS "
             "runs over TCP): use link tcp, or --insecure"
         )
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    out = (args.out or Path("runs") / f"run-{scenario.name}-{stamp}").resolve()
-    swarm = args.swarm or f"{scenario.name}-{stamp}".replace("_", "-")
+    out = (opts.out or Path("runs") / f"run-{scenario.name}-{stamp}").resolve()
+    swarm = opts.swarm or f"{scenario.name}-{stamp}".replace("_", "-")
     previous = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as cleanly as Ctrl-C
     try:
-        if args.hosts is not None:  # K namespaced hosts: deploy.netns.hosts
-            return run_on_hosts(args, out, swarm, duration)
-        if netns_requested(args):  # the same run, launched again inside a lossy namespace
-            return run_in_namespace(args, out, swarm, duration)
-        return Launch(scenario, args, out, swarm, duration).execute()
+        if opts.hosts is not None:  # K namespaced hosts: deploy.netns.hosts
+            return run_on_hosts(opts.hosts, scenario, launch, out, swarm, duration)
+        if opts.netns is not None:  # the same run, launched again inside a lossy namespace
+            return run_in_namespace(opts.netns, launch, out, swarm, duration)
+        return Launch(scenario, launch, out, swarm, duration).execute()
     finally:
         signal.signal(signal.SIGTERM, previous)
 

@@ -11,6 +11,7 @@ import signal
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from types import FrameType
 from typing import Any
 
@@ -28,7 +29,7 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser("sim", help="run the MAVLink vehicle simulator alone",
                                    description=__doc__)
     add_arguments(parser)
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=_main)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -59,25 +60,52 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="stop after this much simulated time (default: until Ctrl-C)")
 
 
-def build_simulator(args: argparse.Namespace) -> Simulator:
-    if args.vehicles is not None:
-        if args.vehicles < 1:
+@dataclass(frozen=True)
+class SimOptions:
+    """`enclose sim`'s command line."""
+
+    scenario: str | None = None  # None: the paper's case (unless `vehicles`)
+    vehicles: int | None = None  # N vehicles on a grid instead of a scenario
+    flavour: str | None = None  # None: the scenario's
+    rate_hz: float = 50.0
+    telemetry_hz: float = 50.0
+    host: str = "127.0.0.1"
+    base_port: int = 14580
+    send_base_port: int = 14540
+    signing_key: str | None = None  # key file: one key for every vehicle
+    duration_s: float | None = None  # simulated time; None: until Ctrl-C
+    signing_secret: str | None = None  # run secret file: a key per vehicle
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> SimOptions:
+        return cls(args.scenario, args.vehicles, args.flavour, args.rate_hz, args.telemetry_hz,
+                   args.host, args.base_port, args.send_base_port, args.signing_key,
+                   args.duration_s, args.signing_secret)
+
+
+def build_simulator(opts: SimOptions) -> Simulator:
+    if opts.vehicles is not None:
+        if opts.vehicles < 1:
             raise EncloseError("--vehicles must be >= 1")
-        spawn, vehicle, home = grid_spawn_ned(args.vehicles), VehicleConfig(), HomeConfig()
+        spawn, vehicle, home = grid_spawn_ned(opts.vehicles), VehicleConfig(), HomeConfig()
     else:
-        scenario = load_scenario(args.scenario)
+        scenario = load_scenario(opts.scenario)
         spawn, vehicle, home = spawn_points_ned(scenario), scenario.vehicle, scenario.home
-    cfg = SimConfig(rate_hz=args.rate_hz, telemetry_hz=args.telemetry_hz,
-                    flavour=args.flavour or vehicle.flavour, host=args.host,
-                    listen_base_port=args.base_port, send_base_port=args.send_base_port,
-                    signing_key=None if args.signing_key is None else load_key(args.signing_key),
-                    signing_secret=None if args.signing_secret is None
-                    else load_key(args.signing_secret))
+    cfg = SimConfig(rate_hz=opts.rate_hz, telemetry_hz=opts.telemetry_hz,
+                    flavour=opts.flavour or vehicle.flavour, host=opts.host,
+                    listen_base_port=opts.base_port, send_base_port=opts.send_base_port,
+                    signing_key=None if opts.signing_key is None else load_key(opts.signing_key),
+                    signing_secret=None if opts.signing_secret is None
+                    else load_key(opts.signing_secret))
     return Simulator(spawn, vehicle, home, cfg)
 
 
-def run(args: argparse.Namespace) -> int:
-    sim = build_simulator(args)
+def _main(args: argparse.Namespace) -> int:
+    return run(SimOptions.from_namespace(args))
+
+
+def run(opts: SimOptions) -> int:
+    sim = build_simulator(opts)
     stop = {"flag": False}
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
@@ -88,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     log.info("%d %s vehicles, sysid 1..%d, listening on %s:%d..%d, sending to %s:%d..%d",
              sim.n, sim.cfg.flavour, sim.n, sim.cfg.host, ports[0], ports[-1], sim.cfg.host,
              sim.cfg.send_base_port, sim.cfg.send_base_port + sim.n - 1)
-    max_ticks = None if args.duration_s is None else round(args.duration_s * sim.cfg.rate_hz)
+    max_ticks = None if opts.duration_s is None else round(opts.duration_s * sim.cfg.rate_hz)
     started = time.monotonic()
     try:
         stats = sim.run(lambda: stop["flag"], max_ticks)
@@ -109,11 +137,11 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="enclose sim", description=__doc__)
     add_arguments(parser)
-    args = parser.parse_args(argv)
+    opts = SimOptions.from_namespace(parser.parse_args(argv))
     logging.basicConfig(level=logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
-        return run(args)
+        return run(opts)
     except EncloseError as exc:
         log.error("%s: %s", type(exc).__name__, exc)
         return 2

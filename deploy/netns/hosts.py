@@ -19,10 +19,12 @@ import logging
 import os
 import sys
 from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
-from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 from deploy.deployment import Deployment, HostSpec, dump_deployment, split_over_hosts
+from deploy.launch_options import LaunchOptions
 from deploy.netns.namespace import _tool, clean_stale, destroy, install_tools
 from deploy.netns.namespace import unavailable as netns_unavailable
 from deploy.netns.run import run_forwarding_signals
@@ -43,6 +45,22 @@ def add_hosts_arguments(parser: argparse.ArgumentParser) -> None:
                    help="one-way delay on follower links between hosts")
 
 
+@dataclass(frozen=True)
+class HostsOptions:
+    """`--hosts K [--host-offsets S,S,..] [--host-delay-ms D]`."""
+
+    count: int
+    offsets: str | None = None  # each host's clock offset in s, comma-separated
+    delay_ms: float = 0.0  # one-way, on follower links between hosts
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> HostsOptions | None:
+        """None without --hosts."""
+        if args.hosts is None:
+            return None
+        return cls(int(args.hosts), args.host_offsets, float(args.host_delay_ms))
+
+
 def _offsets(text: str | None, k: int) -> list[float]:
     if text is None:
         return [0.0] * k
@@ -55,17 +73,15 @@ def _offsets(text: str | None, k: int) -> list[float]:
     return values
 
 
-def hosts_deployment(args: argparse.Namespace, swarm: str, prefix: str) -> Deployment:
-    scenario = load_scenario(args.scenario)
-    k = int(args.hosts)
-    offsets = _offsets(args.host_offsets, k)
-    source = args.scenario or "paper"
-    if source.endswith(".toml"):
-        source = str(Path(source).resolve())
-    hosts = tuple(HostSpec(f"h{i}", f"{SUBNET}.{i + 1}", tuple(procs), netns=f"{prefix}-h{i}",
+def hosts_deployment(hosts: HostsOptions, scenario: Scenario, source: str, swarm: str,
+                     prefix: str) -> Deployment:
+    """`scenario` (loaded from `source`: a shipped name or an absolute path) over the hosts."""
+    k = hosts.count
+    offsets = _offsets(hosts.offsets, k)
+    specs = tuple(HostSpec(f"h{i}", f"{SUBNET}.{i + 1}", tuple(procs), netns=f"{prefix}-h{i}",
                            clock_offset_s=offsets[i])
                   for i, procs in enumerate(split_over_hosts(k, scenario.n, scenario.m)))
-    return Deployment(swarm, source, hosts, float(args.host_delay_ms))
+    return Deployment(swarm, source, specs, hosts.delay_ms)
 
 
 @contextlib.contextmanager
@@ -99,22 +115,16 @@ def linked_namespaces(dep: Deployment, hub: str) -> Iterator[None]:
                 destroy(name)
 
 
-def inner_argv(args: argparse.Namespace, out: Path, duration_s: float) -> list[str]:
-    argv = ["host", str(out / "deployment.toml"), "--all", "--out", str(out),
-            "--duration", repr(duration_s), "--link-timeout", repr(args.link_timeout),
-            "--noise-std-m", repr(args.noise_std_m), "--restart", args.restart,
-            "--max-restarts", str(args.max_restarts)]
-    for fault in args.fault:
-        argv += ["--fault", fault]
-    if args.insecure:
-        argv.append("--insecure")
-    return argv
+def inner_argv(opts: LaunchOptions, out: Path, duration_s: float) -> list[str]:
+    return ["host", str(out / "deployment.toml"), "--all", "--out", str(out),
+            "--duration", repr(duration_s), *opts.supervision_argv()]
 
 
-def run_on_hosts(args: argparse.Namespace, out: Path, swarm: str, duration_s: float) -> int:
+def run_on_hosts(hosts: HostsOptions, scenario: Scenario, opts: LaunchOptions, out: Path,
+                 swarm: str, duration_s: float) -> int:
     """The run over `--hosts K` namespaces; the launcher runs in host 0 on its clock."""
     prefix = f"enclose-{os.getpid()}"
-    dep = hosts_deployment(args, swarm, prefix)
+    dep = hosts_deployment(hosts, scenario, opts.scenario_ref(), swarm, prefix)
     out.mkdir(parents=True, exist_ok=True)
     (out / "deployment.toml").write_text(dump_deployment(dep))
     with linked_namespaces(dep, f"{prefix}-hub"):
@@ -122,7 +132,7 @@ def run_on_hosts(args: argparse.Namespace, out: Path, swarm: str, duration_s: fl
         env = [f"{a}={b}" for a, b in clock_env(h0.clock_offset_s, h0.clock_drift_ppm).items()]
         argv: Sequence[str] = ["ip", "netns", "exec", str(h0.netns), "env", *env,
                                sys.executable, "-m", "deploy.cli",
-                               *inner_argv(args, out, duration_s)]
+                               *inner_argv(opts, out, duration_s)]
         return run_forwarding_signals(argv)
 
 

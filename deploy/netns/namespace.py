@@ -30,6 +30,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
+from deploy.pids import identify, is_alive, signal_same
 from deploy.ports import PX4_SITL_BASES
 from transport.errors import DeployError
 
@@ -147,19 +148,20 @@ def _pid_alive(pid: int) -> bool:
 
 
 def _stop_inside(ns: Namespace) -> None:
-    """Whatever still runs in the namespace was started by this run: SIGTERM, then SIGKILL."""
-    pids = ns.pids()
+    """Whatever still runs in the namespace was started by this run: SIGTERM, then SIGKILL,
+    each only to the process listed (deploy.pids: one that exits meanwhile frees its PID)."""
+    procs = [identify(pid) for pid in ns.pids()]
     for sig in (signal.SIGTERM, signal.SIGKILL):
-        for pid in pids:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, sig)
+        for ident in procs:
+            signal_same(ident, sig)
         deadline = time.monotonic() + STOP_GRACE_S
-        while pids and time.monotonic() < deadline:
+        while procs and time.monotonic() < deadline:
             time.sleep(0.05)
-            pids = [p for p in pids if _pid_alive(p)]
-        if not pids:
+            procs = [p for p in procs if is_alive(p)]
+        if not procs:
             return
-        log.warning("namespace %s: %d processes ignored SIGTERM; killing them", ns.name, len(pids))
+        log.warning("namespace %s: %d processes ignored SIGTERM; killing them", ns.name,
+                    len(procs))
 
 
 def destroy(name: str) -> None:

@@ -11,14 +11,19 @@ import argparse
 import contextlib
 import json
 import logging
+import os
 import signal
 import subprocess
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
 
+from agents.law_args import law_overrides
+from agents.lifeline import launcher_env
 from agents.network_args import network_overrides
+from deploy.launch_options import LaunchOptions
 from deploy.netns.namespace import MAVLINK_PORTS, lossy_namespace
 from transport.errors import DeployError
 
@@ -33,39 +38,41 @@ def add_netns_arguments(parser: argparse.ArgumentParser) -> None:
                    help="fraction of loopback packets the kernel drops (needs --netns)")
 
 
-def netns_requested(args: argparse.Namespace) -> bool:
-    if getattr(args, "os_loss", None) is not None and not getattr(args, "netns", False):
-        raise DeployError("--os-loss needs --netns (it drops packets inside the namespace)")
-    return bool(getattr(args, "netns", False))
+@dataclass(frozen=True)
+class NetnsOptions:
+    """`--netns [--os-loss P]`: the run in a namespace whose loopback loses `os_loss`."""
+
+    os_loss: float = 0.0
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> NetnsOptions | None:
+        """None without --netns; --os-loss alone is an error."""
+        if args.os_loss is not None and not args.netns:
+            raise DeployError("--os-loss needs --netns (it drops packets inside the namespace)")
+        return cls(args.os_loss or 0.0) if args.netns else None
 
 
-def inner_argv(args: argparse.Namespace, out: Path, swarm: str, duration_s: float) -> list[str]:
+def inner_argv(opts: LaunchOptions, out: Path, swarm: str, duration_s: float) -> list[str]:
     """`enclose run` as given, without --netns, for the launcher inside the namespace."""
-    scen = args.scenario
-    if scen and scen.endswith(".toml"):
-        scen = str(Path(scen).resolve())
-    argv = ["-v"] * int(getattr(args, "verbose", 0)) + ["run", *([scen] if scen else [])]
+    scen = opts.scenario_ref() if opts.scenario else None
+    argv = ["-v"] * opts.verbose + ["run", *([scen] if scen else [])]
     argv += ["--duration", repr(duration_s), "--out", str(out), "--swarm", swarm,
-             "--noise-std-m", repr(args.noise_std_m), "--link-timeout", repr(args.link_timeout)]
-    argv += ["--restart", getattr(args, "restart", "on-failure"),
-             "--max-restarts", str(getattr(args, "max_restarts", 5))]
-    for fault in getattr(args, "fault", []):
-        argv += ["--fault", fault]
-    if args.zenoh_config:
-        argv += ["--zenoh-config", str(Path(args.zenoh_config).resolve())]
-    if getattr(args, "insecure", False):
-        argv.append("--insecure")
+             *opts.supervision_argv()]
+    if opts.zenoh_config:
+        argv += ["--zenoh-config", str(Path(opts.zenoh_config).resolve())]
     # The namespace's loopback is not this machine's: a live view there could not be opened.
     argv.append("--no-live")
-    if getattr(args, "json", False):
+    if opts.json:
         argv.append("--json")
-    return argv + network_overrides(args)
+    return argv + network_overrides(opts.network) + law_overrides(opts.law)
 
 
 def run_forwarding_signals(argv: Sequence[str]) -> int:
     """Run `argv` in its own session (a terminal's Ctrl-C reaches only us, once) and pass
-    SIGINT/SIGTERM on to it; its exit code, 128+N when killed by signal N."""
-    proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, start_new_session=True)
+    SIGINT/SIGTERM on to it; its exit code, 128+N when killed by signal N.  It dies with
+    us (agents.lifeline), and its processes with it."""
+    proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, start_new_session=True,
+                            env={**os.environ, **launcher_env()})
 
     def forward(signum: int, frame: FrameType | None) -> None:
         with contextlib.suppress(ProcessLookupError):
@@ -100,13 +107,14 @@ def _mavlink_exempt(out: Path) -> bool | None:
     return exempt
 
 
-def run_in_namespace(args: argparse.Namespace, out: Path, swarm: str, duration_s: float) -> int:
+def run_in_namespace(netns: NetnsOptions, opts: LaunchOptions, out: Path, swarm: str,
+                     duration_s: float) -> int:
     """The whole `enclose run` inside a lossy namespace; writes RUN_DIR/netns.json."""
-    loss = args.os_loss or 0.0
+    loss = netns.os_loss
     out.mkdir(parents=True, exist_ok=True)
     with lossy_namespace(loss) as ns:
         argv = ns.exec_argv([sys.executable, "-m", "deploy.cli",
-                             *inner_argv(args, out, swarm, duration_s)])
+                             *inner_argv(opts, out, swarm, duration_s)])
         code = run_forwarding_signals(argv)
         report: dict[str, object] = {"namespace": ns.name, "os_loss": loss, "exit_code": code}
         with contextlib.suppress(DeployError, ValueError, KeyError, IndexError):

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from agents.law.loader import make_law
 from agents.liveness import MembershipWatch
 from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
@@ -28,6 +29,7 @@ from deploy.recording.resume import newest_part, read_back
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
 from deploy.recording.view_feed import ViewFeed
 from deploy.rundir import RunInfo
+from transport.access import sender_ids
 from transport.bus import Bus, Congestion
 from transport.checks import RECORDER_LIMITS
 from transport.codec import encode
@@ -64,7 +66,11 @@ class Recorder:
         run_dir.mkdir(parents=True, exist_ok=True)
         self.mcap = McapLog(run_dir / MCAP_FILE, chunk_size=chunk_bytes,
                             metadata={"swarm": swarm, "scenario": scenario.name})
-        self.decoder = Decoder(limits=RECORDER_LIMITS)  # implausible messages dropped, counted
+        # Implausible messages, and any not from the process its key names, dropped,
+        # counted; a state whose law fields are not what the scenario's law declares too,
+        # as its followers drop it (transport.law_fields).
+        self.decoder = Decoder(limits=RECORDER_LIMITS, senders=sender_ids(scenario.n, scenario.m),
+                               law_fields=make_law(scenario).declared())
         self.asm = RunAssembler(scenario.n, scenario.m)
         self.state = "starting"
         self.stop_reason = ""
@@ -267,7 +273,7 @@ class Recorder:
         return self.feed.frames_sent
 
     def _status_counters(self) -> dict[str, int]:
-        out = self.decoder.counters()
+        out = {**self.decoder.counters(), **self.liveness.counters()}
         out["truth"] = self.asm.truth_count
         out["mcap_messages"] = sum(self.mcap.messages.values())
         return out

@@ -10,8 +10,8 @@ panels work without set-up:
   `agents.core.metrics.error_series`);
 - `/links` (JSON `enclose.LiveLinks`): per link age and delivered ratio
   (`deploy.recording.live_links`), once a recorder tick;
-- `/status` (JSON `enclose.LiveStatus`): each process's state, what it refused on its
-  MAVLink link (`refused`, deploy.refusals) and the member set, each tick;
+- `/status` (JSON `enclose.LiveStatus`): each process's state, the member set and what the
+  processes refused from the bus (deploy.refusals), each tick;
 - `/log` (`foxglove.Log`, protobuf): a line per process state or membership change.
 """
 
@@ -67,7 +67,8 @@ SCHEMAS = {
         "links": {"type": "array", "items": {"type": "object"}}}),
     STATUS_TOPIC: _json_schema("enclose.LiveStatus", {
         "processes": {"type": "array", "items": {"type": "object"}},
-        "members": {"type": "array", "items": {"type": "integer"}}}),
+        "members": {"type": "array", "items": {"type": "integer"}},
+        "refused": {"type": "object"}}),
 }
 
 
@@ -173,10 +174,13 @@ class LiveView:
             self._members = members
             self._log(f"members {sorted(members)}", fm.LogLevel.Info, now_s, "membership")
         ns = int(now_s * _NS)
-        procs = [{"name": k, "state": s.state, "detail": s.detail,
-                  "refused": refusals(s.counters)} for k, s in sorted(self.processes.items())]
+        procs = [{"name": k, "state": s.state, "detail": s.detail}
+                 for k, s in sorted(self.processes.items())]
         return [*self.frames(),
                 _json(LINKS_TOPIC, {"links": [k.as_json() for k in self.links.links()]}, ns),
                 _json(STATUS_TOPIC, {"processes": procs,
-                                     "members": sorted(self._members or ())}, ns)]
+                                     "members": sorted(self._members or ()),
+                                     "refused": refusals(s.counters
+                                                         for s in self.processes.values())},
+                      ns)]
 

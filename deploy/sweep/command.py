@@ -19,6 +19,7 @@ import shutil
 import signal
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -26,6 +27,7 @@ from typing import Any
 from rich.console import Console
 
 from deploy.json_files import read_json
+from deploy.sweep.figure_by_law import law_figures
 from deploy.sweep.figures import write_figures
 from deploy.sweep.parallel import StopSignals, run_parallel
 from deploy.sweep.progress import SweepProgress
@@ -43,7 +45,8 @@ TIMEOUT_MARGIN_S = 300.0  # link wait (up to 120 s) + recorder writing (up to 12
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
-        "sweep", help="a grid of real runs over network settings: resumable, table and figures"
+        "sweep",
+        help="a grid of real runs over network settings and laws: resumable, table and figures",
     )
     p.add_argument("sweep_file", type=Path, help="sweep TOML file (see bench/sweeps/)")
     p.add_argument("--out", type=Path, default=None, help="sweep directory (default: file's out)")
@@ -75,35 +78,57 @@ def register(sub: Any) -> None:
     p.set_defaults(func=_main)
 
 
+@dataclass(frozen=True)
+class SweepOptions:
+    """`enclose sweep`'s command line."""
+
+    sweep_file: Path
+    out: Path | None = None  # None: the file's `out`
+    report_only: bool = False
+    list: bool = False
+    cell_timeout_s: float | None = None  # None: duration + TIMEOUT_MARGIN_S
+    jobs: int | None = None  # None: 1 here, one per worker thread on a cluster
+    cluster: str | None = None  # a Dask scheduler's address
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> SweepOptions:
+        return cls(args.sweep_file, args.out, args.report_only, args.list, args.cell_timeout,
+                   args.jobs, args.cluster)
+
+
 def _main(args: argparse.Namespace) -> int:
-    spec = load_sweep(args.sweep_file, args.out.resolve() if args.out else None)
-    if args.jobs is not None and args.jobs < 1:
-        raise ConfigError("--jobs", f"must be >= 1, got {args.jobs}")
-    if args.list:
+    return sweep(SweepOptions.from_namespace(args))
+
+
+def sweep(opts: SweepOptions) -> int:
+    spec = load_sweep(opts.sweep_file, opts.out.resolve() if opts.out else None)
+    if opts.jobs is not None and opts.jobs < 1:
+        raise ConfigError("--jobs", f"must be >= 1, got {opts.jobs}")
+    if opts.list:
         for row in collect(spec):
             print(f"{row.state.status:11s} {row.cell.name}")
         return 0
-    if args.report_only:
+    if opts.report_only:
         report(spec)
         return 0
     previous = signal.signal(signal.SIGTERM, _interrupt)  # stop as cleanly as on Ctrl-C
     try:
-        if args.cluster:
-            return _on_cluster(spec, args)
-        return run_sweep(spec, timeout_s=args.cell_timeout, jobs=args.jobs or 1)
+        if opts.cluster:
+            return _on_cluster(spec, opts.cluster, opts)
+        return run_sweep(spec, timeout_s=opts.cell_timeout_s, jobs=opts.jobs or 1)
     finally:
         signal.signal(signal.SIGTERM, previous)
 
 
-def _on_cluster(spec: SweepSpec, args: argparse.Namespace) -> int:
+def _on_cluster(spec: SweepSpec, address: str, opts: SweepOptions) -> int:
     from deploy.sweep.cluster import ClusterRunner, connect  # the optional extra
 
     signals = StopSignals()
-    with connect(args.cluster) as client:
+    with connect(address) as client:
         runner = ClusterRunner(client, signals)
-        jobs = args.jobs or runner.capacity()
+        jobs = opts.jobs or runner.capacity()
         return run_sweep(
-            spec, runner, args.cell_timeout, jobs=jobs, signals=signals, where=args.cluster
+            spec, runner, opts.cell_timeout_s, jobs=jobs, signals=signals, where=address
         )
 
 
@@ -245,5 +270,6 @@ def report(spec: SweepSpec, figures: bool = True) -> None:
     if spec.repeats > 1:
         path = write_summary(spec, rows, md_path)
         log.info("mean and spread over %d seeds: %s", spec.repeats, path.name)
-    paths = write_figures(spec, [r for r in rows if r.state.done]) if figures else []
+    finished = [r for r in rows if r.state.done]
+    paths = [*write_figures(spec, finished), *law_figures(spec, finished)] if figures else []
     print_sweep_verdict(Console(), spec, rows, paths)

@@ -19,8 +19,9 @@ from matplotlib.axes import Axes
 from matplotlib.colors import LogNorm, Normalize
 from matplotlib.ticker import FuncFormatter
 
-from deploy.sweep.spec import SweepSpec, Value, format_value
+from deploy.sweep.spec import SweepSpec
 from deploy.sweep.table import DELIVERED, METRICS, Row
+from deploy.sweep.values import Value, format_value
 
 log = logging.getLogger("enclose.sweep")
 Point = tuple[Value, ...]

@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Protocol
 
+from deploy.pids import kill_run
 from deploy.port_slots import Slot, port_slot
 
 log = logging.getLogger("enclose.sweep")
@@ -157,16 +158,11 @@ class LoadMeter:
 
 
 def kill_all(proc: subprocess.Popen[bytes], out_dir: Path) -> None:
-    """SIGKILL the launcher and every process it wrote to logs/pids.json (own sessions)."""
+    """SIGKILL the launcher and every process it wrote to logs/pids.json (own sessions)
+    that is still the process it recorded (deploy.pids: a reaped one's PID may be
+    another process's by now)."""
     with contextlib.suppress(ProcessLookupError):
         proc.kill()
     with contextlib.suppress(subprocess.TimeoutExpired):
         proc.wait(10)
-    try:
-        pids = json.loads((out_dir / "logs" / "pids.json").read_text()).values()
-    except (OSError, ValueError, AttributeError):
-        return
-    for pid in pids:
-        if isinstance(pid, int):
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.kill(pid, signal.SIGKILL)
+    kill_run(out_dir / "logs")

@@ -12,8 +12,9 @@ import statistics
 from collections.abc import Sequence
 from pathlib import Path
 
-from deploy.sweep.spec import SweepSpec, Value, format_value
+from deploy.sweep.spec import SweepSpec
 from deploy.sweep.table import DELIVERED, METRICS, Row, write_csv_atomic
+from deploy.sweep.values import Value, format_value
 
 SUMMARY_CSV = "results_summary.csv"
 

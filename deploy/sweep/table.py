@@ -10,7 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from deploy.json_files import read_json
-from deploy.sweep.spec import Cell, SweepSpec, format_value
+from deploy.sweep.spec import Cell, SweepSpec
+from deploy.sweep.values import format_value
 from deploy.verdict import silent_followers
 
 RECORD = "sweep_cell.json"  # written by the sweep: the cell's argv, exit code, wall time

@@ -16,6 +16,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from deploy.pids import read_pids
 from tests.integration.runs import spawned, wait_for
 
 
@@ -63,7 +64,7 @@ def run_with_pauses(out: Path, duration_s: float, plan: list[Pause], *extra: str
                      start_timeout_s + pause.at_s * 3.0, f"the run to reach {pause.at_s} s")
             if proc.poll() is not None:
                 break
-            pid = json.loads((out / "logs" / "pids.json").read_text())[pause.process]
+            pid = read_pids(out / "logs")[pause.process].pid
             with contextlib.suppress(ProcessLookupError):
                 walls.append(freeze(pid, pause.length_s))
         output, _ = proc.communicate(timeout=start_timeout_s + duration_s * 3.0)

@@ -13,6 +13,11 @@
   follower j's state key, all of them invalid (garbage, wrong types, wrong sender or index,
   non-finite, impossible or future-stamped values), paced over the run; and forged states on
   follower j+1's key, which its rights do not cover.
+- Identity (part `identity`, with follower j's certificate): statuses forged as the
+  simulator, on the simulator's key and on follower j's own; 2000 made-up roles, on keys
+  of their own and on follower j's; a "stop" word on follower j's state key; liveliness
+  tokens out of range or malformed, and follower j's own token declared and withdrawn
+  again and again.  Every forged status carries a `forged` counter.
 """
 
 from __future__ import annotations
@@ -34,16 +39,18 @@ from agents.mavlink.wire import decode_datagram, new_codec
 from transport.codec import encode
 from transport.credentials import Identity
 from transport.keys import SwarmKeys
-from transport.messages import FollowerState, Header
+from transport.messages import FollowerState, Header, ProcessStatus, RunControl
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
 ARM_DISARM, NAV_LAND, FORCE = 400, 21, 21196.0
 PARTS = os.environ.get("ROGUE_PARTS", "mav,plain,insider")
+ROLES = 2000
+BAD_TOKENS = ("9", "4", "123456789", "99999999999", "-1", "01", "\u00b2", "\u0663")
 
 
 def forged_state(i: int, seq: int, **kw: object) -> FollowerState:
-    f: dict[str, object] = dict(r_m=(500.0, -500.0), dr_m_s=(0.0, 0.0), phi_m=(0.0, 0.0),
+    f: dict[str, object] = dict(r_m=(500.0, -500.0), dr_m_s=(0.0, 0.0),
                                 pos_m=(500.0, -500.0), vel_m_s=(0.0, 0.0), u_m_s=(0.0, 0.0),
                                 vehicle_stamp_s=time.time())
     f.update(kw)
@@ -115,11 +122,60 @@ def wait_running(progress: Path, timeout_s: float = 90.0) -> None:
     raise SystemExit(f"{progress}: the run never started")
 
 
+def forged_status(sender: str, role: str, index: int, seq: int) -> bytes:
+    return encode(ProcessStatus(Header(sender, seq, time.time()), role, index, "failed",
+                                {"forged": 1, "ticks": 10**9}, "forged"))
+
+
+class IdentityAttack:
+    """Follower j's certificate used to pass for others (see the module docstring); one
+    `step` every 0.2 s spreads the made-up roles over the attack."""
+
+    def __init__(self, bus: ZenohBus, keys: SwarmKeys, j: int, report: dict[str, int]) -> None:
+        self.bus, self.keys, self.j, self.report = bus, keys, j, report
+        self.own = bus.declare_publisher(keys.status("follower", j))
+        self.tokens = [bus.declare_token(f"{keys.prefix}/alive/follower/{t}")
+                       for t in BAD_TOKENS]
+        report["tokens_declared"] = len(self.tokens)
+        self.flap: object | None = None
+        self.seq = 0
+
+    def step(self) -> None:
+        keys, r = self.keys, self.report
+        self.seq += 1
+        self.bus.publish(keys.status("sim", 0), forged_status("sim-0", "sim", 0, self.seq))
+        r["statuses_forged_other_keys"] += 1
+        for sender in ("sim-0", f"follower-{self.j}"):
+            self.own.put(forged_status(sender, "sim", 0, self.seq))
+            r["statuses_forged_own_key"] += 1
+        for _ in range(ROLES // 80):  # all 2000 in the first 16 s
+            if r["roles_sent"] >= ROLES:
+                break
+            role = f"role{r['roles_sent']}"
+            self.bus.publish(keys.status(role, 0), forged_status(f"{role}-0", role, 0, 0))
+            self.own.put(forged_status(f"follower-{self.j}", role, 0, self.seq))
+            r["roles_sent"] += 1
+            r["statuses_forged_own_key"] += 1
+            r["statuses_forged_other_keys"] += 1
+        stop = RunControl(Header(f"follower-{self.j}", self.seq, time.time()), "stop",
+                          time.time(), 0.0)
+        self.bus.publish(keys.follower_state(self.j), encode(stop))
+        r["control_forged_sent"] += 1
+        if self.flap is None:  # our own token, beside the real follower j's
+            self.flap = self.bus.declare_token(keys.alive("follower", self.j))
+        else:
+            self.flap.close()  # type: ignore[attr-defined]
+            self.flap = None
+        r["token_flaps"] += 1
+
+
 def run(args: argparse.Namespace) -> dict[str, int]:
     keys, rng = SwarmKeys(args.swarm), random.Random(12)
     report = dict.fromkeys(("mavlink_unsigned_sent", "mavlink_acks", "plain_published",
                             "plain_linked", "fuzz_sent", "fuzz_out_of_rights_sent",
-                            "telemetry_forged_sent"), 0)
+                            "telemetry_forged_sent", "statuses_forged_own_key",
+                            "statuses_forged_other_keys", "roles_sent", "control_forged_sent",
+                            "token_flaps"), 0)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
     sock.setblocking(False)
@@ -131,6 +187,7 @@ def run(args: argparse.Namespace) -> dict[str, int]:
             ZenohBus(ZenohConfig(connect=(args.endpoint,), identity=ident)) as insider:
         fuzz_pub = insider.declare_publisher(keys.follower_state(j))
         wait_running(Path(args.progress))
+        identity = IdentityAttack(insider, keys, j, report) if "identity" in PARTS else None
         t0 = time.monotonic()
         next_attack = t0
         while (elapsed := time.monotonic() - t0) < args.seconds:
@@ -139,13 +196,20 @@ def run(args: argparse.Namespace) -> dict[str, int]:
                 if "mav" in PARTS:
                     attack_mavlink(sock, ports, report)
                     forge_telemetry(sock, agent_ports, report)
-                for i in range(args.followers):
-                    plain.publish(keys.follower_state(i), encode(forged_state(i, 0)))
-                    report["plain_published"] += 1
-                other = (j + 1) % args.followers
-                insider.publish(keys.follower_state(other), encode(forged_state(other, 0)))
-                report["fuzz_out_of_rights_sent"] += 1
-                report["plain_linked"] |= int(bool(plain.peers()))
+                if identity is not None:
+                    identity.step()
+                if "plain" in PARTS:
+                    for i in range(args.followers):
+                        plain.publish(keys.follower_state(i), encode(forged_state(i, 0)))
+                        report["plain_published"] += 1
+                    report["plain_linked"] |= int(bool(plain.peers()))
+                if "insider" in PARTS:
+                    other = (j + 1) % args.followers
+                    insider.publish(keys.follower_state(other), encode(forged_state(other, 0)))
+                    report["fuzz_out_of_rights_sent"] += 1
+            if "insider" not in PARTS:
+                time.sleep(0.02)
+                continue
             due = min(args.fuzz_count, int(args.fuzz_count * elapsed / (0.9 * args.seconds)))
             while report["fuzz_sent"] < due:
                 fuzz_pub.put(fuzz_payload(rng, j, report["fuzz_sent"]))

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import signal
 import subprocess
 import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+
+from deploy.pids import ProcessId, read_pids, signal_same
 
 
 def pid_alive(pid: int) -> bool:
@@ -20,13 +21,17 @@ def pid_alive(pid: int) -> bool:
     return True
 
 
-def run_pids(root: Path) -> list[int]:
-    """PIDs of every `logs/pids.json` at or below `root` (a run, or a sweep's cells)."""
-    pids: list[int] = []
-    for path in [root / "logs" / "pids.json", *root.glob("*/logs/pids.json")]:
-        with contextlib.suppress(OSError, ValueError):
-            pids += list(json.loads(path.read_text()).values())
-    return pids
+def run_pids(root: Path) -> list[ProcessId]:
+    """The processes of every `logs/pids.json` at or below `root` (a run, or a sweep's
+    cells), with their start times (deploy.pids)."""
+    return [ident for logs in [root / "logs", *(p.parent for p in root.glob("*/logs/pids.json"))]
+            for ident in read_pids(logs).values()]
+
+
+def kill_leftovers(root: Path) -> None:
+    """SIGKILL whatever of the runs under `root` still runs, by PID and start time."""
+    for ident in run_pids(root):
+        signal_same(ident, signal.SIGKILL)
 
 
 @contextlib.contextmanager
@@ -41,9 +46,7 @@ def spawned(argv: Sequence[str], root: Path) -> Iterator[subprocess.Popen[str]]:
         if proc.poll() is None:
             proc.kill()
             proc.wait(10)
-        for pid in run_pids(root):
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
+        kill_leftovers(root)
 
 
 def wait_for(condition: Callable[[], bool], timeout_s: float, what: str,

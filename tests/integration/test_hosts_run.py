@@ -46,3 +46,15 @@ def test_paper_case_over_three_hosts_with_clock_offsets_and_a_router_restart(
     # wrongly: follower-2 (host 2, +1.3 s) would hear nothing from host 1.
     status = launch["status"]["follower-2"]
     assert status.get("drop_rejected_future_stamp", 0) < 10, status
+    # The routers' probes moved no clock by more than the bound: none dropped for it.
+    assert status.get("clock_probes_dropped_step", 0) == 0, status
+    assert status.get("clock_probes_dropped_sender", 0) == 0, status
+    # Every host ran on its own folder of credentials (deploy.host_keys): no CA key
+    # anywhere, no host holding a key of another host's process.
+    creds = out / "credentials"
+    assert not list(creds.rglob("ca.key"))
+    held = {h: {p.name for p in (creds / h).iterdir()} for h in ("h0", "h1", "h2")}
+    assert "follower-0.key" not in held["h0"] and "sim.key" not in held["h1"] | held["h2"]
+    for h, files in held.items():
+        others = set().union(*(v for k, v in held.items() if k != h))
+        assert not {f for f in files & others if f.endswith(".key")}, (h, files & others)

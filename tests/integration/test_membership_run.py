@@ -6,7 +6,6 @@ a steady ring at the desired radius over the last 20 s."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import sys
 from pathlib import Path
@@ -16,6 +15,7 @@ import pytest
 
 from agents.membership_metrics import PhaseErrors, phase_errors
 from agents.scenario.file import load_scenario
+from deploy.pids import read_pids, signal_same
 from deploy.rundir import read_series
 from tests.integration.runs import pid_alive, spawned, wait_for
 
@@ -35,8 +35,7 @@ def run_with_kill(out: Path, *extra: str) -> tuple[int, str, dict[str, Any]]:
             "--duration", str(DURATION_S), "--estimator", "robust", *extra]
     with spawned(argv, out) as proc:
         wait_for(lambda: progress_t_s(out) >= KILL_AT_S, 150.0, f"the run to be {KILL_AT_S} s in")
-        victim = json.loads((out / "logs" / "pids.json").read_text())["follower-0"]
-        os.kill(victim, signal.SIGKILL)
+        assert signal_same(read_pids(out / "logs")["follower-0"], signal.SIGKILL)
         output, _ = proc.communicate(timeout=DURATION_S + 120.0)
     launch = json.loads((out / "launch.json").read_text())
     for name, p in launch["processes"].items():

@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 
 from deploy.netns.namespace import TABLE, destroy, lossy_namespace, namespaces, probe
-from tests.integration.runs import pid_alive, spawned
+from deploy.pids import is_alive, read_pids
+from tests.integration.runs import spawned
 
 pytestmark = pytest.mark.integration
 
@@ -129,8 +130,8 @@ def launched(out: Path, *extra: str) -> Iterator[subprocess.Popen[str]]:
 
 def assert_nothing_left(out: Path, launcher_pid: int) -> None:
     assert f"enclose-{launcher_pid}" not in namespaces()
-    for name, pid in json.loads((out / "logs" / "pids.json").read_text()).items():
-        assert not pid_alive(pid), f"{name} (pid {pid}) still running"
+    for name, ident in read_pids(out / "logs").items():
+        assert not is_alive(ident), f"{name} (pid {ident.pid}) still running"
 
 
 @pytest.mark.timeout(240)

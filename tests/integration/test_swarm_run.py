@@ -5,7 +5,6 @@ from __future__ import annotations
 import bisect
 import contextlib
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -17,6 +16,7 @@ from typing import Any
 import pytest
 from mcap.reader import make_reader
 
+from deploy.pids import read_pids, signal_same
 from tests.foxglove_client import Received, foxglove_client
 from tests.integration.runs import pid_alive, spawned, wait_for
 
@@ -197,15 +197,9 @@ def test_ctrl_c_stops_every_process_and_keeps_the_recording(tmp_path: Path) -> N
 def kill_at_birth(out: Path, name: str) -> None:
     """SIGKILL `name` as soon as the launcher has started it: long before it links
     (its vehicle's take-off alone takes seconds)."""
-    pids_file = out / "logs" / "pids.json"
-
-    def started() -> bool:
-        with contextlib.suppress(OSError, ValueError):
-            return name in json.loads(pids_file.read_text())
-        return False
-
-    wait_for(started, 120.0, f"{name} to start", period_s=0.01)
-    os.kill(json.loads(pids_file.read_text())[name], signal.SIGKILL)
+    wait_for(lambda: name in read_pids(out / "logs"), 120.0, f"{name} to start",
+             period_s=0.01)
+    assert signal_same(read_pids(out / "logs")[name], signal.SIGKILL)
 
 
 @pytest.mark.timeout(240)

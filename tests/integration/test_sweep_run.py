@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from deploy.pids import is_alive
 from deploy.sweep.command import run_sweep
 from deploy.sweep.parallel import StopSignals
 from deploy.sweep.runner import TIMEOUT_EXIT, SubprocessRunner
@@ -95,7 +96,7 @@ def test_a_two_cell_sweep_runs_real_swarms_and_resumes_without_rerunning(tmp_pat
     assert all(float(r["estimator_error_m"]) > 0 for r in table)
     assert float(table[0]["delivered_ratio"]) > 0.9  # no loss on the first cell
     assert (out / "error_vs_loss.png").stat().st_size > 10_000
-    assert all(not pid_alive(pid) for pid in run_pids(out))
+    assert not any(is_alive(p) for p in run_pids(out))
     t0 = time.monotonic()
     with sweeping(sweep_file) as again:
         output, _ = again.communicate(timeout=60)
@@ -122,7 +123,7 @@ def test_ctrl_c_stops_the_current_cell_in_order_and_marks_it_interrupted(tmp_pat
     assert [r["status"] for r in results(out)] == ["interrupted", "pending"]
     launch = json.loads((out / "loss=0__seed=1" / "launch.json").read_text())
     assert launch["processes"]["recorder"]["exit_code"] == 0  # stopped in order, not killed
-    assert all(not pid_alive(pid) for pid in run_pids(out))
+    assert not any(is_alive(p) for p in run_pids(out))
 
 
 @pytest.mark.timeout(60)
@@ -201,5 +202,6 @@ def test_a_sweep_on_a_local_two_worker_dask_cluster(tmp_path: Path) -> None:
             assert (cell / "recording.mcap").stat().st_size > 0
             assert not (cell / "credentials").exists()
     assert len({swarm for swarm, _ in placements(out)}) == 2
-    assert all(not pid_alive(pid) for pid in [*run_pids(out), *workers])
+    assert not any(is_alive(p) for p in run_pids(out))
+    assert all(not pid_alive(pid) for pid in workers)
     assert set(Path(tempfile.gettempdir()).glob("enclose-cell-*")) <= before

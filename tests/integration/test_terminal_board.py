@@ -7,7 +7,6 @@ import contextlib
 import os
 import shlex
 import shutil
-import signal
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -15,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.integration.runs import run_pids, wait_for
+from tests.integration.runs import kill_leftovers, wait_for
 
 pytestmark = pytest.mark.integration
 TMUX = shutil.which("tmux")
@@ -57,9 +56,7 @@ def test_run_on_a_terminal_draws_the_board_and_ends_with_the_verdict(tmp_path: P
             wait_for(rc_file.exists, 150.0, "the run to end", period_s=0.5)
             screen = pane(tmux, history=True)
         finally:
-            for pid in run_pids(out):
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, signal.SIGKILL)
+            kill_leftovers(out)
     assert rc_file.read_text().strip() == "0", screen[-3000:]
     assert "enclose run paper" in board and "follower-3" in board and "links:" in board
     # Redrawn in place: the board was drawn many times but stands once in the scrollback.

@@ -62,7 +62,7 @@ def truth(stamp_s: float = START_S + 0.25) -> TruthSnapshot:
 
 def state(i: int, r_m: tuple[float, float], stamp_s: float = START_S) -> FollowerState:
     z = (0.0, 0.0)
-    return FollowerState(Header(f"follower-{i}", 0, stamp_s), i, r_m, (1.0, 0.0), z, z, z, z, 0.0)
+    return FollowerState(Header(f"follower-{i}", 0, stamp_s), i, r_m, (1.0, 0.0), z, z, z, 0.0)
 
 
 def entities(update: fm.SceneUpdate) -> dict[str, Any]:
@@ -155,9 +155,15 @@ def test_view_throttles_the_scene_and_logs_state_changes(paper: Scenario) -> Non
     assert b"follower-1 failed (boom)" in logs[0] and b"members [0, 2, 3]" in logs[1]
     status = json.loads(next(f.data for f in frames if f.topic == STATUS_TOPIC))
     assert status["members"] == [0, 2, 3]
-    assert status["processes"] == [{"name": "follower-1", "state": "failed", "detail": "boom",
-                                    "refused": {}}]
+    assert status["processes"] == [{"name": "follower-1", "state": "failed", "detail": "boom"}]
+    assert status["refused"] == {}
     assert json.loads(next(f.data for f in frames if f.topic == LINKS_TOPIC)) == {"links": []}
+    view.add(ProcessStatus(Header("recorder-0", 0, START_S), "recorder", 0, "running",
+                           {"statuses_rejected": 7, "tokens_rejected": 2,
+                            "rejected_from_follower-2": 7}), START_S)
+    frames = view.tick_frames(START_S + 2.0, frozenset({0, 2, 3}))
+    status = json.loads(next(f.data for f in frames if f.topic == STATUS_TOPIC))
+    assert status["refused"] == {"statuses": 7, "tokens": 2, "from": {"follower-2": 7}}
 
 
 def status(i: int, counters: dict[str, int], seq: int = 0) -> ProcessStatus:
@@ -233,10 +239,11 @@ def test_server_refuses_a_bad_port_and_knows_loopback() -> None:
 def test_launcher_options_url_and_port_pinning(tmp_path: Path) -> None:
     parser = argparse.ArgumentParser()
     live_args.add_live_arguments(parser)
-    on = parser.parse_args([])
+    on = live_args.LiveOptions.from_namespace(parser.parse_args([]))
+    off = live_args.LiveOptions.from_namespace(parser.parse_args(["--no-live"]))
     assert live_args.recorder_live_argv(on) == ["--live-port", "8765", "--live-host", "127.0.0.1"]
-    assert live_args.recorder_live_argv(parser.parse_args(["--no-live"])) == []
-    assert live_args.announce_live_url(parser.parse_args(["--no-live"]), tmp_path) is None
+    assert off is None and live_args.recorder_live_argv(off) == []
+    assert live_args.announce_live_url(off, tmp_path) is None
     (tmp_path / "progress.json").write_text(json.dumps({"live_url": "ws://127.0.0.1:8770"}))
     assert live_args.read_live_url(tmp_path, wait_s=0.0) == "ws://127.0.0.1:8770"
     argv = ["-m", "deploy.recorder", "--live-port", "8765", "--live-host", "127.0.0.1"]

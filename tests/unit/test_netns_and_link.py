@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from deploy.commands.run import RunOptions
 from deploy.netns import namespace as netns
 from deploy.netns import run as netns_run
 from deploy.ports import rendezvous_endpoint
@@ -41,10 +42,12 @@ def test_rendezvous_endpoint_is_of_the_link_protocol_and_avoids_the_mavlink_bloc
 
 
 def test_os_loss_without_netns_is_an_error_and_netns_is_opt_in() -> None:
+    read = netns_run.NetnsOptions.from_namespace
     with pytest.raises(DeployError, match="--netns"):
-        netns_run.netns_requested(run_args("--os-loss", "0.1"))
-    assert netns_run.netns_requested(run_args("--netns", "--os-loss", "0.1"))
-    assert not netns_run.netns_requested(run_args())
+        read(run_args("--os-loss", "0.1"))
+    assert read(run_args("--netns", "--os-loss", "0.1")) == netns_run.NetnsOptions(0.1)
+    assert read(run_args("--netns")) == netns_run.NetnsOptions(0.0)
+    assert read(run_args()) is None
 
 
 def test_ruleset_drops_the_fraction_on_the_input_hook_and_spares_mavlink() -> None:
@@ -60,7 +63,8 @@ def test_ruleset_drops_the_fraction_on_the_input_hook_and_spares_mavlink() -> No
 def test_inner_command_is_the_same_run_without_netns(tmp_path: Path) -> None:
     scen = tmp_path / "s.toml"
     args = run_args(str(scen), "--netns", "--os-loss", "0.1", "--link", "udp", "--loss", "0.02")
-    argv = netns_run.inner_argv(args, tmp_path / "out", "sw", 30.0)
+    opts = RunOptions.from_namespace(args)
+    argv = netns_run.inner_argv(opts.launch, tmp_path / "out", "sw", 30.0)
     assert argv[:2] == ["run", str(scen.resolve())]
     assert "--netns" not in argv and "--os-loss" not in argv
     assert argv[argv.index("--link") + 1] == "udp"

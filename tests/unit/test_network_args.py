@@ -6,15 +6,20 @@ import argparse
 
 import pytest
 
-from agents.network_args import add_network_arguments, apply_network_arguments, network_overrides
+from agents.network_args import (
+    NetworkOptions,
+    add_network_arguments,
+    apply_network_arguments,
+    network_overrides,
+)
 from agents.scenario.file import load_scenario
 from transport.errors import ScenarioError
 
 
-def parse(*argv: str) -> argparse.Namespace:
+def parse(*argv: str) -> NetworkOptions:
     parser = argparse.ArgumentParser()
     add_network_arguments(parser)
-    return parser.parse_args(list(argv))
+    return NetworkOptions.from_namespace(parser.parse_args(list(argv)))
 
 
 def test_the_estimator_order_follows_the_scenario_unless_overridden() -> None:
@@ -33,6 +38,15 @@ def test_the_order_reaches_the_children() -> None:
     assert network_overrides(parse("--estimator-order", "1")) == ["--estimator-order", "1"]
     with pytest.raises(SystemExit):
         parse("--estimator-order", "3")
+
+
+def test_every_flag_reaches_the_children_as_given() -> None:
+    argv = ["--estimator", "paper", "--link", "udp", "--delay-ms", "5.0", "--loss-model",
+            "gilbert_elliott", "--impair-seed", "7", "--latency-stamps"]
+    opts = parse(*argv)
+    assert network_overrides(opts) == argv
+    assert parse(*network_overrides(opts)) == opts  # a child reads back what it was given
+    assert network_overrides(parse()) == []
 
 
 def test_the_zenoh_runtime_follows_the_scenario_unless_overridden() -> None:

@@ -224,10 +224,10 @@ def test_a_recorder_behind_the_bus_says_by_how_much_and_calls_no_link_silent(
 @pytest.mark.parametrize(("noise_std_m", "argv"), [(0.0, ["--no-sensor"]), (0.2, [])])
 def test_the_launcher_records_observations_only_when_they_are_noisy(
         noise_std_m: float, argv: list[str]) -> None:
-    from argparse import Namespace
     from types import SimpleNamespace
 
     from deploy.launch import Launch
+    from deploy.launch_options import LaunchOptions
 
-    launch = SimpleNamespace(args=Namespace(noise_std_m=noise_std_m))
+    launch = SimpleNamespace(opts=LaunchOptions(noise_std_m=noise_std_m))
     assert Launch.recorder_sensor_argv(launch) == argv  # type: ignore[arg-type]

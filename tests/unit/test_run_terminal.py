@@ -143,6 +143,21 @@ def test_the_verdict_is_short_and_says_bounds_settling_deaths_links_and_files(
                                                       "inside": True}
 
 
+def test_the_processes_line_sums_what_the_processes_refused(tmp_path: Path) -> None:
+    status = {"follower-0": {"state": "done", "tokens_rejected": 3},
+              "recorder-0": {"state": "done", "statuses_rejected": 40,
+                             "rejected_from_follower-2": 40}}
+    run = write_run(tmp_path / "run", processes={"sim": {"exit_code": 0}}, status=status,
+                    launcher={"statuses_rejected": 2, "rejected_from_follower-2": 2})
+    console, buf = plain_console()
+    v = read_verdict(run, "enclose run paper")
+    print_verdict(console, v)
+    assert ("processes    none died, restarted or failed; refused 42 statuses, 3 tokens "
+            "(from follower-2 42)") in buf.getvalue()
+    assert verdict_json(v)["verdict"]["refused"] == {"statuses": 42, "tokens": 3,
+                                                     "from": {"follower-2": 42}}
+
+
 def test_a_metric_over_its_bound_or_no_metrics_says_so(tmp_path: Path) -> None:
     console, buf = plain_console()
     print_verdict(console, read_verdict(write_run(tmp_path / "a", radius_m=0.2), "run"))
@@ -197,7 +212,7 @@ def test_process_health_and_state_as_the_board_shows_them(tmp_path: Path) -> Non
     kids = [Child(n, [], tmp_path / f"{n}.log") for n in ("sim", "follower-0", "follower-1",
                                                          "follower-2", "target-0")]
     kids[2].exit_code, kids[3].exit_code, kids[4].exit_code = -9, 0, -9
-    board = StatusBoard()
+    board = StatusBoard(frozenset())
     for role, i, state in (("sim", 0, "running"), ("follower", 0, "running")):
         board.latest[f"{role}-{i}"] = ProcessStatus(Header(role, 0, 1.0), role, i, state, {})
     views = process_views(kids, board, paused={"follower-0"}, pending={"target-0"})

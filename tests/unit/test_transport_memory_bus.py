@@ -123,7 +123,7 @@ def test_decoder_drains_subscription_and_drops_garbage() -> None:
         out = decoder.drain(sub)
         assert [i.message for i in out] == [msg]
         assert decoder.counters() == {"accepted": 1, "seq_gap": 0, "seq_stale": 0,
-                                      "drop_msgpack": 1}
+                                      "drop_msgpack": 1, "statuses_rejected": 1}
 
 
 def test_wait_until_alive_returns_or_names_the_missing() -> None:

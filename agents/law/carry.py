@@ -17,48 +17,26 @@ start (the old r_i agreed on the LAP, and so does the new mean of p~ + Phi).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
-
-# numpy only for the reference's arrays: the follower process runs next_carry_c and
-# must not import numpy (issue 15: <= 50 MB per follower).
-if TYPE_CHECKING:
-    import numpy as np
-    from numpy.typing import NDArray
-
-    FloatArray = NDArray[np.float64]
 
 REBASE_TAU_S = 3.0
 
 
 def next_carry(
-    carry_m: FloatArray,
-    raw_r_m: FloatArray,
-    continue_from_m: FloatArray | None,
-    dt_s: float,
-    tau_s: float = REBASE_TAU_S,
-) -> FloatArray:
-    """The carry c_i of this tick (r_i = raw + c_i, dr_i/dt = raw rate - c_i / tau_s).
-
-    `continue_from_m` (the previous r_i carried to now) is given at the first tick after a
-    change: c_i is set so that r_i equals it.  Otherwise c_i decays over dt_s.  The
-    consensus must act on r_i with its carry: acting on the raw part would pull each raw
-    part towards the neighbours' carried r_j and undo the continuity.
-    """
-    if continue_from_m is not None:
-        import numpy as np
-
-        return np.asarray(continue_from_m, float) - raw_r_m
-    return carry_m * math.exp(-dt_s / tau_s)
-
-
-def next_carry_c(
     carry_m: complex,
     raw_r_m: complex,
     continue_from_m: complex | None,
     dt_s: float,
     tau_s: float = REBASE_TAU_S,
 ) -> complex:
-    """`next_carry` with plane vectors as complex x + iy (agents.follower_fast)."""
+    """The carry c_i of this step (r_i = raw + c_i, dr_i/dt = raw rate - c_i / tau_s), plane
+    vectors as complex x + iy.
+
+    `continue_from_m` (the previous r_i carried to now: the platform's `Inputs.rebase_to`)
+    is given at the first step after a change: c_i is set so that r_i equals it.
+    Otherwise c_i decays over dt_s.  The consensus must act on r_i with its carry: acting
+    on the raw part would pull each raw part towards the neighbours' carried r_j and undo
+    the continuity.
+    """
     if continue_from_m is not None:
         return continue_from_m - raw_r_m
     return carry_m * math.exp(-dt_s / tau_s)

@@ -1,8 +1,11 @@
-"""A follower's node: all of one follower's state and its loop body, on a given bus and vehicle.
+"""A follower's node: its loop on a given bus and vehicle, top to bottom.
 
-Apart from `agents.follower`, the process around it (command line, impaired bus, the
-vehicle loop of agents.vehicle_loop), so that the node runs on whatever bus and vehicle
-it is handed: tests/unit/test_liveness.py builds it on an in-memory bus.
+`FollowerNode.tick` is the loop: re-form the ring if the members changed
+(agents.follower.membership via agents.liveness), receive (agents.follower.inputs), run the law
+(agents.follower.runner around an agents.law.interface law), command the vehicle, publish.
+Apart from agents.follower.main, the process around it (command line, impaired bus, the
+vehicle loop of agents.vehicle_loop), so that the node runs on whatever bus and vehicle it
+is handed: tests/unit/test_liveness.py builds it on an in-memory bus.
 """
 
 from __future__ import annotations
@@ -10,30 +13,26 @@ from __future__ import annotations
 import logging
 import math
 import time
+from typing import Any
 
-from agents.follower_fast import (
-    FastSetup,
-    FollowerMemory,
-    PeerView,
-    Sample,
-    estimator_tick,
-    follower_tick,
-    link_flows,
-    observe_target,
-    peer_view,
-    ready,
-)
-from agents.follower_fast_membership import join_running, regroup, standing_estimate, with_missing
+from agents.follower.inputs import Latest
+from agents.follower.membership import setup_for, stand_ins
+from agents.follower.runner import LawRunner
+from agents.law.interface import Law, Output, Sample
+from agents.law.loader import make_law
 from agents.liveness import MembershipWatch
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.process import StatusReporter
 from agents.scenario.model import Scenario
+from transport.access import sender_ids
 from transport.bus import Bus, Subscription
-from transport.checks import DEFAULT_LIMITS, newer
+from transport.checks import DEFAULT_LIMITS
 from transport.codec import encode
 from transport.decoder import Decoder
+from transport.errors import CodecError
 from transport.impairment import ImpairedBus
 from transport.keys import SwarmKeys
+from transport.law_fields import NO_FIELDS, LawFields
 from transport.link_stats import AgeHistogram, LinkDecoder
 from transport.messages import FollowerState, RunControl, Stamper, TargetObservation, vec2
 
@@ -44,13 +43,10 @@ ALTITUDE_GAIN_PER_S = 1.0
 # credentials) costs each tick at most this many decodes and never delays the others.
 PEER_QUEUE = 8
 # A follower first running this long after the start joins a running swarm
-# (agents.follower_membership.join_running); at the start all begin together from p~.
+# (LawRunner.join); at the start all begin together from p~.
 JOIN_AFTER_S = 1.0
 
 
-# The follower runs agents.follower_fast, the twin of agents.follower_logic with plane
-# vectors as complex x + iy (held to it by tests/unit/test_follower_fast.py): numpy's
-# per-call cost was most of a step's.
 def _xy(vec: complex) -> tuple[float, float]:
     return (vec.real, vec.imag)
 
@@ -60,11 +56,12 @@ class FollowerNode:
 
     def __init__(
         self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter, swarm: str,
-        joining: bool = False,
+        joining: bool = False, law: Law[Any] | None = None,
     ) -> None:
         self.scenario = scenario
-        self.setup = FastSetup.from_scenario(scenario, index)
         self.members = frozenset(range(scenario.n))
+        self.runner = LawRunner(law or make_law(scenario), setup_for(scenario, index))
+        self.latest = Latest(index, self.runner.declared)
         self.index, self.bus, self.vehicle = index, bus, vehicle
         self.altitude_m = scenario.vehicle.altitude_m
         self.keys = SwarmKeys(swarm)
@@ -78,19 +75,21 @@ class FollowerNode:
         # The estimator's own rate (issue 15): steps between control ticks, each published
         # on a second key so that an update crosses a link in an estimator period.
         self.est_steps = scenario.run.estimator_substeps > 1
-        self._follow(set(self.setup.neighbours) | {self.setup.successor})
+        self._follow(set(self.runner.setup.peers))
         self.out = bus.declare_publisher(self.keys.follower_state(index))
         self.stamper = Stamper(f"follower-{index}", bus.now_s)
         self.est_out = bus.declare_publisher(self.keys.follower_estimate(index))
         self.est_stamper = Stamper(f"follower-{index}", bus.now_s)
-        self.est_phase_s = self.setup.est_period_s * scenario.tick_phase(index)
+        self.est_phase_s = self.runner.setup.est_period_s * scenario.tick_phase(index)
         self.last_state: VehicleState | None = None
+        self.last_own: Sample | None = None
         self.last_u = 0j
-        # Checked, not trusted (transport.checks); + per-link rx and age (transport.link_stats)
-        self.decoder: Decoder = LinkDecoder(limits=DEFAULT_LIMITS)
+        # Checked, not trusted (transport.checks, the law's declared fields);
+        # + per-link rx and age (transport.link_stats)
+        self.decoder: Decoder = LinkDecoder(limits=DEFAULT_LIMITS,
+                                            senders=sender_ids(scenario.n, scenario.m),
+                                            law_fields=self.runner.declared)
         self.status = StatusReporter(bus, self.keys, "follower", index)
-        self.memory = FollowerMemory()
-        self.peers: dict[int, PeerView] = {}
         self.start_s: float | None = None
         self.stop_s = math.inf
         # Neighbour-state age at use, whole run; a histogram, not samples: its percentiles
@@ -98,7 +97,7 @@ class FollowerNode:
         # ~2 ms each time (transport.link_stats.AgeHistogram: 0.1-ms bins, 10-s range).
         self.nbr_ages = AgeHistogram()
         # Started into a running swarm (restarted, or back after a leave): publish nothing
-        # until our first estimate continues the neighbours' (agents.follower_membership).
+        # until our first estimate continues the neighbours' (LawRunner.join).
         self.joining = joining
 
     def _follow(self, peers: set[int]) -> None:
@@ -116,6 +115,55 @@ class FollowerNode:
             if self.est_steps:
                 self.est_subs[j] = self.bus.subscribe(self.keys.follower_estimate(j), PEER_QUEUE)
 
+    def tick(self, now_s: float) -> None:
+        """The loop body: members, receive, the law, the command, publish."""
+        self.regroup(now_s)
+        self.ingest()
+        state = self.vehicle.poll()
+        # The law is computed for the instant its command leaves, not the tick's nominal
+        # one: if we were descheduled since, our inputs are fresher than now_s.
+        now_s = max(now_s, self.bus.now_s())
+        pos, vel = state.pos_enu_m, state.vel_enu_m_s
+        own = Sample(complex(pos[0], pos[1]), complex(vel[0], vel[1]), state.stamp_s)
+        runner, counters = self.runner, self.status.counters
+        running = self.start_s is not None and now_s >= self.start_s
+        late = self.start_s is not None and now_s > self.start_s + JOIN_AFTER_S
+        if running and (self.joining or late):
+            runner.join(self.latest.peers, now_s)
+        flying = running and (runner.last_r is not None or self.latest.ready(runner.setup))
+        stepped = self._step(now_s, own, command=True) if flying else None
+        if running and not flying:
+            counters["ticks_not_ready"] += 1
+        u = 0j if stepped is None else stepped[0].u_m_s  # a failed law: hold
+        if not state.link_ok:
+            counters["ticks_without_vehicle"] += 1
+            u = 0j  # hover until our vehicle is heard again
+        self._command(state, u)
+        self.last_state, self.last_own, self.last_u = state, own, u
+        if self.joining and runner.last_r is None:
+            counters["ticks_joining"] += 1  # p~ would throw the running ring
+            return
+        if stepped is not None:
+            out, fields = stepped
+            self._publish(now_s, state, out.r_m, out.dr_m_s, u, fields)
+        elif not flying:  # not flying the law (yet, or for a moment after a change)
+            r = runner.standing_estimate(self.latest.targets, now_s)
+            self._publish(now_s, state, r, 0j, u, NO_FIELDS)
+        # else the law failed: its neighbours keep its last state until it is stale
+
+    def _step(self, now_s: float, own: Sample, command: bool) -> tuple[Output, LawFields] | None:
+        """One step of the law on the newest inputs; None if it failed (LawRunner)."""
+        runner, latest = self.runner, self.latest
+        setup = runner.setup
+        peers = stand_ins(latest.peers, setup, runner.last_r, now_s)
+        stepped = runner.step(now_s, command, own, latest.targets, peers)
+        if command and stepped is not None:
+            self.status.counters["stale_inputs"] += latest.stale(setup, peers, now_s)
+            for j in setup.neighbours:
+                if j in latest.peers:
+                    self.nbr_ages.add(now_s - latest.peers[j].r.stamp_s)
+        return stepped
+
     def regroup(self, now_s: float) -> None:
         """Re-form around the followers alive now (agents.liveness, agents.membership).
 
@@ -126,11 +174,9 @@ class FollowerNode:
         members = self.liveness.members(now_s) | {self.index}
         if self.start_s is None or members == self.members:
             return
-        new = FastSetup.from_scenario(self.scenario, self.index, members)
-        self.memory = regroup(self.memory, self.setup, new)
-        # A departed peer's last state (and robust link sums) must not outlive it: if it
-        # comes back, it is a new process whose links start from zero.
-        self.peers = {j: v for j, v in self.peers.items() if j in members}
+        new = setup_for(self.scenario, self.index, members)
+        self.runner.regroup(new)
+        self.latest.regroup(new)
         for j in self.members - members:
             self.decoder.forget(self.keys.follower_state(j))
             self.decoder.forget(self.keys.follower_estimate(j))
@@ -139,8 +185,8 @@ class FollowerNode:
             sorted(self.members), sorted(members), list(new.neighbours), new.successor,
             math.degrees(new.angle_rad),
         )
-        self.setup, self.members = new, members
-        self._follow(set(new.neighbours) | {new.successor})
+        self.members = members
+        self._follow(set(new.peers))
         self.status.counters["membership_changes"] += 1
         self.status.counters["members"] = len(members)  # as this follower sees the swarm
 
@@ -151,17 +197,10 @@ class FollowerNode:
 
     def _apply(self, msg: object) -> None:
         if isinstance(msg, TargetObservation) and msg.observer_index == self.index:
-            self.memory = observe_target(
-                self.memory,
-                self.setup,
-                msg.target_index,
-                complex(msg.pos_m[0], msg.pos_m[1]),
-                msg.observed_stamp_s,
-            )
+            self.latest.observe(self.runner.setup, msg.target_index,
+                                complex(msg.pos_m[0], msg.pos_m[1]), msg.observed_stamp_s)
         elif isinstance(msg, FollowerState) and msg.index in self.peer_subs:
-            known = self.peers.get(msg.index)
-            if known is None or newer(msg.header.stamp_s, known.r.stamp_s, self.bus.now_s()):
-                self.peers[msg.index] = peer_view(msg, self.index)
+            self.latest.receive(msg, self.bus.now_s())
         elif isinstance(msg, RunControl):
             if msg.command == "start":
                 self.start_s = msg.start_stamp_s
@@ -169,52 +208,12 @@ class FollowerNode:
             else:
                 self.stop_s = min(self.stop_s, self.bus.now_s())
 
-    def tick(self, now_s: float) -> None:
-        self.regroup(now_s)
-        self.ingest()
-        state = self.vehicle.poll()
-        # The law is computed for the instant its command leaves, not the tick's nominal
-        # one: if we were descheduled since, our inputs are fresher than now_s.
-        now_s = max(now_s, self.bus.now_s())
-        pos, vel = state.pos_enu_m, state.vel_enu_m_s
-        own = Sample(complex(pos[0], pos[1]), complex(vel[0], vel[1]), state.stamp_s)
-        r: complex | None = None
-        dr, u = 0j, 0j
-        running = self.start_s is not None and now_s >= self.start_s
-        late = self.start_s is not None and now_s > self.start_s + JOIN_AFTER_S
-        if running and (self.joining or late):
-            self.memory = join_running(self.memory, self.setup, self.peers, now_s)
-        if running and (self.memory.last_r is not None or
-                        ready(self.memory, self.setup, self.peers)):
-            # The estimator needs no vehicle: it keeps running (and its estimate is what
-            # we publish) while our vehicle's telemetry is missing; only the command waits.
-            views = with_missing(self.peers, self.setup, self.memory, now_s)
-            self.memory, out = follower_tick(self.memory, self.setup, own, views, now_s)
-            r, dr, u = out.r_m, out.dr_m_s, out.u_m_s
-            self.status.counters["stale_inputs"] += len(out.stale)
-            for j in self.setup.neighbours:
-                if j in self.peers:
-                    self.nbr_ages.add(now_s - self.peers[j].r.stamp_s)
-        elif running:
-            self.status.counters["ticks_not_ready"] += 1
-        if not state.link_ok:
-            self.status.counters["ticks_without_vehicle"] += 1
-            u = 0j  # hover until our vehicle is heard again
-        if r is None:  # not flying the law (yet, or for a moment after a change)
-            r = standing_estimate(self.memory, self.setup, now_s)
-        self._command(state, u)
-        self.last_state, self.last_u = state, u
-        if self.joining and self.memory.last_r is None:
-            self.status.counters["ticks_joining"] += 1  # p~ would throw the running ring
-            return
-        self._publish(now_s, state, r, dr, u)
-
     def idle(self, duration_s: float) -> None:
         """The wait between control ticks (the Ticker's sleep): estimator steps on the
         grid k * est_period + phase (neighbours half a period apart), the last one at
         least half a period before the control tick, which is an estimator step too."""
         until = self.bus.now_s() + duration_s
-        period = self.setup.est_period_s
+        period = self.runner.setup.est_period_s
         while self.est_steps:
             now = self.bus.now_s()
             nxt = math.ceil((now - self.est_phase_s) / period) * period + self.est_phase_s
@@ -225,15 +224,15 @@ class FollowerNode:
         time.sleep(max(until - self.bus.now_s(), 0.0))
 
     def estimator_step(self, now_s: float) -> None:
-        """Advance the estimator alone and publish the state on the estimator key."""
-        if self.last_state is None or self.memory.last_r is None or self.start_s is None:
+        """Advance the law alone (no command) and publish on the estimator key."""
+        state, own = self.last_state, self.last_own
+        if state is None or own is None or self.runner.last_r is None or self.start_s is None:
             return  # the law is not running yet: nothing to advance
         self.ingest()
-        views = with_missing(self.peers, self.setup, self.memory, now_s)
-        self.memory = estimator_tick(self.memory, self.setup, views, now_s)
-        r = self.memory.last_r
-        if r is not None:
-            self._publish(now_s, self.last_state, r.value, r.rate, self.last_u, estimate=True)
+        stepped = self._step(now_s, own, command=False)
+        if stepped is not None:
+            out, fields = stepped
+            self._publish(now_s, state, out.r_m, out.dr_m_s, self.last_u, fields, estimate=True)
 
     def _command(self, state: VehicleState, u: complex) -> None:
         climb = ALTITUDE_GAIN_PER_S * (self.altitude_m - state.pos_enu_m[2])
@@ -244,31 +243,26 @@ class FollowerNode:
 
     def _publish(
         self, now_s: float, state: VehicleState, r: complex, dr: complex, u: complex,
-        estimate: bool = False,
+        fields: LawFields, estimate: bool = False,
     ) -> None:
         if not (math.isfinite(r.real) and math.isfinite(r.imag)
                 and all(math.isfinite(v) for v in state.pos_enu_m)):
             self.status.counters["states_not_published"] += 1
             return
         stamper = self.est_stamper if estimate else self.stamper
-        msg = FollowerState(
-            stamper.header(now_s),
-            self.index,
-            _xy(r),
-            _xy(dr),
-            _xy(self.memory.phi_m),
-            vec2(state.pos_enu_m[:2]),
-            vec2(state.vel_enu_m_s[:2]),
-            _xy(u),
-            state.stamp_s,
-            link_flows(self.memory, self.setup),
-            _xy(self.memory.rv_m_s),
-            link_flows(self.memory, self.setup, velocity=True),
-        )
-        (self.est_out if estimate else self.out).put(encode(msg))
+        msg = FollowerState(stamper.header(now_s), self.index, _xy(r), _xy(dr),
+                            vec2(state.pos_enu_m[:2]), vec2(state.vel_enu_m_s[:2]), _xy(u),
+                            state.stamp_s, fields)
+        try:
+            payload = encode(msg)
+        except CodecError as exc:  # a law field not finite (the platform's fields are)
+            self.runner.failed(f"its fields do not encode: {exc}")
+            return
+        (self.est_out if estimate else self.out).put(payload)
 
     def counters(self) -> dict[str, int]:
-        """Decoder drops and gaps, and the age of neighbour states at use (p50, p99).
+        """Decoder drops and gaps, the age of neighbour states at use (p50, p99), and how
+        often the law failed (LawRunner: the vehicle held).
 
         Per link L (`f<j>`: follower j, 0-based; `sensor`): rx_L, rx_dup_L, seq_first_L,
         seq_last_L, age_p50_us_L, age_p99_us_L (transport.link_stats) and imp_<count>_L
@@ -281,7 +275,8 @@ class FollowerNode:
             ages = {"nbr_age_p50_us": round(p50 * 1e6), "nbr_age_p99_us": round(p99 * 1e6)}
         links = self.bus.counters() if isinstance(self.bus, ImpairedBus) else {}
         sent = self.stamper.next_seq + self.est_stamper.next_seq
-        return {**self.decoder.counters(), **ages, **links, "states_sent": sent}
+        return {**self.decoder.counters(), **self.liveness.counters(), **ages, **links,
+                "states_sent": sent, "law_failures": self.runner.failures}
 
     def close(self) -> None:
         for sub in [*self.subs, *self.peer_subs.values(), *self.est_subs.values()]:

@@ -1,0 +1,1 @@
+"""Control laws: the interface a law implements (agents.law.interface) and the shipped ones."""
