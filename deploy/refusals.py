@@ -34,7 +34,7 @@ ROWS = (
     ("replayed MAVLink frames", "signing_rejected_replay"),
     ("malformed MAVLink datagrams", "signing_rejected_malformed"),
     ("unreadable MAVLink frames", "signing_rejected_error"),
-    ("MAVLink datagrams over a tick's budget", "mav_flood_drops"),
+    ("MAVLink datagrams cut (each over a whole tick's budget)", "mav_flood_drops"),
     ("MAVLink datagrams the kernel dropped", "mav_kernel_drops"),
     ("MAVLink peers (table full)", "peers_refused"),
 )

@@ -120,10 +120,13 @@ class VehicleEndpoint:
     def on_datagram(self, data: bytes, addr: Addr, now_s: float, row: tm.Row) -> None:
         """The one entry point for a received UDP datagram; never raises."""
         self.counters["rx_datagrams"] += 1
-        admitted = self.gate.admit(data, addr)
-        if not admitted:
-            return
-        decoded = decode_datagram(self.rx_codec, admitted)
+        admitted = self.gate.admit(data, addr, now_s)
+        if admitted:
+            self.parse_datagram(admitted, addr, now_s, row)
+
+    def parse_datagram(self, data: bytes, addr: Addr, now_s: float, row: tm.Row) -> None:
+        """Decode, verify and dispatch a datagram the gate let through; never raises."""
+        decoded = decode_datagram(self.rx_codec, data)
         if decoded.bad:
             self.counters["bad_packets"] += decoded.bad
         if decoded.unknown:  # a bigger dialect's types (ardupilotmega...): not garbage

@@ -163,9 +163,12 @@ class Simulator:
         self._new_budgets()
 
     def _new_budgets(self) -> None:
-        """A new tick: every vehicle's receive budget afresh, every socket read again."""
-        for ep in self.endpoints:
-            ep.gate.new_tick()
+        """A new tick: every vehicle's receive budget afresh (first the datagram the last
+        one had no room for), every socket read again."""
+        for i, ep in enumerate(self.endpoints):
+            carried = ep.gate.new_tick()
+            if carried is not None and carried[1] is not None:
+                ep.parse_datagram(carried[0], carried[1], self.boot_time_s(), self._rows[i])
         for i in self._resting:
             self._selector.register(self.endpoints[i].sock, selectors.EVENT_READ, i)
         self._resting.clear()

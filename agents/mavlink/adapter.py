@@ -136,7 +136,9 @@ class MavlinkAdapter:
         now = self.clock()
         self._poll_s = now
         gate = self.gate
-        gate.new_tick()
+        carried = gate.new_tick()
+        if carried is not None and carried[1] is not None:  # last tick had no room for it
+            self._datagram(carried[0], carried[1], carried[2])
         while self.sock is not None and gate.open:
             try:
                 data, anc, _flags, addr = self.sock.recvmsg(65535, ANCILLARY_BYTES)
@@ -147,9 +149,10 @@ class MavlinkAdapter:
                 break
             if anc and (dropped := kernel_drops(anc)) is not None:
                 self.counters["mav_kernel_drops"] = dropped
-            admitted = gate.admit(data, addr)
+            received = kernel_arrival_s(anc, time.time(), self.clock())
+            admitted = gate.admit(data, addr, received)
             if admitted:
-                self._datagram(admitted, addr, kernel_arrival_s(anc, time.time(), self.clock()))
+                self._datagram(admitted, addr, received)
         if now - self._last_hb_tx_s >= HEARTBEAT_PERIOD_S and self.remote is not None:
             self._last_hb_tx_s = now
             self._send(self.mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER,

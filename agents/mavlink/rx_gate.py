@@ -9,9 +9,11 @@ kernel drops what overflows its buffer).  With signing on, each datagram is firs
 by its first frame alone (`SignatureVerifier.screen`, one hash): a refused one is dropped
 unparsed and counted under its reason (signing_rejected_<reason>), so a flood of badly
 signed datagrams costs a read and a hash each.  A datagram that would take the tick past
-its parse budget is cut there: its tail is dropped and counted (`mav_flood_drops`,
-`mav_flood_bytes`).  Refusals are logged at most once per LOG_EVERY_S per receiver, with
-their count, reasons and the last sender.
+its parse budget is kept whole for the next tick (`RxGate.new_tick` hands it back), so a
+burst of good datagrams is delayed, never lost; only one larger than a whole tick's budget
+is cut there, its tail dropped and counted (`mav_flood_drops`, `mav_flood_bytes`).
+Refusals are logged at most once per LOG_EVERY_S per receiver, with their count, reasons
+and the last sender.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from agents.mavlink.signing import SignatureVerifier
 log = logging.getLogger(__name__)
 LOG_EVERY_S = 10.0
 Addr = tuple[str, int]
+Carried = tuple[bytes, Addr | None, float]  # a datagram, its sender and arrival stamp
 
 
 @dataclass(frozen=True)
@@ -84,19 +87,25 @@ class RxGate:
         self.refusals = RefusalLog(name)
         self.datagrams = 0
         self.parsed_bytes = 0
+        self.carried: Carried | None = None
 
-    def new_tick(self) -> None:
-        self.datagrams = 0
-        self.parsed_bytes = 0
+    def new_tick(self) -> Carried | None:
+        """A fresh budget; the datagram the last tick had no room for, if any, already
+        charged to this one: the receiver parses it first."""
+        carried, self.carried = self.carried, None
+        self.datagrams = 0 if carried is None else 1
+        self.parsed_bytes = 0 if carried is None else len(carried[0])
+        return carried
 
     @property
     def open(self) -> bool:
         return (self.datagrams < self.budget.datagrams
                 and self.parsed_bytes < self.budget.parse_bytes)
 
-    def admit(self, data: bytes, sender: Addr | None) -> bytes | None:
-        """What of `data` to parse: None when its first frame is refused (counted under
-        its reason), else `data`, cut at the tick's parse budget (the cut counted)."""
+    def admit(self, data: bytes, sender: Addr | None, stamp: float = 0.0) -> bytes | None:
+        """What of `data` to parse now: None when its first frame is refused (counted under
+        its reason) or when the tick has no room left for it (kept for the next tick, with
+        `stamp`); else `data`, cut at the parse budget if it alone exceeds it (counted)."""
         self.datagrams += 1
         if self.verifier is not None:
             reason = self.verifier.screen(data)
@@ -105,6 +114,10 @@ class RxGate:
                 self.refusals.note(reason, sender)
                 return None
         room = self.budget.parse_bytes - self.parsed_bytes
+        if len(data) > room and self.parsed_bytes > 0:
+            self.carried = (data, sender, stamp)
+            self.parsed_bytes = self.budget.parse_bytes  # the gate closes for this tick
+            return None
         if len(data) > room:
             self.counters["mav_flood_drops"] += 1
             self.counters["mav_flood_bytes"] += len(data) - max(0, room)

@@ -70,23 +70,34 @@ def test_a_poll_reads_at_most_its_budget_of_a_stuffed_socket() -> None:
     assert ad.state.pos_enu_m == pytest.approx((2.0, 1.0, 3.0))
 
 
-def test_a_poll_parses_at_most_its_byte_budget() -> None:
+def test_a_poll_parses_at_most_its_byte_budget_and_keeps_the_rest() -> None:
     key = vehicle_key(SECRET, 1)
     vehicle = new_codec(1, 1)  # one stream: each datagram stamped after the one before
     sign_outgoing(vehicle, key, 0, signing_timestamp(time.time()))
-    bigs = [signed_position(key, pad_to=6000, mav=vehicle) for _ in range(10)]
+    bigs = [signed_position(key, x=float(k), pad_to=6000, mav=vehicle) for k in range(10)]
     ad, sock = stuffed_adapter(bigs)
     ad.poll()
-    parsed, size = ADAPTER_BUDGET.parse_bytes, len(bigs[0])
-    assert sock.reads == -(-parsed // size)  # it stops once the budget is spent
-    assert ad.counters["mav_flood_drops"] == (1 if parsed % size else 0)
-    assert ad.counters["mav_flood_bytes"] == sock.reads * size - parsed
-    assert ad.telemetry_seen and ad.counters["signing_rejected_replay"] == 0
+    per_poll = ADAPTER_BUDGET.parse_bytes // len(bigs[0])  # whole datagrams that fit
+    assert sock.reads == per_poll + 1  # the one that did not fit waits for the next poll
+    assert ad.state.pos_enu_m[1] == pytest.approx(per_poll - 1)
+    for _ in range(10):
+        ad.poll()
+    assert sock.reads == 10 and ad.state.pos_enu_m[1] == pytest.approx(9.0)
+    assert ad.counters["mav_flood_drops"] == 0 and ad.counters["signing_rejected_replay"] == 0
     # "rx_<x>" in a follower's status is link x's count (deploy.recording.links): not ours.
     assert not [k for k in ad.counters if k.startswith("rx_")]
 
 
-def test_gate_cuts_at_the_budget_and_screens_first() -> None:
+def test_a_datagram_larger_than_a_whole_budget_is_cut() -> None:
+    key = vehicle_key(SECRET, 1)
+    huge = signed_position(key, pad_to=ADAPTER_BUDGET.parse_bytes + 5000)
+    ad, _sock = stuffed_adapter([huge])
+    ad.poll()
+    assert ad.telemetry_seen and ad.counters["mav_flood_drops"] == 1
+    assert ad.counters["mav_flood_bytes"] == len(huge) - ADAPTER_BUDGET.parse_bytes
+
+
+def test_gate_screens_first_and_keeps_what_does_not_fit() -> None:
     counters: Counter[str] = Counter()
     key = vehicle_key(SECRET, 1)
     gate = RxGate("t", RxBudget(datagrams=3, parse_bytes=100), counters,
@@ -94,11 +105,11 @@ def test_gate_cuts_at_the_budget_and_screens_first() -> None:
     good = signed_position(key)
     assert gate.admit(b"\x00" * 64, None) is None
     assert gate.admit(good, None) == good and gate.open
-    cut = gate.admit(good * 2, None)
-    assert cut is not None and len(cut) == 100 - len(good) and not gate.open
-    assert counters["signing_rejected_malformed"] == 1 and counters["mav_flood_drops"] == 1
-    gate.new_tick()
-    assert gate.open and gate.parsed_bytes == 0
+    assert gate.admit(good * 2, ("127.0.0.1", 5), 7.0) is None and not gate.open
+    assert counters["signing_rejected_malformed"] == 1 and counters["mav_flood_drops"] == 0
+    assert gate.new_tick() == (good * 2, ("127.0.0.1", 5), 7.0)
+    assert gate.parsed_bytes == 2 * len(good) and gate.open
+    assert gate.new_tick() is None and gate.parsed_bytes == 0
 
 
 @settings(max_examples=400, deadline=None)

@@ -42,7 +42,7 @@ def test_the_verdict_sums_mavlink_refusals_and_names_the_sender(tmp_path: Path) 
     summed = launch_refusals({"status": status})
     assert summed == {"unsigned MAVLink frames": 2500, "badly signed MAVLink frames": 91000,
                       "MAVLink frames signed with another vehicle's key": 20,
-                      "MAVLink datagrams over a tick's budget": 2,
+                      "MAVLink datagrams cut (each over a whole tick's budget)": 2,
                       "MAVLink datagrams the kernel dropped": 17, "from": {"follower-2": 20}}
     buf = io.StringIO()
     print_verdict(Console(file=buf, width=600), read_verdict(run, "enclose run paper"))
