@@ -171,3 +171,25 @@ def test_screen_never_changes_state_and_agrees_with_check(data: st.DataObject) -
     if verdict is None:  # nothing passes unsigned here: a whole signed first frame
         end = 12 + frame[1] + 13
         assert frame[2] & 1 and check(v, frame[:end], frame[7] | frame[8] << 8) is None
+
+
+def test_a_companions_host_folder_holds_its_own_vehicles_keys_only(tmp_path: Path) -> None:
+    """Over hosts, a follower's host gets its followers' vehicle keys, not the run secret
+    nor another vehicle's key (deploy.host_keys copies what RunSecrets.args_for names)."""
+    from deploy.deployment import Deployment, HostSpec
+    from deploy.host_keys import write_swarm_keys
+
+    dep = Deployment("field", "paper", (
+        HostSpec("ground", "10.0.0.1", ("launcher", "sim", "recorder", "target-0", "target-1")),
+        HostSpec("drone-a", "10.0.0.2", ("follower-0", "follower-1")),
+        HostSpec("drone-b", "10.0.0.3", ("follower-2", "follower-3"))))
+    folders = write_swarm_keys(tmp_path / "creds", dep, 4, 2)
+    secret = (tmp_path / "creds" / "operator" / MAVLINK_SECRET_FILE).read_bytes()
+    mavlink = {host: sorted(p.name for p in folder.iterdir() if "mavlink" in p.name)
+               for host, folder in folders.items()}
+    assert mavlink == {
+        "ground": [MAVLINK_SECRET_FILE, "target-0.mavlink-key.bin", "target-1.mavlink-key.bin"],
+        "drone-a": ["follower-0.mavlink-key.bin", "follower-1.mavlink-key.bin"],
+        "drone-b": ["follower-2.mavlink-key.bin", "follower-3.mavlink-key.bin"]}
+    assert (folders["drone-b"] / "follower-2.mavlink-key.bin").read_bytes() == \
+        vehicle_key(secret, 3)
