@@ -32,6 +32,7 @@ STYLE: dict[str, tuple[str, bool, str | None]] = {
     "angle_error": ("|e_delta|", True, "delta"),
     "settle_time_s": ("settle time [s]", False, None),
     "command_jump_m_s": ("command jump [m/s]", False, None),
+    "min_separation_m": ("closest approach [m]", False, None),
     DELIVERED: ("delivered ratio", False, None),
 }
 PLAIN = FuncFormatter(lambda v, _: f"{v:g}")  # 0.06, not 6 x 10^-2, on log axes

@@ -16,7 +16,7 @@ from deploy.verdict import silent_followers
 
 RECORD = "sweep_cell.json"  # written by the sweep: the cell's argv, exit code, wall time
 METRICS = ("estimator_error_m", "radius_error_m", "angle_error", "settle_time_s",
-           "command_jump_m_s")
+           "command_jump_m_s", "min_separation_m")
 DELIVERED = "delivered_ratio"
 INTERRUPTED_EXIT = 130
 RUN_COLUMNS = ("wall_s", "jobs", "load_1min", "host")
