@@ -13,6 +13,7 @@ import numpy as np
 from agents.core.metrics import ErrorSeries, Metrics
 from agents.core.timeseries import RunSeries
 from agents.scenario.model import Scenario
+from deploy.version import enclose_version
 from transport.errors import EncloseError
 
 SERIES_FILE = "series.csv"
@@ -99,7 +100,7 @@ def read_series(path: Path, n: int, m: int) -> RunSeries:
 
 
 def write_metrics(run_dir: Path, metrics: Metrics, info: RunInfo, extra: dict[str, Any]) -> None:
-    payload = {**metrics.as_dict(), **extra}
+    payload = {**metrics.as_dict(), **extra, "enclose_version": enclose_version()}
     clean = {
         k: (None if isinstance(v, float) and not math.isfinite(v) else v)
         for k, v in payload.items()
