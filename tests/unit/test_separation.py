@@ -15,7 +15,13 @@ from agents.core.metrics import (
     window_metrics,
 )
 from agents.core.timeseries import RunSeries
+from agents.scenario.file import load_scenario
+from deploy.recording.scene import FOLLOWER_RGBA, TOO_CLOSE_RGBA, scene_update, too_close
+from deploy.recording.view import ERRORS_TOPIC, LOG_TOPIC, SCENE_TOPIC, LiveView
+from deploy.rundir import RunInfo
 from deploy.verdict import read_verdict
+from tests.unit.test_live_view import START_S, entities, state
+from transport.messages import Header, TruthSnapshot
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -89,3 +95,26 @@ def test_the_verdict_fails_a_near_collision_and_names_the_faults(tmp_path: Path)
     metrics["min_separation_m"] = 0.6
     (tmp_path / "metrics.json").write_text(json.dumps(metrics))
     assert read_verdict(tmp_path, "run").inside
+
+
+def test_the_live_view_marks_vehicles_under_the_safety_distance_red() -> None:
+    view = LiveView(RunInfo.from_scenario(load_scenario("paper"), "networked", 10.0))
+    pos = ((0.0, 0.0, 10.0), (0.6, 0.0, 10.0), (10.0, 0.0, 10.0), (-10.0, 0.0, 10.0))
+    snap = TruthSnapshot(Header("sim-0", 0, START_S), 0.0, pos, ((0.0,) * 3,) * 4,
+                         ((0.0, 0.0), (2.0, 2.0)), ((0.0, 0.0),) * 2)
+    for i in range(4):
+        view.add(state(i, (1.0, 1.0)), START_S)
+    view.add(snap, START_S)
+    frames = view.frames()
+    assert any(f.topic == SCENE_TOPIC for f in frames)
+    pairs = too_close(snap, 1.0)
+    assert [(i, j) for _, i, j in pairs] == [(0, 1)]
+    drawn = entities(scene_update(snap, {}, [], 5.0, frozenset({0, 1})))
+    red = {k for k, e in drawn.items() if k.startswith("follower-")
+           and round(e.spheres[0].color.r, 2) == TOO_CLOSE_RGBA[0]}
+    assert red == {"follower-0", "follower-1"} and FOLLOWER_RGBA[0] != TOO_CLOSE_RGBA[0]
+    errors = json.loads(next(f.data for f in frames if f.topic == ERRORS_TOPIC))
+    assert errors["min_separation_m"] == pytest.approx(0.6)
+    assert errors["safety_distance_m"] == 1.0
+    logs = [f.data for f in view.frames() if f.topic == LOG_TOPIC]
+    assert len(logs) == 1 and b"followers 0 and 1 0.60 m apart" in logs[0]
