@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tomllib
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -10,6 +11,8 @@ import pytest
 from agents.network_args import NetworkOptions, apply_network_arguments
 from agents.scenario.file import build_scenario, load_scenario, shipped_text
 from agents.scenario.net_faults import check_fault_flag, parse_net_fault_flag
+from deploy.commands.run import RunOptions, run
+from deploy.launch_options import LaunchOptions
 from transport.errors import ScenarioError
 from transport.impairment import ImpairedBus
 from transport.keys import SwarmKeys
@@ -150,3 +153,11 @@ def test_a_degradation_draws_losses_only_in_its_window() -> None:
     assert counts.delivered == 300 - counts.dropped
     tx.close()
     bus.close()
+
+
+def test_a_window_past_a_shorter_run_is_refused_before_anything_starts(tmp_path: Path) -> None:
+    launch = LaunchOptions(network=NetworkOptions(net_faults=("20:isolate:follower-1:10",)))
+    with pytest.raises(ScenarioError) as err:
+        run(RunOptions(launch, duration_s=25.0, out=tmp_path / "run"))
+    assert err.value.field == "--duration"
+    assert not (tmp_path / "run").exists()
