@@ -13,9 +13,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from agents.core.estimator_one import finite_difference_velocity, lag_free_velocity
 from agents.follower.membership import TARGET_ACCEL_TAU_S, TARGET_VEL_TAU_S
 from agents.law.interface import Peer, Sample, Setup
+from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
 from transport.checks import newer
 from transport.law_fields import FieldSpec
 from transport.messages import FollowerState

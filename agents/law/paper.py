@@ -10,8 +10,9 @@ still cancel for the paper's estimator; the robust one keeps the neighbour's lin
 last known), and a missing successor drops the spacing term (radius and rotation go on,
 as if it were where it should be) instead of chasing a stale bearing.
 
-The equations are the core's (agents.core: `consensus_flows_c`, `link_balance_c`,
-`enclosing_control_one`; the carry of agents.law.carry); plane vectors are complex x + iy
+The equations are agents.law's, each written once (consensus, velocity_stage, enclosing,
+sig; the lock-step engine compiles the same functions; the carry of agents.law.carry);
+plane vectors are complex x + iy
 (numpy's per-call cost was most of a step's at 2-vectors, issue 15).  Its options come
 from the scenario: [network] estimator ("paper" or "robust") and [gains] (estimator_order
 2 adds the velocity stage, robust only; lead_s).
@@ -24,11 +25,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
-from agents.core.controller_one import ControlGains, enclosing_control_one
-from agents.core.estimator_one import EstimatorParams, consensus_flows_c, link_balance_c
 from agents.core.params import control_gains, estimator_params
 from agents.law.carry import REBASE_TAU_S, next_carry
+from agents.law.consensus import EstimatorParams, consensus_flows, link_balance
+from agents.law.enclosing import ControlGains, enclosing_control
 from agents.law.interface import FieldSpec, Inputs, Law, Output, Peer, Setup, reference
+from agents.law.sig import rate_cap
+from agents.law.velocity_stage import fed_flow, lap_velocity
 from transport.errors import ScenarioError
 
 if TYPE_CHECKING:
@@ -151,21 +154,23 @@ class PaperLaw(Law[PaperState]):
         if self.robust:
             zeros = (0j,) * len(r_nbrs)
             sums = tuple([s + dt * f for s, f in zip(sums or zeros, rates or zeros, strict=False)])
-            phi = link_balance_c(sums, their_sums)
+            phi = link_balance(sums, their_sums)
         else:
             phi = state.phi_m + dt * state.phi_rate_m_s
         carry = next_carry(state.carry_m, phi + p_tilde, inputs.rebase_to, dt)
-        flows = consensus_flows_c(phi + p_tilde + carry, r_nbrs, fractions, self.estimator,
-                                  setup.est_period_s)
+        est = self.estimator
+        flows = consensus_flows(phi + p_tilde + carry, r_nbrs, fractions, est.k_e,
+                                1.0 / est.alpha1, rate_cap(est.step_fraction, setup.est_period_s))
         if not all(live):
             flows = [f if ok else 0j for f, ok in zip(flows, live, strict=False)]
         vel_sums, vel_rates, rv = state.vel_sums_m_s, state.vel_rates_m_s2, state.rv_m_s
         if self.second_order:
             vel_sums, vel_rates, rv = self._velocity_stage(state, inputs, dt, p_tilde_rate,
                                                            live, fractions)
-            flows = [f + s if ok else 0j for f, s, ok in zip(flows, vel_sums, live, strict=False)]
+            flows = [fed_flow(f, s) if ok else 0j
+                     for f, s, ok in zip(flows, vel_sums, live, strict=False)]
         if self.robust:
-            phi_rate = link_balance_c(flows, their_rates)
+            phi_rate = link_balance(flows, their_rates)
             rates = tuple(flows)
         else:
             phi_rate = sum(flows, 0j)
@@ -193,9 +198,11 @@ class PaperLaw(Law[PaperState]):
                 value, rate, stamp = flow
                 theirs.append(value + rate * (min(now_s, stamp + hold) - stamp))
             rv_nbrs.append(fields.get("rv_m_s"))
-        rv = link_balance_c(sums, theirs) + p_tilde_rate
-        flows = consensus_flows_c(rv, [rv if v is None else v for v in rv_nbrs], fractions,
-                                  self.estimator, inputs.setup.est_period_s)
+        rv = lap_velocity(link_balance(sums, theirs), p_tilde_rate)
+        est = self.estimator
+        flows = consensus_flows(rv, [rv if v is None else v for v in rv_nbrs], fractions,
+                                est.k_e, 1.0 / est.alpha1,
+                                rate_cap(est.step_fraction, inputs.setup.est_period_s))
         return sums, tuple([f if ok else 0j for f, ok in zip(flows, live, strict=False)]), rv
 
     def _command(self, state: PaperState, inputs: Inputs, r: complex, dr: complex) -> complex:
@@ -209,9 +216,11 @@ class PaperLaw(Law[PaperState]):
             succ_pos = succ.value + succ.rate * (at_s - succ.stamp_s)
         else:  # missing: where it should be, so that only radius and rotation act
             succ_pos = r_at + (own_pos - r_at) * state.derived.rotation
-        u, _, _ = enclosing_control_one(own_pos, succ_pos, r_at, dr, setup.angle_rad,
-                                        self.control, setup.period_s,
-                                        state.peer_age_s[setup.successor])
+        c = self.control
+        u, _, _ = enclosing_control(own_pos, succ_pos, r_at, dr, setup.angle_rad, c.k_z,
+                                    1.0 / c.alpha2, c.k_d, 1.0 / c.alpha3, c.rho_d_m,
+                                    c.w_d_rad_s, c.step_fraction, c.spacing_gain_age,
+                                    setup.period_s, state.peer_age_s[setup.successor])
         return u
 
     def _fields(self, state: PaperState) -> dict[str, object]:

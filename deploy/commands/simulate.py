@@ -50,7 +50,8 @@ def register(sub: Any) -> None:
         "--engine",
         choices=ENGINES,
         default="auto",
-        help="numba: compiled loop (default when installed); numpy: reference functions",
+        help="numba: the law compiled into the loop (default when installed); python: the "
+             "same functions interpreted (slow)",
     )
     parser.add_argument(
         "--estimator-dt", type=float, default=None,

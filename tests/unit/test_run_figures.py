@@ -111,7 +111,7 @@ def short_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 4-s lock-step run with a networked run's extra files: links.csv and launch.json."""
     paper = load_scenario("paper")
     run_dir = tmp_path_factory.mktemp("run")
-    series = simulate_lockstep(paper, 0.02, 4.0, engine="numpy")
+    series = simulate_lockstep(paper, 0.02, 4.0)
     (run_dir / "launch.json").write_text(json.dumps({"events": EVENTS}))
     h = LinkHistory()
     for k in range(5):
@@ -125,7 +125,7 @@ def short_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_every_figure_draws_the_marks_of_the_run(short_run: Path, tmp_path: Path) -> None:
     paper = load_scenario("paper")
-    series = simulate_lockstep(paper, 0.02, 4.0, engine="numpy")
+    series = simulate_lockstep(paper, 0.02, 4.0)
     marks = run_marks(short_run, [2.5])
     assert [m.kind for m in marks] == ["pause", "fault", "died", "membership", "restart"]
     errors = error_series(series, paper.successor, np.asarray(paper.pattern.angles_rad),
@@ -153,7 +153,7 @@ def test_a_large_swarm_gets_a_colour_bar_not_a_legend_that_squeezes_the_panels(
     import deploy.figures as figures
 
     ring32 = load_scenario("ring32")
-    series = simulate_lockstep(ring32, 0.02, 2.0, engine="numpy")
+    series = simulate_lockstep(ring32, 0.02, 2.0)
     errors = error_series(series, ring32.successor, np.asarray(ring32.pattern.angles_rad),
                           ring32.pattern.rho_d_m)
     kept: list[object] = []

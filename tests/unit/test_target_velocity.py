@@ -14,9 +14,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.core.estimator_one import finite_difference_velocity, lag_free_velocity
 from agents.follower.inputs import Latest
 from agents.follower.membership import setup_for
+from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
 from agents.scenario.file import load_scenario
 
 PERIOD_S = 0.05

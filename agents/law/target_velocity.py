@@ -1,63 +1,22 @@
-"""The LAP estimator's laws for one follower on complex plane vectors, without numpy.
+"""A target's velocity from its timestamped observations (the followers do not know it).
 
-Twins of agents.core.estimator's (pinned by tests/unit/test_scalar_twins.py) and its
-parameters: what the follower process runs, which must not import numpy (issue 15:
-<= 50 MB per follower).
+The controller feeds dr_i/dt = dPhi_i/dt + dp~_i/dt forward, and dp~_i/dt needs the
+observed targets' velocities: each follower estimates them from the positions it
+observes.  Plain arithmetic on plane vectors: complex x + iy (the follower) or (2,)
+arrays (the numpy reference tick), the same for both.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, TypeVar
-
-from agents.core.geometry_one import limited_sig_one, rate_cap
 
 if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-    # A plane vector: a (2,) array, or x + iy (the networked follower's scalar twins).
     Vec = TypeVar("Vec", NDArray[np.float64], complex)
 else:
     Vec = TypeVar("Vec")
-
-
-@dataclass(frozen=True)
-class EstimatorParams:
-    """k_e and alpha1 of the paper; `step_fraction` caps one step's flow (0: plain Euler);
-    `order` 2 adds the velocity stage (agents.scenario.model.Gains.estimator_order)."""
-
-    k_e: float
-    alpha1: float
-    step_fraction: float = 0.5
-    order: int = 1
-
-
-def consensus_flows_c(
-    r_self_m: complex,
-    r_nbrs_m: Sequence[complex],
-    nbr_fractions: Sequence[float],
-    params: EstimatorParams,
-    dt_s: float,
-) -> list[complex]:
-    """`consensus_flows` with plane vectors as complex x + iy (one list entry per link):
-    the same law, component by component, without numpy's per-call cost."""
-    base, exponent, gain = rate_cap(params.step_fraction, dt_s), 1.0 / params.alpha1, params.k_e
-    flows = []
-    for r_j, fraction in zip(r_nbrs_m, nbr_fractions, strict=True):
-        gap, cap = r_j - r_self_m, base * fraction
-        flows.append(complex(limited_sig_one(gap.real, exponent, gain, cap),
-                             limited_sig_one(gap.imag, exponent, gain, cap)))
-    return flows
-
-
-def link_balance_c(own_sums_m: Sequence[complex], their_sums_m: Sequence[complex]) -> complex:
-    """`link_balance` with plane vectors as complex x + iy, one per link."""
-    total = 0j
-    for own, theirs in zip(own_sums_m, their_sums_m, strict=True):
-        total += own - theirs
-    return 0.5 * total
 
 
 def finite_difference_velocity(
@@ -71,7 +30,6 @@ def finite_difference_velocity(
     """Velocity from two timestamped observations, optionally low-passed with time constant tau.
 
     A zero or negative stamp difference (duplicate or reordered data) keeps the old estimate.
-    Vectors are (2,) arrays or complex x + iy: plain arithmetic, the same for both.
     """
     dt = stamp_s - prev_stamp_s
     if dt <= 0.0:
