@@ -172,7 +172,7 @@ def test_a_large_swarm_gets_a_colour_bar_not_a_legend_that_squeezes_the_panels(
 
 def test_a_network_fault_is_banded_on_every_figure_and_measured(tmp_path: Path) -> None:
     paper = load_scenario("paper")
-    series = simulate_lockstep(paper, 0.02, 4.0, engine="numpy")
+    series = simulate_lockstep(paper, 0.02, 4.0)
     info = dataclasses.replace(RunInfo.from_scenario(paper, "networked", 4.0),
                                net_faults=(("partition 1,2|3,4 1-2 s", 1.0, 2.0),))
     h = LinkHistory()
