@@ -122,6 +122,7 @@ class LiveView:
         self._pending_log: list[ViewFrame] = []
         self._recorded_states = [0] * info.n
         self._too_close = False  # two vehicles under the safety distance at the last scene
+        self._network_said: set[tuple[int, str]] = set()  # network fault windows logged
 
     def add(self, msg: Message, recv_stamp_s: float) -> None:
         if isinstance(msg, TruthSnapshot):
@@ -146,6 +147,18 @@ class LiveView:
         if msg.role == "follower" and 0 <= msg.index < self.info.n:
             self.follower_status[msg.index] = msg
             self.links.update(msg, self.follower_status, self._recorded_states)
+
+    def _network_marks(self, now_s: float) -> None:
+        """A log line as each network fault's window opens and closes."""
+        if self.start_stamp_s is None:
+            return
+        t = now_s - self.start_stamp_s
+        for k, (label, at_s, end_s) in enumerate(self.info.net_faults):
+            for edge, what in ((at_s, "begins"), (end_s, "ends")):
+                if t >= edge and (k, what) not in self._network_said:
+                    self._network_said.add((k, what))
+                    self._log(f"network fault {label} {what}", fm.LogLevel.Warning, now_s,
+                              "network")
 
     def _log(self, text: str, level: fm.LogLevel, stamp_s: float, name: str) -> None:
         msg = fm.Log(timestamp=timestamp(stamp_s), level=level, message=text, name=name)
@@ -184,6 +197,7 @@ class LiveView:
         if members is not None and members != self._members:
             self._members = members
             self._log(f"members {sorted(members)}", fm.LogLevel.Info, now_s, "membership")
+        self._network_marks(now_s)
         ns = int(now_s * _NS)
         procs = [{"name": k, "state": s.state, "detail": s.detail}
                  for k, s in sorted(self.processes.items())]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from deploy.recording.view import ERRORS_TOPIC, LOG_TOPIC, SCENE_TOPIC, LiveView
 from deploy.rundir import RunInfo
 from deploy.verdict import read_verdict
 from tests.unit.test_live_view import START_S, entities, state
-from transport.messages import Header, TruthSnapshot
+from transport.messages import Header, RunControl, TruthSnapshot
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -118,3 +119,17 @@ def test_the_live_view_marks_vehicles_under_the_safety_distance_red() -> None:
     assert errors["safety_distance_m"] == 1.0
     logs = [f.data for f in view.frames() if f.topic == LOG_TOPIC]
     assert len(logs) == 1 and b"followers 0 and 1 0.60 m apart" in logs[0]
+
+
+def test_the_live_view_logs_each_network_fault_window() -> None:
+    info = dataclasses.replace(RunInfo.from_scenario(load_scenario("paper"), "networked", 10.0),
+                               net_faults=(("isolate 2 2-4 s", 2.0, 4.0),))
+    view = LiveView(info)
+    view.add(RunControl(Header("launcher-0", 0, START_S), "start", START_S, 10.0), START_S)
+    said = []
+    for k in range(12):
+        frames = view.tick_frames(START_S + 0.5 * k, None)
+        said += [(0.5 * k, f.data) for f in frames if f.topic == LOG_TOPIC]
+    assert [t for t, _ in said] == [2.0, 4.0]
+    assert b"network fault isolate 2 2-4 s begins" in said[0][1]
+    assert b"ends" in said[1][1]
