@@ -15,7 +15,7 @@ from deploy.sweep.command import run_sweep
 from deploy.sweep.figures import error_against
 from deploy.sweep.progress import SweepProgress, clock_text
 from deploy.sweep.spec import SweepSpec, load_sweep, parse_sweep
-from deploy.sweep.table import collect
+from deploy.sweep.table import RECOVERY, collect, pick_metrics
 from transport.errors import ConfigError
 
 pytestmark = pytest.mark.timeout(60)
@@ -322,3 +322,13 @@ def test_progress_eta_comes_from_the_mean_cell_time() -> None:
     progress.end(50.0)
     assert progress.eta_s() == pytest.approx(4 * 40.0)
     assert clock_text(59.6) == "1:00" and clock_text(3725) == "1:02:05"
+
+
+def test_a_cells_network_faults_give_its_slowest_recovery() -> None:
+    doc = {"min_separation_m": 0.5,
+           "net_faults": [{"recovery_s": 3.0}, {"recovery_s": 7.5}]}
+    picked = pick_metrics(doc)
+    assert picked[RECOVERY] == 7.5 and picked["min_separation_m"] == 0.5
+    doc["net_faults"].append({"recovery_s": None})  # one never came back
+    assert pick_metrics(doc)[RECOVERY] is None
+    assert RECOVERY not in pick_metrics({"min_separation_m": 0.5})
