@@ -151,7 +151,7 @@ def row_values(spec: SweepSpec, row: Row, cols: list[str], digits: int = 6) -> d
     out["jobs"] = "" if s.jobs is None else str(s.jobs)
     out["load_1min"] = "" if s.load_1min is None else f"{s.load_1min:.2f}"
     out["host"] = s.host or ""
-    for key in (*METRICS, DELIVERED):
+    for key in (*METRICS, DELIVERED, RECOVERY):
         if key in cols:
             v = s.metrics.get(key)
             out[key] = "" if v is None else f"{v:.{digits}g}"
