@@ -94,7 +94,8 @@ def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mav-vehicle-base", type=int, default=14580,
                         help="vehicle v listens on BASE+v (PX4 SITL: 14580)")
     parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="32-byte MAVLink 2 signing key: sign everything sent to the vehicle")
+                        help="this vehicle's 32-byte MAVLink 2 signing key: sign everything "
+                        "sent to it, refuse what it did not sign")
     parser.add_argument("--mav-vehicle-host", default=None, metavar="ADDR",
                         help="the vehicle's address when it is on another host (default: "
                         "127.0.0.1); the adapter then listens on every address")

@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "sim": "deploy.commands.sim",
     "sweep": "deploy.sweep.command",
     "keys": "deploy.commands.keys",
+    "vehicle-key": "deploy.commands.vehicle_key",
     "host": "deploy.commands.host",
 }
 COMMAND_MODULES: tuple[str, ...] = tuple(COMMANDS.values())
