@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.core.metrics import Metrics, compute_metrics, error_series
+from agents.core.metrics import Metrics, compute_metrics, error_series, window_metrics
 from agents.core.timeseries import RunSeries
 from deploy.figures import performance_figure, trajectory_figure
 from deploy.figures_links import LINKS_PNG, link_health_figure
@@ -45,7 +45,11 @@ def write_run_outputs(
     angles = np.asarray(info.angles_rad)
     errors = error_series(series, info.successor, angles, info.rho_d_m)
     metrics = compute_metrics(series, errors, info.steady_from_s, info.eps_rho_m, info.eps_delta)
-    write_metrics(run_dir, metrics, info, extra or {})
+    faults = [{"label": label, "at_s": at_s, "end_s": end_s,
+               **window_metrics(series, errors, (at_s, end_s), info.eps_rho_m, info.eps_delta)}
+              for label, at_s, end_s in info.net_faults]
+    write_metrics(run_dir, metrics, info,
+                  {**(extra or {}), **({"net_faults": faults} if faults else {})})
     thin = series.decimate(_decimation(series.t_s))
     thin_errors = error_series(thin, info.successor, angles, info.rho_d_m)
     write_series(run_dir / SERIES_FILE, thin, thin_errors)
@@ -66,7 +70,7 @@ def _figures(run_dir: Path, series: RunSeries, info: RunInfo, marks_s: list[floa
     angles = np.asarray(info.angles_rad)
     errors = error_series(series, info.successor, angles, info.rho_d_m)
     eps = (info.eps_rho_m, info.eps_delta)
-    marks = run_marks(run_dir, marks_s)
+    marks = run_marks(run_dir, marks_s, info.net_faults)
     performance_figure(series, errors, eps, run_dir / PERFORMANCE_PNG, marks)
     trajectory_figure(series, info.rho_d_m, run_dir / TRAJECTORY_PNG, marks)
     paths = [run_dir / PERFORMANCE_PNG, run_dir / TRAJECTORY_PNG]

@@ -204,6 +204,8 @@ class FollowerNode:
         elif isinstance(msg, RunControl):
             if msg.command == "start":
                 self.start_s = msg.start_stamp_s
+                if isinstance(self.bus, ImpairedBus):  # the network faults' time zero
+                    self.bus.set_origin(msg.start_stamp_s)
                 self.stop_s = msg.start_stamp_s + msg.duration_s
             else:
                 self.stop_s = min(self.stop_s, self.bus.now_s())

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 from agents.law.loader import make_law
@@ -16,6 +17,7 @@ from agents.scenario.faults import parse_faults
 from agents.scenario.fields import Table, positive, table_of, vec2
 from agents.scenario.law import parse_law
 from agents.scenario.model import Scenario
+from agents.scenario.net_faults import parse_net_faults
 from agents.scenario.network import network
 from agents.scenario.tables import (
     parse_edges,
@@ -88,6 +90,9 @@ def build_scenario(doc: Table, default_name: str = "scenario",
     pattern = parse_pattern(pattern_t, n)
     center = tuple(math.fsum(t.initial_pos_m[k] for t in targets) / len(targets) for k in (0, 1))
     successor = parse_successor(pattern_t, f_pos, center, n)
+    run = parse_run(table_of(doc, "run"))
+    net = replace(network(table_of(doc, "network"), n),
+                  faults=parse_net_faults(doc.get("faults"), n, run.duration_s))
     name = doc.get("name", default_name)
     if not isinstance(name, str) or not name:
         raise ScenarioError("name", "must be a non-empty string")
@@ -100,10 +105,10 @@ def build_scenario(doc: Table, default_name: str = "scenario",
         successor=successor,
         pattern=pattern,
         gains=parse_gains(table_of(doc, "gains")),
-        run=parse_run(table_of(doc, "run")),
+        run=run,
         vehicle=parse_vehicle(table_of(doc, "vehicle")),
         home=parse_home(table_of(doc, "home")),
-        network=network(table_of(doc, "network"), n),
+        network=net,
         faults=parse_faults(doc.get("faults"), n, len(targets)),
         law=parse_law(table_of(doc, "law"), base),
     )

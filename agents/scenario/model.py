@@ -108,6 +108,8 @@ class RunConfig:
     eps_rho_m: float = 0.0999
     eps_delta: float = 0.0199
     target_start_s: float = 0.0
+    # Two vehicles closer than this are a near collision: the verdict and live view say so.
+    safety_distance_m: float = 1.0
 
     @property
     def estimator_hz(self) -> float:

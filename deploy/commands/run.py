@@ -13,6 +13,7 @@ from typing import Any
 from agents.law_args import add_law_arguments, apply_law_arguments
 from agents.network_args import NetworkOptions, add_network_arguments, apply_network_arguments
 from agents.scenario.file import load_scenario
+from agents.scenario.net_faults import check_window
 from deploy.launch import Launch
 from deploy.launch_options import LaunchOptions
 from deploy.live_args import LiveOptions, add_live_arguments
@@ -99,6 +100,8 @@ def run(opts: RunOptions) -> int:
     duration = scenario.run.duration_s if opts.duration_s is None else opts.duration_s
     if duration <= 0:
         raise DeployError("--duration must be > 0")
+    for fault in scenario.network.faults:
+        check_window(fault, "--duration", duration)
     if scenario.network.link != "tcp" and not launch.insecure:
         raise DeployError(
             f"network.link = {scenario.network.link!r} cannot be authenticated (Zenoh mTLS "

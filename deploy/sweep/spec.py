@@ -10,9 +10,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.scenario.faults import parse_fault_flag
 from agents.scenario.file import load_scenario
 from agents.scenario.model import ESTIMATORS
+from agents.scenario.net_faults import check_fault_flag
 from agents.scenario.network import IMPAIRMENT_KEYS, choice, impairment
 from deploy.restarts import RESTART_POLICIES
 from deploy.sweep.laws import check_laws, is_law_key, law_flags, law_keys, law_value
@@ -152,9 +152,9 @@ def _check_faults(axes: Any, fixed: dict[str, Any], n: int, m: int) -> None:
         for k, point in enumerate(points):
             for key, value in zip(keys, point, strict=True):
                 if key == "fault":
-                    parse_fault_flag(str(value), n, m, f"grid.{key}[{k}]")
+                    check_fault_flag(str(value), n, m, f"grid.{key}[{k}]")
     if "fault" in fixed:
-        parse_fault_flag(str(fixed["fault"]), n, m, "fixed.fault")
+        check_fault_flag(str(fixed["fault"]), n, m, "fixed.fault")
 
 
 def _scenario(raw: Any, base: Path) -> str:
@@ -234,7 +234,7 @@ def _value(key: str, raw: Any, where: str) -> Value:
         if key == "restart":
             return choice(raw, RESTART_POLICIES, where)
         if key == "fault":  # the format here; the follower numbers against the scenario below
-            parse_fault_flag(_string(raw, where), 10**6, 10**6, where)
+            check_fault_flag(_string(raw, where), 10**6, 10**6, where)
             return str(raw)
         if is_law_key(key):
             return law_value(key, raw, where)

@@ -142,7 +142,7 @@ def test_metrics_json_carries_the_version(tmp_path: Path) -> None:
     from deploy.rundir import RunInfo, write_metrics
     from deploy.version import enclose_version
 
-    metrics = Metrics(1.0, 0.01, 0.01, 0.001, 2.0, 0.1, 10.0, 100)
+    metrics = Metrics(1.0, 0.01, 0.01, 0.001, 2.0, 0.1, 10.0, 100, 3.0, 3.0, 4.0)
     info = RunInfo("paper", "lockstep", 4, 2, (1, 2, 3, 0), tuple(np.ones(4)), 8.0, 0.1,
                    0.02, 5.0)
     write_metrics(tmp_path, metrics, info, {})

@@ -3,6 +3,7 @@ membership changes; link health over time (links.csv -> links.png)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -167,3 +168,25 @@ def test_a_large_swarm_gets_a_colour_bar_not_a_legend_that_squeezes_the_panels(
     legends = [ax.get_legend() for ax in [*perf.axes, *traj.axes]]  # type: ignore[attr-defined]
     assert all(len(leg.get_texts()) <= 12 for leg in legends if leg is not None)
     assert any(ax.get_ylabel() == "follower" for ax in perf.axes)  # type: ignore[attr-defined]
+
+
+def test_a_network_fault_is_banded_on_every_figure_and_measured(tmp_path: Path) -> None:
+    paper = load_scenario("paper")
+    series = simulate_lockstep(paper, 0.02, 4.0)
+    info = dataclasses.replace(RunInfo.from_scenario(paper, "networked", 4.0),
+                               net_faults=(("partition 1,2|3,4 1-2 s", 1.0, 2.0),))
+    h = LinkHistory()
+    for k in range(5):
+        h.add(status(2, 1000.0 + k, rx_f1=48 * k, seq_first_f1=0, seq_last_f1=50 * k))
+    h.write_csv(tmp_path / "links.csv", start_stamp_s=1000.0)
+    metrics = write_run_outputs(tmp_path, series, info)
+    doc = json.loads((tmp_path / "metrics.json").read_text())
+    (fault,) = doc["net_faults"]
+    assert fault["label"] == "partition 1,2|3,4 1-2 s" and fault["at_s"] == 1.0
+    assert fault["min_separation_m"] >= metrics.min_separation_m > 0.0
+    assert doc["min_separation_m"] == metrics.min_separation_m
+    assert [m.kind for m in run_marks(tmp_path, [], info.net_faults)] == ["network"]
+    assert json.loads((tmp_path / "run.json").read_text())["net_faults"] == [
+        ["partition 1,2|3,4 1-2 s", 1.0, 2.0]]
+    paths = regenerate_figures(tmp_path)  # run.json read back: the fault again
+    assert {p.name for p in paths} == {"performance.png", "trajectory.png", "links.png"}
