@@ -124,8 +124,10 @@ class AgentOptions:
     vehicle: VehicleOptions
     index: int
     join: bool = False  # a follower restarted into a running swarm
+    journal: str | None = None  # a follower's input journal's folder (enclose replay)
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> AgentOptions:
         return cls(BusOptions.from_namespace(args), VehicleOptions.from_namespace(args),
-                   args.index, bool(getattr(args, "join", False)))
+                   args.index, bool(getattr(args, "join", False)),
+                   getattr(args, "journal", None))

@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "keys": "deploy.commands.keys",
     "vehicle-key": "deploy.commands.vehicle_key",
     "host": "deploy.commands.host",
+    "replay": "deploy.commands.replay",
 }
 COMMAND_MODULES: tuple[str, ...] = tuple(COMMANDS.values())
 

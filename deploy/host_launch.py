@@ -133,6 +133,7 @@ class HostLaunch(Launch):
         elif name != "launcher":
             role, _, idx = name.rpartition("-")
             extra = ["--mav-vehicle-host", self.sim_address] if remote else []
+            extra += self.journal_argv() if role == "follower" else []
             self.sup.start(name, AGENT_MODULES[role], [*argv, *mav, *extra, "--index", idx],
                            prefix=pre)
 

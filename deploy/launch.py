@@ -82,6 +82,10 @@ class Launch:
         extra += network_overrides(self.opts.network) + law_overrides(self.opts.law)
         return ["--scenario", self.opts.scenario_ref(), "--swarm", self.keys.swarm, *extra]
 
+    def journal_argv(self) -> list[str]:
+        """A follower's input journal, in the run directory (enclose replay)."""
+        return ["--journal", str(self.out / "journal")] if self.opts.journal else []
+
     def recorder_sensor_argv(self) -> list[str]:
         """Noiseless target observations are the truth's target positions again: the
         recorder leaves them out (deploy.recording.loop)."""
@@ -127,7 +131,8 @@ class Launch:
             argv = [*joins, *mav, "--index", str(j), *sec(f"target-{j}")]
             self.sup.start(f"target-{j}", "agents.target", argv, fork=True)
         for i in range(s.n):
-            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
+            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}"),
+                    *self.journal_argv()]
             self.sup.start(f"follower-{i}", "agents.follower.main", argv, fork=True)
 
     def expected_tokens(self) -> set[str]:

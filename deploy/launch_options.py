@@ -32,6 +32,7 @@ class LaunchOptions:
     port_range: str | None = None  # LO-HI
     credentials_dir: str | None = None  # a host's copy of `enclose keys` (enclose host)
     verbose: int = 0
+    journal: bool = True  # every follower journals its law's inputs (enclose replay)
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace, scenario: str | None,
@@ -46,6 +47,7 @@ class LaunchOptions:
             network=network, law=LawOptions.from_namespace(args), live=live,
             port_range=port_range,
             credentials_dir=credentials_dir, verbose=int(getattr(args, "verbose", 0)),
+            journal=bool(getattr(args, "journal", True)),
         )
 
     def scenario_ref(self) -> str:

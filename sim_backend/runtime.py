@@ -165,13 +165,19 @@ class Simulator:
     def _new_budgets(self) -> None:
         """A new tick: every vehicle's receive budget afresh (first the datagram the last
         one had no room for), every socket read again."""
+        self._take_carried()
+        for i in self._resting:
+            self._selector.register(self.endpoints[i].sock, selectors.EVENT_READ, i)
+        self._resting.clear()
+
+    def _take_carried(self) -> None:
+        """Handle the datagrams the last tick read but had no budget left to parse (each
+        gate then starts a new tick): at a tick's end, and when the run stops, so that a
+        datagram taken off its socket is never lost."""
         for i, ep in enumerate(self.endpoints):
             carried = ep.gate.new_tick()
             if carried is not None and carried[1] is not None:
                 ep.parse_datagram(carried[0], carried[1], self.boot_time_s(), self._rows[i])
-        for i in self._resting:
-            self._selector.register(self.endpoints[i].sock, selectors.EVENT_READ, i)
-        self._resting.clear()
 
     def _write_control(self, changed: list[tuple[int, ControlRow]]) -> None:
         """Changed control rows (every vehicle, while setpoints stream): one write per field."""
@@ -266,6 +272,7 @@ class Simulator:
                     self.stats.overruns += 1
                     self.stats.max_late_s = max(self.stats.max_late_s, late_s)
         finally:
+            self._take_carried()
             self._origin_s = None
         return self.stats
 

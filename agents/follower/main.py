@@ -8,9 +8,12 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
+from agents.follower.journal import JournalWriter, journal_path
 from agents.follower.node import FollowerNode
 from agents.mavlink.adapter import MavlinkAdapter
+from agents.network_args import network_overrides
 from agents.process import load_run_scenario, process_main
 from agents.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
 from agents.vehicle_loop import fly
@@ -30,9 +33,24 @@ def run(opts: AgentOptions) -> int:
 
     def make(bus: Bus, mav: MavlinkAdapter) -> FollowerNode:
         impaired = ImpairedBus(bus, scenario.network, receiver=opts.index)  # [network] links
-        return FollowerNode(scenario, opts.index, impaired, mav, opts.bus.swarm, opts.join)
+        node = FollowerNode(scenario, opts.index, impaired, mav, opts.bus.swarm, opts.join)
+        if opts.journal is not None:
+            node.runner.journal = JournalWriter(journal_path(Path(opts.journal), opts.index),
+                                                journal_header(opts),
+                                                node.runner.declared)
+        return node
 
     return fly(opts, scenario, "follower", opts.index, make)
+
+
+def journal_header(opts: AgentOptions) -> dict[str, object]:
+    """What `enclose replay` needs besides the records: who, and the run's law."""
+    scen = opts.bus.scenario
+    if scen is not None and scen.endswith(".toml"):
+        scen = str(Path(scen).resolve())
+    return {"index": opts.index, "scenario": scen, "law": opts.bus.law.law,
+            "law_params": [list(p) for p in opts.bus.law.params],
+            "network": network_overrides(opts.bus.network)}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -42,6 +60,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--join", action="store_true",
                         help="the swarm is already running (a restart): start from the "
                              "neighbours' estimate, not from p~")
+    parser.add_argument("--journal", default=None, metavar="DIR",
+                        help="journal every input of the law into DIR/follower-I.journal "
+                             "(enclose replay)")
     add_vehicle_arguments(parser)
     return process_main(parser, argv, AgentOptions.from_namespace, run,
                         lambda o: f"follower-{o.index}")

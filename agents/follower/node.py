@@ -207,6 +207,8 @@ class FollowerNode:
                 self.stop_s = msg.start_stamp_s + msg.duration_s
             else:
                 self.stop_s = min(self.stop_s, self.bus.now_s())
+            if self.start_s is not None:
+                self.runner.window(self.start_s, self.stop_s)
 
     def idle(self, duration_s: float) -> None:
         """The wait between control ticks (the Ticker's sleep): estimator steps on the
@@ -284,3 +286,5 @@ class FollowerNode:
         self.liveness.close()
         self.out.close()
         self.est_out.close()
+        if self.runner.journal is not None:
+            self.runner.journal.close()

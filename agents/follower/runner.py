@@ -18,6 +18,7 @@ import traceback
 from collections.abc import Mapping
 from typing import Any
 
+from agents.follower.journal import JournalWriter
 from agents.follower.membership import joined_estimate
 from agents.law.interface import Inputs, Law, Output, Peer, Sample, Setup, reference
 from transport.law_fields import FieldSpec, LawFields, LawValue
@@ -41,9 +42,29 @@ class LawRunner:
         self.rebase = False  # continue from last_r (a change of members, a join)
         self.failures = 0
         self._next_log_s = -math.inf
+        # What the law is handed and gives, for `enclose replay` (agents.follower.journal)
+        self.journal: JournalWriter | None = None
+
+    def _journal(self, write: Any, *args: Any) -> None:
+        """A journal write; a journal that cannot be written is dropped, the flight goes on."""
+        if self.journal is None:
+            return
+        try:
+            write(*args)
+        except (OSError, ValueError, TypeError) as exc:
+            log.error("input journal stopped: %s", exc)
+            self.journal = None
 
     def step(self, now_s: float, command: bool, own: Sample, targets: Mapping[int, Sample],
              peers: Mapping[int, Peer]) -> tuple[Output, LawFields] | None:
+        """`_step`, journaled."""
+        result = self._step(now_s, command, own, targets, peers)
+        if self.journal is not None:
+            self._journal(self.journal.step, now_s, command, own, targets, peers, result)
+        return result
+
+    def _step(self, now_s: float, command: bool, own: Sample, targets: Mapping[int, Sample],
+              peers: Mapping[int, Peer]) -> tuple[Output, LawFields] | None:
         """One step of the law: its output and its fields as published; None if it failed
         (counted and logged: the caller holds the vehicle and publishes nothing).  The
         output's command is the law's on a control tick (0 if it was not finite), and
@@ -132,11 +153,20 @@ class LawRunner:
                 self._failed(traceback.format_exc())
         self.setup = new
         self.rebase = True
+        if self.journal is not None:
+            self._journal(self.journal.regroup, new.members)
+
+    def window(self, start_s: float, stop_s: float) -> None:
+        """The experiment's start and stop (the run's control words): journaled only."""
+        if self.journal is not None:
+            self._journal(self.journal.window, start_s, stop_s)
 
     def join(self, peers: Mapping[int, Peer], now_s: float) -> None:
         """Joining a running swarm: continue from the neighbours' mean estimate."""
         if self.last_r is not None:
             return
+        if self.journal is not None:
+            self._journal(self.journal.join, peers, now_s)
         joined = joined_estimate(peers, self.setup, now_s)
         if joined is not None:
             self.last_r, self.rebase = joined, True

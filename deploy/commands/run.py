@@ -53,6 +53,11 @@ def register(sub: Any) -> None:
         action="store_true",
         help="no Zenoh authentication/access control and no MAVLink signing (not recommended)",
     )
+    p.add_argument(
+        "--journal", action=argparse.BooleanOptionalAction, default=True,
+        help="every follower journals its law's inputs into RUN/journal (enclose replay; "
+        "default: on)",
+    )
     add_live_arguments(p)
     add_json_argument(p)
     add_supervision_arguments(p)
