@@ -7,7 +7,8 @@ agents.liveness: `tokens_rejected`, `tokens_held`); these sum them over processe
 sender is the process whose key the input came on: with access control on, the one that
 put it, whatever it claimed.  On the MAVLink side (agents.mavlink.signing, .rx_gate):
 frames refused by their signature (`signing_rejected_<reason>`), datagrams over a tick's
-budget or dropped unread by the kernel, peers refused; a frame signed with another
+budget or dropped unread by the kernel, peers refused.  Clock probes dropped
+(transport.peer_clock: `clock_probes_dropped_<why>`).  A frame signed with another
 vehicle's key names the agent that holds that key (the simulator's
 `rejected_from_<agent>`, deploy.swarm_sim).
 """
@@ -37,6 +38,10 @@ ROWS = (
     ("MAVLink datagrams cut (each over a whole tick's budget)", "mav_flood_drops"),
     ("MAVLink datagrams the kernel dropped", "mav_kernel_drops"),
     ("MAVLink peers (table full)", "peers_refused"),
+    ("clock probes from no router", "clock_probes_dropped_sender"),
+    ("clock probes with impossible times", "clock_probes_dropped_times"),
+    ("clock probes too close together", "clock_probes_dropped_rate"),
+    ("clock probes over the offset step", "clock_probes_dropped_step"),
 )
 FROM_PREFIX = "rejected_from_"
 SENDERS_SHOWN = 3

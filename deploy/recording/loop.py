@@ -21,7 +21,7 @@ from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.link_history import LinkHistory
-from deploy.recording.links import FINAL_STATES, link_report
+from deploy.recording.links import FINAL_STATES, link_report, unreadable_links
 from deploy.recording.live_server import LiveServer
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
 from deploy.recording.progress import PROGRESS_FILE, behind_s, live_errors
@@ -229,6 +229,8 @@ class Recorder:
         dropped = dict(self.decoder.dropped) | {
             f"assembler_{k}": v for k, v in self.asm.drops.items()
         }
+        if skipped := unreadable_links(self.follower_status):
+            dropped["link_counters_unreadable"] = skipped
         return {
             "recorder": {
                 "messages_per_topic": dict(sorted(self.mcap.messages.items())),

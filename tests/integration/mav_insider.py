@@ -3,7 +3,7 @@ agent holds), for the insider test and the flood benchmark.
 
     python -m tests.integration.mav_insider --seconds T --out report.json \
         [--key FILE --own-sysid K --vehicle-port BASE --vehicles N] \
-        [--flood-port P ... --flood-dps R --flood-size B]
+        [--flood-port P ... --flood-dps R --flood-size B] [--progress PROGRESS_JSON]
 
 - Insider (`--key`): every 0.2 s, to every other vehicle, a force-disarm, a NAV_LAND and a
   velocity setpoint signed with its key, on its agent's link (K-1); counts every
@@ -12,6 +12,7 @@ agent holds), for the insider test and the flood benchmark.
   stream still open?).
 - Flood (`--flood-port`): R datagrams a second of B bytes each, of MAVLink frames signed
   with a key nobody holds, in the vehicle's name (sysid 1, component 1), at each port.
+- `--progress`: a run's progress.json; nothing is sent before the run's experiment starts.
 """
 
 from __future__ import annotations
@@ -24,9 +25,11 @@ import sys
 import time
 from collections import Counter
 from collections.abc import Sequence
+from pathlib import Path
 
 from agents.mavlink.signing import load_key, signing_timestamp
 from agents.mavlink.wire import Codec, decode_datagram, encode, new_codec, sign_outgoing
+from tests.integration.rogue import wait_running
 
 ARM_DISARM, NAV_LAND, REQUEST_MESSAGE, FORCE = 400, 21, 512, 21196.0
 FUTURE_S = 3600.0
@@ -139,6 +142,8 @@ class Insider:
 
 
 def run(args: argparse.Namespace) -> dict[str, float]:
+    if args.progress is not None:
+        wait_running(Path(args.progress))
     flooder = Flooder(args.flood_port, args.flood_dps, args.flood_size)
     insider = None if args.key is None else Insider(load_key(args.key), args.own_sysid,
                                                     args.vehicle_port, args.vehicles)
@@ -174,6 +179,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--flood-port", type=int, action="append", default=[])
     p.add_argument("--flood-dps", type=float, default=0.0, help="datagrams a second, in all")
     p.add_argument("--flood-size", type=int, default=65000, help="bytes per datagram")
+    p.add_argument("--progress", default=None, help="a run's progress.json: wait for its start")
     args = p.parse_args(argv)
     report = run(args)
     with open(args.out, "w") as out:

@@ -48,3 +48,17 @@ def test_the_verdict_sums_mavlink_refusals_and_names_the_sender(tmp_path: Path) 
     print_verdict(Console(file=buf, width=600), read_verdict(run, "enclose run paper"))
     assert refusal_text(summed) in buf.getvalue()
     assert "(from follower-2 20)" in buf.getvalue()
+
+
+def test_dropped_clock_probes_are_summed_and_shown() -> None:
+    follower = {"state": "done", "clock_probes_dropped_sender": 3,
+                "clock_probes_dropped_step": 2}
+    router_side = {"clock_probes_dropped_times": 1, "clock_probes_dropped_rate": 4,
+                   "clock_probes_dropped_sender": 5}
+    summed = launch_refusals({"status": {"follower-0": follower, "sim-0": router_side}})
+    assert summed == {"clock probes from no router": 8,
+                      "clock probes with impossible times": 1,
+                      "clock probes too close together": 4,
+                      "clock probes over the offset step": 2}
+    text = refusal_text(summed)
+    assert text is not None and "8 clock probes from no router" in text
