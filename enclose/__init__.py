@@ -12,10 +12,10 @@
 from __future__ import annotations
 
 from deploy.version import enclose_version
-from enclose.api import run, simulate, sweep
+from enclose.api import replay, run, simulate, sweep
 from enclose.results import Run, load_run
 from enclose.scenario import Scenario
 
 __version__ = enclose_version()
 
-__all__ = ["Run", "Scenario", "__version__", "load_run", "run", "simulate", "sweep"]
+__all__ = ["Run", "Scenario", "__version__", "load_run", "replay", "run", "simulate", "sweep"]

@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from agents.law_args import LawOptions
+    from deploy.commands.replay import FollowerReplay
     from deploy.launch_options import LaunchOptions
 
 ScenarioLike = Scenario | str | Path | None
@@ -177,3 +178,18 @@ def _check_keys(where: str, given: Mapping[str, Any], known: set[str]) -> None:
         if key not in known:
             raise ConfigError(key, f"is not an option of {where} (known: "
                               f"{', '.join(sorted(known))})")
+
+
+def replay(run_dir: str | Path, follower: int, law: str | None = None,
+           law_params: Mapping[str, Any] | None = None, sets: Sequence[str] = (),
+           figure: str | Path | None = None) -> list[FollowerReplay]:
+    """`enclose replay RUN_DIR follower-K`: follower `follower`'s journals replayed, one
+    `FollowerReplay` per journal (`.found.reproduced`, `.found.difference`, the series).
+    With `law`, `law_params` or `sets` ("gains.k_e=4"), the first one also holds what that
+    law or those parameters would have commanded on the same inputs (`.asked`, open loop)
+    and the figure of the two (`.figure`).  JournalError for a damaged or foreign journal."""
+    from deploy.commands.replay import ReplayOptions, replay_journals
+
+    opts = ReplayOptions(law_options(law, law_params), tuple(sets),
+                         None if figure is None else Path(figure))
+    return replay_journals(Path(run_dir), follower, opts)

@@ -13,6 +13,7 @@ import argparse
 import dataclasses
 import re
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +40,33 @@ def register(sub: Any) -> None:
                    help="the counterfactual's figure (default: RUN_DIR/replay-follower-K.png)")
     add_law_arguments(p)
     p.set_defaults(func=run)
+
+
+@dataclass(frozen=True)
+class ReplayOptions:
+    """What to ask of a journal besides reproducing it: another law or parameters (a
+    counterfactual, drawn into `figure`, default RUN_DIR/replay-follower-K.png)."""
+
+    law: LawOptions = dataclasses.field(default_factory=LawOptions)
+    sets: tuple[str, ...] = ()  # SECTION.KEY=VALUE
+    figure: Path | None = None
+
+    @property
+    def counterfactual(self) -> bool:
+        return bool(self.law.law or self.law.params or self.sets)
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> ReplayOptions:
+        return cls(LawOptions.from_namespace(args), tuple(args.set), args.figure)
+
+
+@dataclass(frozen=True)
+class FollowerReplay:
+    """One journal replayed (`found`), and the counterfactual on its inputs, if asked."""
+
+    found: Replay
+    asked: Replay | None = None
+    figure: Path | None = None
 
 
 def run_scenario(header: dict[str, Any]) -> Scenario:
@@ -78,41 +106,48 @@ def _follower(text: str | None) -> int:
     return int(m.group(1))
 
 
-def replay_follower(run_dir: Path, k: int, args: argparse.Namespace) -> bool:
-    """Replay follower k's journals; print the verdict; True if it reproduced.  With
-    another law or parameters, also what they would have commanded (the figure)."""
+def replay_journals(run_dir: Path, k: int, opts: ReplayOptions) -> list[FollowerReplay]:
+    """Replay follower k's journals (a restarted follower wrote one per process); with
+    another law or parameters, also what they would have commanded on the first one."""
     paths = list(journals(run_dir, k))
     if not paths:
         raise EncloseError(f"follower-{k}: no journal in {run_dir / 'journal'} (a run "
                            "with --no-journal, or not a run directory)")
-    counterfactual = bool(args.law or args.law_param or args.set)
-    ok = True
+    out = []
     for path in paths:
         scenario = run_scenario(Frames.open(path).header)
         t0 = time.perf_counter()
         found = replay(path, scenario, make_law(scenario))
         _say(found, k, time.perf_counter() - t0)
-        ok = ok and found.reproduced
-        if counterfactual and path == paths[0]:
-            _counterfactual(path, scenario, found, run_dir, k, args)
-    return ok
+        if opts.counterfactual and path == paths[0]:
+            out.append(_counterfactual(path, scenario, found, run_dir, k, opts))
+        else:
+            out.append(FollowerReplay(found))
+    return out
+
+
+def replay_follower(run_dir: Path, k: int, opts: ReplayOptions) -> bool:
+    """Replay follower k, print the verdict; True if every journal reproduced."""
+    return all(r.found.reproduced for r in replay_journals(run_dir, k, opts))
 
 
 def _counterfactual(path: Path, scenario: Scenario, found: Replay, run_dir: Path, k: int,
-                    args: argparse.Namespace) -> None:
+                    opts: ReplayOptions) -> FollowerReplay:
     """The other law or parameters on the same inputs, open loop, drawn beside the run."""
-    other = with_sets(apply_law_arguments(scenario, LawOptions.from_namespace(args)), args.set)
+    other = with_sets(apply_law_arguments(scenario, opts.law), list(opts.sets))
     asked = replay(path, other, make_law(other), check=False)
-    label = " ".join([*(["law " + args.law] if args.law else []), *args.law_param, *args.set])
+    law_words = ["law " + opts.law.law] if opts.law.law else []
+    label = " ".join([*law_words, *(f"{k_}={v}" for k_, v in opts.law.params), *opts.sets])
     from deploy.replay_figure import counterfactual_figure
 
-    out = args.figure or run_dir / f"replay-follower-{k}.png"
+    out = opts.figure or run_dir / f"replay-follower-{k}.png"
     drawn = counterfactual_figure(found.series, asked.series, found.start_s, run_dir, k,
                                   label, out)
     apart = max((abs(a - b) for a, b in zip(found.series.u_m_s, asked.series.u_m_s,
                                             strict=False)), default=0.0)
     print(f"  {label}, open loop: its command up to {apart:.3f} m/s from the run's; "
           f"figure: {drawn}")
+    return FollowerReplay(found, asked, drawn)
 
 
 def _say(found: Replay, k: int, took_s: float) -> None:
@@ -138,6 +173,7 @@ def _say(found: Replay, k: int, took_s: float) -> None:
 
 def run(args: argparse.Namespace) -> int:
     run_dir: Path = args.run_dir
+    opts = ReplayOptions.from_namespace(args)
     try:
         if args.all:
             folder = run_dir / "journal"
@@ -145,12 +181,12 @@ def run(args: argparse.Namespace) -> int:
                          for p in folder.glob("follower-*.journal")})
             if not ks:
                 raise EncloseError(f"no journal in {folder}")
-            results = {k: replay_follower(run_dir, k, args) for k in ks}
+            results = {k: replay_follower(run_dir, k, opts) for k in ks}
             bad = [f"follower-{k}" for k, ok in results.items() if not ok]
             print("run reproduced: every follower" if not bad else
                   f"run NOT reproduced: {', '.join(bad)}")
             return 1 if bad else 0
-        return 0 if replay_follower(run_dir, _follower(args.follower), args) else 1
+        return 0 if replay_follower(run_dir, _follower(args.follower), opts) else 1
     except JournalError as exc:
         print(f"damaged or foreign journal: {exc}")
         return 2

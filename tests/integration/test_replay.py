@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+import enclose
 from tests.integration.test_swarm_run import assert_all_exited, launched
 
 pytestmark = pytest.mark.integration
@@ -44,3 +45,11 @@ def test_every_follower_replays_bit_for_bit(tmp_path: Path) -> None:
     apart = float(other.stdout.split("gains.k_z=1, open loop: its command up to ")[1].split()[0])
     assert apart > 0.01, other.stdout
     assert figure.stat().st_size > 10_000
+    # The same counterfactual through the Python API: the replay and the other law's series
+    got = enclose.replay(out, 2, sets=["gains.k_z=1"], figure=tmp_path / "api.png")
+    assert got and all(r.found.reproduced for r in got)
+    first = got[0]
+    assert first.asked is not None and first.figure is not None and first.figure.exists()
+    assert len(first.asked.series.u_m_s) == len(first.found.series.u_m_s) > 500
+    assert any(a != b for a, b in zip(first.asked.series.u_m_s, first.found.series.u_m_s,
+                                      strict=True))
