@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from agents.scenario.checks import check_estimator_order
 from agents.scenario.model import ESTIMATORS, Scenario
+from agents.scenario.net_faults import parse_net_fault_flag
 from agents.scenario.network import IMPAIRMENT_KEYS, impairment
 from transport.network_schema import AGENT_SCHEDS, LINK_PROTOCOLS, LOSS_MODELS, ZENOH_RUNTIMES
 
@@ -39,6 +40,9 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--duplicate", type=float, default=None, help="probability of a duplicate")
     g.add_argument("--reorder", type=float, default=None, help="probability of a reordering")
     g.add_argument("--impair-seed", type=int, default=None, help="seed of the impairment")
+    g.add_argument("--net-fault", action="append", default=None, metavar="SPEC",
+                   help="a network fault on the run's timeline, e.g. 40:partition:1,2|3,4:15 "
+                        "(agents.scenario.net_faults; `enclose run --fault` takes it too)")
     g.add_argument("--latency-stamps", action="store_true", default=None,
                    help="stamp every sample's arrival: one-way latency per link in the "
                         "followers' status (lat_p50_us_f<j>; bench/bench_latency.py)")
@@ -56,6 +60,7 @@ class NetworkOptions:
     impairment: tuple[tuple[str, float | str], ...] = ()  # (IMPAIRMENT_KEYS name, value)
     impair_seed: int | None = None
     latency_stamps: bool = False
+    net_faults: tuple[str, ...] = ()  # --net-fault texts
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> NetworkOptions:
@@ -63,7 +68,8 @@ class NetworkOptions:
                       if getattr(args, k, None) is not None)
         return cls(**{k: getattr(args, k, None) for k in _CHOICES}, impairment=given,
                    impair_seed=getattr(args, "impair_seed", None),
-                   latency_stamps=bool(getattr(args, "latency_stamps", None)))
+                   latency_stamps=bool(getattr(args, "latency_stamps", None)),
+                   net_faults=tuple(getattr(args, "net_fault", None) or ()))
 
 
 _CHOICES = ("estimator", "estimator_order", "link", "zenoh_runtime", "agent_sched")
@@ -77,6 +83,8 @@ def network_overrides(opts: NetworkOptions) -> list[str]:
     for dest, value in values:
         if value is not None:
             argv += ["--" + dest.replace("_", "-"), str(value)]
+    for text in opts.net_faults:
+        argv += ["--net-fault", text]
     return argv + (["--latency-stamps"] if opts.latency_stamps else [])
 
 
@@ -93,6 +101,12 @@ def apply_network_arguments(scenario: Scenario, opts: NetworkOptions) -> Scenari
             net = dataclasses.replace(net, **{dest: getattr(opts, dest)})
     if opts.impair_seed is not None:
         net = dataclasses.replace(net, seed=opts.impair_seed)
+    if opts.net_faults:
+        # Their windows are checked against the run's length by the command that knows it
+        # (deploy.commands.run: --duration may differ from the scenario's).
+        added = [parse_net_fault_flag(t, scenario.n, "--net-fault") for t in opts.net_faults]
+        net = dataclasses.replace(
+            net, faults=tuple(sorted((*net.faults, *added), key=lambda f: f.at_s)))
     # The velocity stage is the robust estimator's: `--estimator paper` is order 1.
     order = opts.estimator_order
     if order is None:

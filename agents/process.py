@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from types import FrameType
 from typing import TypeVar
 
+from agents.law_args import apply_law_arguments
 from agents.lifeline import die_with_launcher
 from agents.network_args import apply_network_arguments
 from agents.phases import mark
@@ -43,11 +44,12 @@ Options = TypeVar("Options")
 
 
 def load_run_scenario(opts: BusOptions, whole_run: bool = True) -> Scenario:
-    """The scenario named on the command line, with the command line's network overrides;
-    checked over the whole run unless `whole_run` is false (agents.follower: see
-    agents.scenario.checks.check_admissible).  A process calls it once and passes the
+    """The scenario named on the command line, with the command line's network and law
+    overrides; checked over the whole run unless `whole_run` is false (agents.follower.main:
+    see agents.scenario.checks.check_admissible).  A process calls it once and passes the
     result on."""
-    return apply_network_arguments(load_scenario(opts.scenario, whole_run), opts.network)
+    scenario = apply_network_arguments(load_scenario(opts.scenario, whole_run), opts.network)
+    return apply_law_arguments(scenario, opts.law)
 
 
 def open_bus(opts: BusOptions, network: NetworkConfig, arrival_stamps: bool = False) -> Bus:

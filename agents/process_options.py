@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 
+from agents.law_args import LawOptions, add_law_arguments
 from agents.network_args import NetworkOptions, add_network_arguments
 
 
@@ -56,6 +57,7 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
                         "follower-0), hosts separated by ';' in router order")
     parser.add_argument("--log-level", default="INFO")
     add_network_arguments(parser)
+    add_law_arguments(parser)
 
 
 @dataclass(frozen=True)
@@ -73,6 +75,7 @@ class BusOptions:
     clock_hosts: str = ""
     log_level: str = "INFO"
     network: NetworkOptions = field(default_factory=NetworkOptions)
+    law: LawOptions = field(default_factory=LawOptions)
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> BusOptions:
@@ -81,7 +84,7 @@ class BusOptions:
             connect=tuple(args.connect), zenoh_config=args.zenoh_config,
             credentials=args.credentials, mode=args.mode, clock_host=args.clock_host,
             clock_hosts=args.clock_hosts, log_level=args.log_level,
-            network=NetworkOptions.from_namespace(args),
+            network=NetworkOptions.from_namespace(args), law=LawOptions.from_namespace(args),
         )
 
 
@@ -91,7 +94,8 @@ def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mav-vehicle-base", type=int, default=14580,
                         help="vehicle v listens on BASE+v (PX4 SITL: 14580)")
     parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="32-byte MAVLink 2 signing key: sign everything sent to the vehicle")
+                        help="this vehicle's 32-byte MAVLink 2 signing key: sign everything "
+                        "sent to it, refuse what it did not sign")
     parser.add_argument("--mav-vehicle-host", default=None, metavar="ADDR",
                         help="the vehicle's address when it is on another host (default: "
                         "127.0.0.1); the adapter then listens on every address")
@@ -120,8 +124,10 @@ class AgentOptions:
     vehicle: VehicleOptions
     index: int
     join: bool = False  # a follower restarted into a running swarm
+    journal: str | None = None  # a follower's input journal's folder (enclose replay)
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> AgentOptions:
         return cls(BusOptions.from_namespace(args), VehicleOptions.from_namespace(args),
-                   args.index, bool(getattr(args, "join", False)))
+                   args.index, bool(getattr(args, "join", False)),
+                   getattr(args, "journal", None))

@@ -153,7 +153,10 @@ def fly(opts: AgentOptions, scenario: Scenario, role: str, vehicle: int,
         watch, keeper = VehicleWatch(), OffboardKeeper(mav)
 
         def extra() -> dict[str, int]:
-            signing = {k: v for k, v in mav.counters.items() if k.startswith("signing_")}
+            # What the adapter refused or dropped (signatures, flood): agents.mavlink.rx_gate.
+            # Not "rx_": that prefix names a link's counters (deploy.recording.links).
+            signing = {k: v for k, v in mav.counters.items()
+                       if k.startswith(("signing_", "mav_"))}
             return {"overruns": ticker.overruns, "ticks": ticker.ticks,
                     "offboard_requests": keeper.requests,
                     **mav.clock_counters(), **signing, **node.counters()}

@@ -2,8 +2,9 @@
 
     python bench/bench_codec.py [--calls 20000] [--repeats 7]
 
-For FollowerState (a robust ring follower with 2 link flows; "FollowerState rv": the same
-with the second-order estimator's rv_m_s and 2 velocity-stage flows, codec v3),
+For FollowerState (a robust ring follower: the paper law's link sums and rates on 2
+links; "FollowerState rv": the same with the second-order estimator's rv_m_s and
+velocity-stage sums and rates),
 TargetObservation and TruthSnapshot (16 followers, 2 targets), prints the time per call of
 - `encode(msg)`;
 - `decode(payload)`;
@@ -45,15 +46,18 @@ SENDERS = sender_ids(N_FOLLOWERS, 2)  # as every process decodes: the scenario's
 
 def follower_state(seq: int, now_s: float) -> FollowerState:
     return FollowerState(
-        Header("follower-3", seq, now_s - 0.002), 3, (1.25, -2.5), (0.01, 0.02), (0.5, 0.25),
+        Header("follower-3", seq, now_s - 0.002), 3, (1.25, -2.5), (0.01, 0.02),
         (20.0, 3.5), (1.5, -0.5), (1.4, -0.6), now_s - 0.004,
-        ((2, 0.125, -0.25, 0.001, 0.002), (4, -0.5, 0.75, -0.003, 0.0)))
+        {"link_sums_m": ((2, 0.125, -0.25), (4, -0.5, 0.75)),
+         "link_rates_m_s": ((2, 0.001, 0.002), (4, -0.003, 0.0))})
 
 
 def follower_state_rv(seq: int, now_s: float) -> FollowerState:
-    return dataclasses.replace(
-        follower_state(seq, now_s), rv_m_s=(0.25, -0.5),
-        rv_flows=((2, 0.0125, -0.025, 0.5, 0.25), (4, -0.05, 0.075, -0.125, 0.0)))
+    msg = follower_state(seq, now_s)
+    return dataclasses.replace(msg, law={
+        **msg.law, "rv_m_s": (0.25, -0.5),
+        "vel_sums_m_s": ((2, 0.0125, -0.025), (4, -0.05, 0.075)),
+        "vel_rates_m_s2": ((2, 0.5, 0.25), (4, -0.125, 0.0))})
 
 
 def target_observation(seq: int, now_s: float) -> TargetObservation:

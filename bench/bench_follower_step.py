@@ -1,13 +1,18 @@
-"""A networked follower's per-step cost: the reference logic against its fast twin (issue 15).
+"""A networked follower's per-step cost: its law and the platform around it (issue 15, 33).
 
 python bench/bench_follower_step.py [--calls 2000] [--repeat 9]
 
-Prints µs per call of estimator_tick, follower_tick, peer_view and observe_target, for
-agents.follower_logic (before: numpy 2-vectors) and agents.follower_fast (after: complex
-numbers), for the paper's case and ring16 with both estimators.  Every call gets the same
-realistic state: a follower that has run a while, its neighbours fresh, robust link sums
-published.  The figure is the best of --repeat rounds of --calls calls (process CPU time:
-less disturbed by other load than wall time), so say under what load it was measured.
+Prints µs per call of what agents.follower.node does per step, for the paper's law
+(agents.law.paper) in the paper's case and ring16 with both estimators:
+- estimator step: the law advanced without a command (LawRunner.step, with the stand-ins
+  for links not heard and the published fields checked and made wire-ready);
+- control step: the same with the command, and the count of stale inputs;
+- receive: a neighbour's FollowerState kept as the law reads it (Latest.peer);
+- observe: one target observation folded into its track (Latest.observe).
+Every call gets the same realistic state: a follower that has run a while, its
+neighbours fresh, robust link sums published.  The figure is the best of --repeat rounds
+of --calls calls (process CPU time: less disturbed by other load than wall time), so say
+under what load it was measured.
 """
 
 from __future__ import annotations
@@ -19,10 +24,11 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
-from agents import follower_fast as fast
-from agents import follower_logic as ref
+from agents.follower.inputs import Latest
+from agents.follower.membership import setup_for, stand_ins
+from agents.follower.runner import LawRunner
+from agents.law.interface import Sample
+from agents.law.paper import PaperLaw
 from agents.scenario.file import load_scenario
 from transport.messages import FollowerState, Header
 from transport.network_schema import NetworkConfig
@@ -40,52 +46,59 @@ def _per_call_us(fn: Callable[[], Any], calls: int, repeat: int) -> float:
     return best / calls * 1e6
 
 
-def _message(j: int, receiver: int, now_s: float, robust: bool) -> FollowerState:
-    links = ((receiver, 0.3 * j, -0.2, 0.01, 0.02), (receiver + 1, 0.1, 0.1, 0.0, 0.0))
+def _message(j: int, receiver: int, now_s: float, runner: LawRunner) -> FollowerState:
+    """Neighbour j's state as its law publishes it: its declared fields, sums towards us."""
+    links = ((receiver, 0.3 * j, -0.2), (receiver + 1, 0.1, 0.1))
+    rates = ((receiver, 0.01, 0.02), (receiver + 1, 0.0, 0.0))
+    values = {"phi_m": (0.5, 0.5), "link_sums_m": links, "link_rates_m_s": rates,
+              "rv_m_s": (0.1, 0.0), "vel_sums_m_s": links, "vel_rates_m_s2": rates}
+    law = {name: values[name] for name in runner.declared}
     return FollowerState(Header(f"follower-{j}", 7, now_s - 0.004), j, (3.0 + 0.1 * j, 1.0),
-                         (0.05, 0.0), (0.5, 0.5), (8.0, float(j)), (0.1, 1.0), (0.0, 1.0),
-                         now_s - 0.006, links if robust else ())
+                         (0.05, 0.0), (8.0, float(j)), (0.1, 1.0), (0.0, 1.0), now_s - 0.006,
+                         law)
 
 
-def _case(name: str, estimator: str, calls: int, repeat: int) -> dict[str, tuple[float, float]]:
+def _case(name: str, estimator: str, calls: int, repeat: int) -> dict[str, float]:
     scenario = dataclasses.replace(load_scenario(name), network=NetworkConfig(estimator))
-    setup = ref.FollowerSetup.from_scenario(scenario, 0)
-    fsetup = fast.FastSetup.of(setup)
-    robust, t = estimator == "robust", 10.0
-    msgs = {j: _message(j, 0, t, robust) for j in fsetup.peers}
-    out: dict[str, tuple[float, float]] = {}
-    timings: list[tuple[str, Callable[[], Any], Callable[[], Any]]] = []
-    r_mem, f_mem = ref.FollowerMemory(), fast.FollowerMemory()
+    runner = LawRunner(PaperLaw.from_params({}, scenario), setup_for(scenario, 0))
+    latest = Latest(0, runner.declared)
+    setup, t = runner.setup, 10.0
+    msgs = {j: _message(j, 0, t, runner) for j in setup.peers}
     for k, j in enumerate(setup.observed):
         for dt in (0.0, 0.02):
-            r_mem = ref.observe_target(r_mem, setup, j, np.array([k, 1.0 + dt]), t - 0.02 + dt)
-            f_mem = fast.observe_target(f_mem, fsetup, j, complex(k, 1.0 + dt), t - 0.02 + dt)
-    r_peers = {j: ref.peer_view(m, 0) for j, m in msgs.items()}
-    f_peers = {j: fast.peer_view(m, 0) for j, m in msgs.items()}
+            latest.observe(setup, j, complex(k, 1.0 + dt), t - 0.02 + dt)
+    for msg in msgs.values():
+        latest.receive(msg, t)
+    own = Sample(8.0 + 0.5j, 1j, t - 0.003)
     for step in (0.0, 0.005, 0.005, 0.005):  # a follower that has run: link sums, ages
         t += step
-        r_mem = ref.estimator_tick(r_mem, setup, r_peers, t)
-        f_mem = fast.estimator_tick(f_mem, fsetup, f_peers, t)
-    later, own = t + 0.005, (np.array([8.0, 0.5]), np.array([0.0, 1.0]), t - 0.003)
-    r_own, f_own = ref.Sample(*own), fast.Sample(complex(*own[0]), complex(*own[1]), own[2])
+        runner.step(t, False, own, latest.targets, latest.peers)
+    later, state = t + 0.005, runner.state
     target, msg = setup.observed[0], msgs[setup.neighbours[0]]
-    timings = [
-        ("estimator_tick", lambda: ref.estimator_tick(r_mem, setup, r_peers, later),
-         lambda: fast.estimator_tick(f_mem, fsetup, f_peers, later)),
-        ("follower_tick", lambda: ref.follower_tick(r_mem, setup, r_own, r_peers, later),
-         lambda: fast.follower_tick(f_mem, fsetup, f_own, f_peers, later)),
-        ("peer_view", lambda: ref.peer_view(msg, 0), lambda: fast.peer_view(msg, 0)),
-        ("observe_target",
-         lambda: ref.observe_target(r_mem, setup, target, np.array([0.5, 1.5]), later),
-         lambda: fast.observe_target(f_mem, fsetup, target, complex(0.5, 1.5), later)),
-        ("link_flows", lambda: ref.link_flows(r_mem, setup),
-         lambda: fast.link_flows(f_mem, fsetup)),
+
+    def step(command: bool) -> Any:
+        runner.state, runner.last_step_s = state, t  # every call: the same step
+        peers = stand_ins(latest.peers, setup, runner.last_r, later)
+        out = runner.step(later, command, own, latest.targets, peers)
+        if command:
+            latest.stale(setup, peers, later)
+        return out
+
+    stamps = iter(range(10**9))
+
+    def observe() -> None:  # each a newer sample than the last: the filter runs
+        latest.observe(setup, target, complex(0.5, 1.5), later + 0.01 * next(stamps))
+
+    timings: list[tuple[str, Callable[[], Any]]] = [
+        ("estimator step", lambda: step(False)),
+        ("control step", lambda: step(True)),
+        ("receive", lambda: latest.peer(msg)),
+        ("observe", observe),
     ]
     print(f"<!-- {name}, {estimator}: follower 0, {len(setup.neighbours)} neighbours, "
-          f"{len(setup.observed)} observed target(s) -->")
-    for label, before, after in timings:
-        out[label] = (_per_call_us(before, calls, repeat), _per_call_us(after, calls, repeat))
-    return out
+          f"{len(setup.observed)} observed target(s), fields {sorted(runner.declared)} -->")
+    assert runner.failures == 0
+    return {label: _per_call_us(fn, calls, repeat) for label, fn in timings}
 
 
 def main() -> None:
@@ -95,14 +108,12 @@ def main() -> None:
     args = parser.parse_args()
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "
           f"best of {args.repeat} x {args.calls} calls, process CPU time, µs per call")
-    print("| case | estimator | function | before (follower_logic) | after (follower_fast) "
-          "| speed-up |")
-    print("|---|---|---|---|---|---|")
+    print("| case | estimator | per step | µs |")
+    print("|---|---|---|---|")
     for name in ("paper", "ring16"):
         for estimator in ("robust", "paper"):
-            for label, (before, after) in _case(name, estimator, args.calls, args.repeat).items():
-                print(f"| {name} | {estimator} | {label} | {before:.1f} | {after:.2f} "
-                      f"| {before / after:.1f}x |")
+            for label, us in _case(name, estimator, args.calls, args.repeat).items():
+                print(f"| {name} | {estimator} | {label} | {us:.2f} |")
 
 
 if __name__ == "__main__":

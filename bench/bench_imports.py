@@ -1,9 +1,9 @@
 """What each import costs a follower (issue 15: lean processes): RSS and time, in order.
 
 In a fresh interpreter per repeat, imports the follower's dependencies one after another
-(as `agents.follower` pulls them in) and prints the VmRSS each adds and the wall time it
+(as `agents.follower.main` pulls them in) and prints the VmRSS each adds and the wall time it
 took; then, for reference, what a follower no longer imports (each in a fresh interpreter
-on top of agents.follower); then what each MAVLink dialect adds on top of what a follower
+on top of agents.follower.main); then what each MAVLink dialect adds on top of what a follower
 holds before it (the agents' lean one, pymavlink's common and minimal).  Times depend on
 machine load; RSS does not (much), but it does on whether the modules' bytecode is cached:
 with PYTHONDONTWRITEBYTECODE set and no __pycache__, every interpreter compiles the
@@ -22,7 +22,7 @@ import subprocess
 import sys
 
 CHAIN = ("msgpack", "zenoh", "agents.mavlink.lean_common", "transport.zenoh_bus",
-         "agents.mavlink.adapter", "agents.follower_fast", "agents.follower")
+         "agents.mavlink.adapter", "agents.law.paper", "agents.follower.main")
 NOT_IMPORTED = ("numpy", "pymavlink.dialects.v20.common", "cryptography.x509",
                 "matplotlib.pyplot", "mcap.writer", "numba")
 DIALECT_BASE = ("msgpack", "zenoh", "hashlib", "json", "logging", "struct", "fastcrc")
@@ -63,10 +63,10 @@ def main() -> None:
         added = rss - runs[0][k - 1][1] if k else rss
         ms = statistics.median(r[k][2] for r in runs) * 1e3
         print(f"| {name} | {added:.1f} | {rss:.1f} | {ms:.0f} |")
-    print("\nNot imported by a follower any more (each on top of agents.follower):")
+    print("\nNot imported by a follower any more (each on top of agents.follower.main):")
     for name in NOT_IMPORTED:
         try:
-            rows = probe(("agents.follower", name))
+            rows = probe(("agents.follower.main", name))
         except subprocess.CalledProcessError:
             print(f"| {name} | not installed |")
             continue

@@ -84,8 +84,9 @@ def zenoh_rtt(n: int, creds: str | None) -> tuple[list[float], float]:
             sub, pub = bus.subscribe(KEYS.follower_state(1)), bus.declare_publisher(
                 KEYS.follower_state(0))
             stamper, rtts = Stamper("follower-0"), []
-            state = FollowerState(stamper.header(), 0, (1.0, 2.0), (0.1, 0.2), (0.3, 0.4),
-                                  (10.0, -20.0), (0.5, 0.6), (0.7, 0.8), time.time())
+            state = FollowerState(stamper.header(), 0, (1.0, 2.0), (0.1, 0.2),
+                                  (10.0, -20.0), (0.5, 0.6), (0.7, 0.8), time.time(),
+                                  {"phi_m": (0.3, 0.4)})
             payload = encode(state)
             c0 = cpu_s() + cpu_s(proc.pid)
             for k in range(n + 50):

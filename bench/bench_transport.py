@@ -81,8 +81,8 @@ def wait_for(cond: Callable[[], bool], timeout_s: float) -> None:
 
 
 def sample_state(stamper: Stamper) -> FollowerState:
-    return FollowerState(stamper.header(), 0, (1.0, 2.0), (0.1, 0.2), (0.3, 0.4), (10.0, -20.0),
-                         (0.5, 0.6), (0.7, 0.8), time.time())
+    return FollowerState(stamper.header(), 0, (1.0, 2.0), (0.1, 0.2), (10.0, -20.0),
+                         (0.5, 0.6), (0.7, 0.8), time.time(), {"phi_m": (0.3, 0.4)})
 
 
 def ping_pong(bus: ZenohBus, n: int) -> list[float]:

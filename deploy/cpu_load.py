@@ -160,7 +160,7 @@ class CpuSampler:
 
 
 # A machine this busy queues every process for a core: latencies, late ticks and the
-# errors they cause are then the machine's (README, "What a run costs").
+# errors they cause are then the machine's (docs/large-swarms.md, "What a run costs").
 SATURATED_PCT = 95.0
 
 

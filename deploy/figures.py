@@ -132,7 +132,8 @@ def trajectory_figure(
     return drawn
 
 
-MARKERS = {"membership": "D", "fault": "X", "died": "x", "restart": "P", "pause": "s"}
+MARKERS = {"membership": "D", "fault": "X", "died": "x", "restart": "P", "pause": "s",
+           "network": "v"}
 
 
 def _mark_positions(ax: Axes, series: RunSeries, marks: Sequence[Mark]) -> list[Mark]:

@@ -1,6 +1,6 @@
 """Start a swarm process as a fork of the launcher (issue 15: fast start).
 
-`python -m agents.follower` spends most of its start-up importing (numpy, Zenoh,
+`python -m agents.follower.main` spends most of its start-up importing (numpy, Zenoh,
 pymavlink: ~0.4 s of CPU each; 16 followers on 2 cores queue for seconds).  The
 launcher imports a process's module once, then forks: the child is its own OS process
 (own PID, session, log, Zenoh session and sockets) that runs `module.main(argv)` at once,

@@ -21,6 +21,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from agents.scenario.file import load_scenario, parse_scenario, shipped_text
+from agents.scenario.law import pinned_law
 from agents.scenario.model import Scenario
 from deploy.deployment import Deployment
 from deploy.host_keys import HostSecrets, write_swarm_keys
@@ -34,6 +35,8 @@ from transport.zenoh_config import ZenohConfig
 
 log = logging.getLogger("enclose.host")
 IMPAIRED_SCENARIO = "scenario-hosts.toml"
+# The entry point of each kind of agent process (as deploy.launch starts them).
+AGENT_MODULES = {"follower": "agents.follower.main", "target": "agents.target"}
 
 
 class HostLaunch(Launch):
@@ -51,10 +54,11 @@ class HostLaunch(Launch):
         if dep.inter_host_delay_ms > 0:  # at each follower's receiving end (impairment)
             out.mkdir(parents=True, exist_ok=True)
             path = out / IMPAIRED_SCENARIO
-            text = _source(dep.scenario) + _links(dep, scenario)
+            # The copy is elsewhere: its [law] module, if any, must name its folder.
+            text = pinned_law(_source(dep.scenario), scenario.law) + _links(dep, scenario)
             path.write_text(text)
             # The file the processes load, read here from the same text.
-            scenario = parse_scenario(text, origin=str(path))
+            scenario = parse_scenario(text, origin=str(path), base=path.parent)
             opts = replace(opts, scenario=str(path))
         super().__init__(scenario, opts, out, dep.swarm, duration_s)
         self.coordinator = dep.host_of("launcher") in local
@@ -129,7 +133,8 @@ class HostLaunch(Launch):
         elif name != "launcher":
             role, _, idx = name.rpartition("-")
             extra = ["--mav-vehicle-host", self.sim_address] if remote else []
-            self.sup.start(name, f"agents.{role}", [*argv, *mav, *extra, "--index", idx],
+            extra += self.journal_argv() if role == "follower" else []
+            self.sup.start(name, AGENT_MODULES[role], [*argv, *mav, *extra, "--index", idx],
                            prefix=pre)
 
     def open_bus(self) -> ZenohBus:

@@ -13,6 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from agents.law_args import law_overrides
 from agents.network_args import network_overrides
 from agents.phases import mark
 from agents.scenario.faults import parse_fault_flag
@@ -78,8 +79,12 @@ class Launch:
 
     def common(self) -> list[str]:
         extra = ["--zenoh-config", self.opts.zenoh_config] if self.opts.zenoh_config else []
-        extra += network_overrides(self.opts.network)
+        extra += network_overrides(self.opts.network) + law_overrides(self.opts.law)
         return ["--scenario", self.opts.scenario_ref(), "--swarm", self.keys.swarm, *extra]
+
+    def journal_argv(self) -> list[str]:
+        """A follower's input journal, in the run directory (enclose replay)."""
+        return ["--journal", str(self.out / "journal")] if self.opts.journal else []
 
     def recorder_sensor_argv(self) -> list[str]:
         """Noiseless target observations are the truth's target positions again: the
@@ -126,8 +131,9 @@ class Launch:
             argv = [*joins, *mav, "--index", str(j), *sec(f"target-{j}")]
             self.sup.start(f"target-{j}", "agents.target", argv, fork=True)
         for i in range(s.n):
-            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}")]
-            self.sup.start(f"follower-{i}", "agents.follower", argv, fork=True)
+            argv = [*joins, *mav, "--index", str(i), *sec(f"follower-{i}"),
+                    *self.journal_argv()]
+            self.sup.start(f"follower-{i}", "agents.follower.main", argv, fork=True)
 
     def expected_tokens(self) -> set[str]:
         k, s = self.keys, self.scenario
@@ -300,7 +306,7 @@ class Launch:
 
     def _before_restart(self, child: Child) -> None:
         """A restarted recorder starts a new MCAP: keep the dead one's beside it.  A
-        restarted follower joins a running swarm (agents.follower --join)."""
+        restarted follower joins a running swarm (agents.follower.main --join)."""
         mcap = self.out / "recording.mcap"
         if child.name == "recorder" and mcap.exists():
             mcap.rename(self.out / f"recording-part{child.restarts + 1}.mcap")

@@ -17,6 +17,7 @@ from agents.phases import stamps
 from deploy.cpu_load import overrun_summary
 from deploy.restarts import EXIT_SOMETHING_DIED
 from deploy.verdict import announce
+from deploy.version import enclose_version
 
 if TYPE_CHECKING:
     from deploy.launch import Launch
@@ -46,6 +47,7 @@ def stop_in_order(launch: Launch) -> None:
 def launch_report(launch: Launch) -> dict[str, Any]:
     """The content of launch.json (a host's launcher adds its hosts: deploy.host_launch)."""
     return {
+        "enclose_version": enclose_version(),
         "swarm": launch.keys.swarm,
         "zenoh_endpoint": launch.endpoint,
         "vehicle_base_port": launch.vehicle_base,

@@ -7,10 +7,12 @@ Read once from the parsed flags by the command (deploy.commands.run, deploy.comm
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from agents.law_args import LawOptions
 from agents.network_args import NetworkOptions
+from agents.scenario.faults import is_net_action
 from deploy.live_args import LiveOptions
 
 
@@ -26,10 +28,12 @@ class LaunchOptions:
     max_restarts: int = 5
     faults: tuple[str, ...] = ()  # --fault AT_S:ACTION:TARGET[:DURATION_S]
     network: NetworkOptions = field(default_factory=NetworkOptions)
+    law: LawOptions = field(default_factory=LawOptions)  # --law, --law-param
     live: LiveOptions | None = None  # None: no live view
     port_range: str | None = None  # LO-HI
     credentials_dir: str | None = None  # a host's copy of `enclose keys` (enclose host)
     verbose: int = 0
+    journal: bool = True  # every follower journals its law's inputs (enclose replay)
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace, scenario: str | None,
@@ -37,12 +41,18 @@ class LaunchOptions:
                        port_range: str | None = None,
                        credentials_dir: str | None = None) -> LaunchOptions:
         """The flags both launchers share, from `args`; the others as the command says."""
+        # A network fault reaches every process as the network flag --net-fault.
+        net_faults = tuple(f for f in args.fault if is_net_action(f))
+        network = replace(network, net_faults=network.net_faults + net_faults)
         return cls(
             scenario=scenario, zenoh_config=args.zenoh_config, noise_std_m=args.noise_std_m,
             link_timeout_s=args.link_timeout, insecure=args.insecure, json=args.json,
-            restart=args.restart, max_restarts=args.max_restarts, faults=tuple(args.fault),
-            network=network, live=live, port_range=port_range,
+            restart=args.restart, max_restarts=args.max_restarts,
+            faults=tuple(f for f in args.fault if not is_net_action(f)),
+            network=network, law=LawOptions.from_namespace(args), live=live,
+            port_range=port_range,
             credentials_dir=credentials_dir, verbose=int(getattr(args, "verbose", 0)),
+            journal=bool(getattr(args, "journal", True)),
         )
 
     def scenario_ref(self) -> str:

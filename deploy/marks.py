@@ -30,7 +30,9 @@ STYLE: dict[str, tuple[str, str, str]] = {
     "died": ("tab:purple", "--", "process died"),
     "restart": ("tab:green", "--", "process (re)started"),
     "pause": ("tab:orange", "-", "process paused"),
+    "network": ("tab:cyan", "-", "network fault"),
 }
+BANDS = ("pause", "network")
 
 
 @dataclass(frozen=True)
@@ -85,9 +87,12 @@ def read_launch(run_dir: Path) -> dict[str, Any] | None:
     return doc if isinstance(doc, dict) else None
 
 
-def run_marks(run_dir: Path, membership_s: Sequence[float]) -> list[Mark]:
-    """Every mark of a run directory, in time order."""
+def run_marks(run_dir: Path, membership_s: Sequence[float],
+              net_faults: Sequence[tuple[str, float, float]] = ()) -> list[Mark]:
+    """Every mark of a run directory, in time order; `net_faults` (label, at_s, end_s)
+    from run.json: bands."""
     marks = membership_marks(membership_s) + event_marks(read_launch(run_dir))
+    marks += [Mark(at_s, "network", label, end_s) for label, at_s, end_s in net_faults]
     return sorted(marks, key=lambda m: m.t_s)
 
 
@@ -107,7 +112,7 @@ def legend_handles(marks: Sequence[Mark]) -> list[Line2D | Patch]:
     handles: list[Line2D | Patch] = []
     for kind in dict.fromkeys(m.kind for m in marks):
         colour, style, text = STYLE[kind]
-        if kind == "pause":
+        if kind in BANDS:
             handles.append(Patch(color=colour, alpha=0.3, label=text))
         else:
             handles.append(Line2D([], [], color=colour, ls=style, label=text))

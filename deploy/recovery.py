@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from deploy.rundir import SERIES_FILE
 
-EPS_M = 0.0999  # the paper's bounds (README: settle_time_s)
+EPS_M = 0.0999  # the paper's bounds (docs/index.md: settle_time_s)
 EPS_DELTA = 0.0199
 FloatArray = NDArray[np.float64]
 

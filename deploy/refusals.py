@@ -5,7 +5,12 @@ Every process counts its refusals in its status counters (transport.decoder:
 `<kind>_rejected` and `rejected_from_<sender>` for its most rejected senders;
 agents.liveness: `tokens_rejected`, `tokens_held`); these sum them over processes.  A
 sender is the process whose key the input came on: with access control on, the one that
-put it, whatever it claimed.
+put it, whatever it claimed.  On the MAVLink side (agents.mavlink.signing, .rx_gate):
+frames refused by their signature (`signing_rejected_<reason>`), datagrams over a tick's
+budget or dropped unread by the kernel, peers refused.  Clock probes dropped
+(transport.peer_clock: `clock_probes_dropped_<why>`).  A frame signed with another
+vehicle's key names the agent that holds that key (the simulator's
+`rejected_from_<agent>`, deploy.swarm_sim).
 """
 
 from __future__ import annotations
@@ -23,6 +28,20 @@ ROWS = (
     ("control words", "control_rejected"),
     ("tokens", "tokens_rejected"),
     ("token changes held", "tokens_held"),
+    ("unsigned MAVLink frames", "signing_rejected_unsigned"),
+    ("badly signed MAVLink frames", "signing_rejected_bad_signature"),
+    ("MAVLink frames signed with another vehicle's key", "signing_rejected_wrong_key"),
+    ("MAVLink frames stamped ahead", "signing_rejected_future"),
+    ("replayed MAVLink frames", "signing_rejected_replay"),
+    ("malformed MAVLink datagrams", "signing_rejected_malformed"),
+    ("unreadable MAVLink frames", "signing_rejected_error"),
+    ("MAVLink datagrams cut (each over a whole tick's budget)", "mav_flood_drops"),
+    ("MAVLink datagrams the kernel dropped", "mav_kernel_drops"),
+    ("MAVLink peers (table full)", "peers_refused"),
+    ("clock probes from no router", "clock_probes_dropped_sender"),
+    ("clock probes with impossible times", "clock_probes_dropped_times"),
+    ("clock probes too close together", "clock_probes_dropped_rate"),
+    ("clock probes over the offset step", "clock_probes_dropped_step"),
 )
 FROM_PREFIX = "rejected_from_"
 SENDERS_SHOWN = 3

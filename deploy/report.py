@@ -14,7 +14,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from agents.core.metrics import Metrics, MetricsAccumulator, error_series
+from agents.core.metrics import Metrics, MetricsAccumulator, WindowAccumulator, error_series
 from agents.core.timeseries import FloatArray, RunSeries, decimated_rows
 from deploy.figures import performance_figure, trajectory_figure
 from deploy.figures_links import LINKS_PNG, link_health_figure
@@ -88,9 +88,15 @@ def write_run_outputs(
     thin_total = len(decimated_rows(0, total, every, total))
     drawn = _Drawn(thin_total, figure_rows(info.n))
     metrics = MetricsAccumulator(info.steady_from_s, info.eps_rho_m, info.eps_delta)
+    faults = [(label, at_s, end_s, WindowAccumulator((at_s, end_s), info.eps_rho_m,
+                                                     info.eps_delta))
+              for label, at_s, end_s in info.net_faults]
     with SeriesWriter(run_dir, info.n, info.m) as writer:
         for chunk in source.chunks():
-            metrics.add(chunk, error_series(chunk, info.successor, angles, info.rho_d_m))
+            errors = error_series(chunk, info.successor, angles, info.rho_d_m)
+            metrics.add(chunk, errors)
+            for *_, window in faults:
+                window.add(chunk, errors)
             for sink in sinks:
                 sink.add(chunk)
             thin = chunk.take(decimated_rows(offset, len(chunk.t_s), every, total))
@@ -98,7 +104,10 @@ def write_run_outputs(
             drawn.add(thin)
             offset += len(chunk.t_s)
     result = metrics.result()
-    write_metrics(run_dir, result, info, dict(extra() if callable(extra) else extra or {}))
+    windows = [{"label": label, "at_s": at_s, "end_s": end_s, **window.result()}
+               for label, at_s, end_s, window in faults]
+    write_metrics(run_dir, result, info, {**(extra() if callable(extra) else extra or {}),
+                                          **({"net_faults": windows} if windows else {})})
     _figures(run_dir, info, marks_s or [], drawn.series())
     return result
 
@@ -143,7 +152,7 @@ def _figures(run_dir: Path, info: RunInfo, marks_s: list[float],
     angles = np.asarray(info.angles_rad)
     errors = error_series(series, info.successor, angles, info.rho_d_m)
     eps = (info.eps_rho_m, info.eps_delta)
-    marks = run_marks(run_dir, marks_s)
+    marks = run_marks(run_dir, marks_s, info.net_faults)
     performance_figure(series, errors, eps, run_dir / PERFORMANCE_PNG, marks)
     trajectory_figure(series, info.rho_d_m, run_dir / TRAJECTORY_PNG, marks)
     paths = [run_dir / PERFORMANCE_PNG, run_dir / TRAJECTORY_PNG]

@@ -15,6 +15,7 @@ import numpy as np
 from agents.core.metrics import ErrorSeries, Metrics
 from agents.core.timeseries import FloatArray, RunSeries, decimated_rows
 from agents.scenario.model import Scenario
+from deploy.version import enclose_version
 from transport.errors import EncloseError
 
 SERIES_FILE = "series.csv"
@@ -37,6 +38,10 @@ class RunInfo:
     eps_rho_m: float
     eps_delta: float
     steady_from_s: float
+    law: str = "paper"  # the followers' law: a shipped name or a module reference
+    safety_distance_m: float = 1.0
+    # The network faults: (label, at_s, end_s) in experiment time (transport.network_schema)
+    net_faults: tuple[tuple[str, float, float], ...] = ()
 
     @staticmethod
     def from_scenario(scenario: Scenario, kind: str, duration_s: float) -> RunInfo:
@@ -52,6 +57,9 @@ class RunInfo:
             eps_rho_m=scenario.run.eps_rho_m,
             eps_delta=scenario.run.eps_delta,
             steady_from_s=duration_s / 2.0 if steady is None else steady,
+            law=scenario.law.ref,
+            safety_distance_m=scenario.run.safety_distance_m,
+            net_faults=tuple((f.label(), f.at_s, f.end_s) for f in scenario.network.faults),
         )
 
 
@@ -182,7 +190,7 @@ def _csv_batches(path: Path, names: list[str],
 
 
 def write_metrics(run_dir: Path, metrics: Metrics, info: RunInfo, extra: dict[str, Any]) -> None:
-    payload = {**metrics.as_dict(), **extra}
+    payload = {**metrics.as_dict(), **extra, "enclose_version": enclose_version()}
     clean = {
         k: (None if isinstance(v, float) and not math.isfinite(v) else v)
         for k, v in payload.items()
@@ -197,6 +205,8 @@ def read_info(run_dir: Path) -> RunInfo:
         raw = json.loads(path.read_text())
         raw["successor"] = tuple(raw["successor"])
         raw["angles_rad"] = tuple(raw["angles_rad"])
+        raw["net_faults"] = tuple((str(a), float(b), float(c))
+                                  for a, b, c in raw.get("net_faults", ()))
         return RunInfo(**raw)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise EncloseError(f"{path} is missing or malformed: {exc}") from exc

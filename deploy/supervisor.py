@@ -25,7 +25,7 @@ Clock = Callable[[], float]
 FORKED_MODULES = ("deploy.swarm_sim", "agents.target")
 # Forked by a fork server that imported only these (deploy.zygote): a follower must not
 # inherit the launcher's numpy and simulator pages (issue 15: <= 50 MB per follower).
-LEAN_MODULES = ("agents.follower",)
+LEAN_MODULES = ("agents.follower.main",)
 
 
 @dataclass

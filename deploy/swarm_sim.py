@@ -13,7 +13,7 @@ import argparse
 import logging
 import math
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +32,7 @@ from agents.process import (
 )
 from agents.process_options import BusOptions, add_bus_arguments
 from agents.scenario.model import Scenario
+from deploy.run_secrets import agent_of_vehicle
 from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from transport.bus import Bus
@@ -124,6 +125,15 @@ def sensor_every_ticks(tick_hz: float, sensor_hz: float) -> int:
     return max(1, math.floor(tick_hz / sensor_hz + 1e-9))
 
 
+def wrong_key_senders(counters: Mapping[str, int], n: int) -> dict[str, int]:
+    """The agents whose vehicle keys signed frames sent to other vehicles, as the refusals
+    of deploy.refusals name senders: `rejected_from_<agent>` (one counter per key holder:
+    at most one per vehicle)."""
+    prefix = "signing_wrong_key_vehicle_"
+    return {f"rejected_from_{agent_of_vehicle(int(k[len(prefix):]), n)}": v
+            for k, v in counters.items() if k.startswith(prefix) and k[len(prefix):].isdigit()}
+
+
 MAX_DEFAULT_TICK_HZ = 50.0
 
 
@@ -155,13 +165,13 @@ class SwarmSimOptions:
     base_port: int = 14580
     mav_host: str = "127.0.0.1"
     send_base_port: int = 14540
-    signing_key: str | None = None
+    signing_secret: str | None = None  # the run's MAVLink secret: a key per vehicle
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SwarmSimOptions:
         return cls(BusOptions.from_namespace(args), args.rate_hz, args.telemetry_hz,
                    args.sensor_hz, args.noise_std_m, args.seed, args.base_port, args.mav_host,
-                   args.send_base_port, args.signing_key)
+                   args.send_base_port, args.signing_secret)
 
 
 def run(opts: SwarmSimOptions) -> int:
@@ -174,7 +184,7 @@ def run(opts: SwarmSimOptions) -> int:
         host=opts.mav_host,
         listen_base_port=opts.base_port,
         send_base_port=opts.send_base_port,
-        signing_key=None if opts.signing_key is None else load_key(opts.signing_key),
+        signing_secret=None if opts.signing_secret is None else load_key(opts.signing_secret),
     )
     keys = SwarmKeys(opts.bus.swarm)
     with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus:
@@ -195,7 +205,8 @@ def run(opts: SwarmSimOptions) -> int:
             st = sim.stats
             return {"ticks": st.ticks, "overruns": st.overruns, "catch_ups": st.catch_ups,
                     "caught_up_ticks": st.caught_up_ticks, "resyncs": st.resyncs,
-                    **dict(sim.counters), **sensor.liveness.counters()}
+                    **dict(sim.counters), **wrong_key_senders(sim.counters, scenario.n),
+                    **sensor.liveness.counters()}
 
         def report(_t: float, _s: FleetState) -> None:
             if status.due():
@@ -253,8 +264,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="address the vehicles listen on (another host's agents: its "
                         "own address, or 0.0.0.0); telemetry also goes to whoever sends")
     parser.add_argument("--send-base-port", type=int, default=14540)
-    parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="MAVLink 2 signing key the vehicles enforce")
+    parser.add_argument("--signing-secret", default=None, metavar="FILE",
+                        help="the run's 32-byte MAVLink secret: each vehicle enforces signing "
+                        "with its own key derived from it (agents.mavlink.signing)")
     return process_main(parser, argv, SwarmSimOptions.from_namespace, run, lambda _o: "sim")
 
 

@@ -39,10 +39,17 @@ class Check:
     unit: str
     value: float | None
     bound: float
+    floor: bool = False  # the value must stay at or above the bound (a distance)
 
     @property
     def inside(self) -> bool:
-        return self.value is not None and self.value < self.bound
+        if self.value is None:
+            return False
+        return self.value >= self.bound if self.floor else self.value < self.bound
+
+    def bound_text(self) -> str:
+        u = f" {self.unit}" if self.unit else ""
+        return f"{'>=' if self.floor else '<'} {self.bound:g}{u}"
 
     def text(self) -> str:
         u = f" {self.unit}" if self.unit else ""
@@ -68,6 +75,8 @@ class Verdict:
     silent: tuple[int, ...] = ()  # 0-based followers that sent no state: not judged whole
     recording: str | None = None  # what the recorder lost, when it lost enough to matter
     refused: dict[str, Any] | None = None  # bus input the processes refused (deploy.refusals)
+    law: str | None = None  # the followers' law and how often it failed in flight
+    network: tuple[str, ...] = ()  # each network fault: its window, recovery, closest approach
 
     @property
     def inside(self) -> bool:
@@ -149,6 +158,27 @@ def silent_text(silent: tuple[int, ...], n: int | None) -> str:
     return f"follower{'s' if len(silent) > 1 else ''} {names} (0-based) sent no state{over}"
 
 
+def law_line(info: dict[str, Any], metrics: dict[str, Any],
+             launch: dict[str, Any]) -> str | None:
+    """The law the followers flew (run.json) and its failures: in flight, the followers'
+    `law_failures` counters as the flight ended (launch.json); in lock-step, metrics.json's."""
+    law = info.get("law")
+    if not isinstance(law, str):
+        return None
+    if launch:
+        status = _dict(launch.get("status_at_stop") or launch.get("status"))
+        counts = {name: _dict(c).get("law_failures") for name, c in status.items()
+                  if name.startswith("follower-")}
+    else:
+        counts = {"lock-step": metrics.get("law_failures")}
+    failed = {name: n for name, n in counts.items() if isinstance(n, int) and n > 0}
+    if not failed:
+        return f"{law} (no failure)" if launch or "law_failures" in metrics else law
+    worst = max(failed, key=lambda k: failed[k])
+    return (f"{law}: FAILED {sum(failed.values())} times, the vehicle held (most: {worst} "
+            f"{failed[worst]}; its log has the traceback)")
+
+
 def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
     metrics, info = _read(run_dir / "metrics.json"), _read(run_dir / "run.json")
     launch = _read(run_dir / "launch.json")
@@ -158,6 +188,10 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
               _num(info.get(bound)) or PAPER_BOUNDS[bound])
         for key, label, unit, bound in BOUNDED
     )
+    if "min_separation_m" in metrics:  # runs recorded before it was measured have none
+        checks += (Check("min_separation_m", "closest approach", "m",
+                         _num(metrics["min_separation_m"]),
+                         _num(info.get("safety_distance_m")) or 1.0, floor=True),)
     live = launch.get("live_url")
     load = _dict(launch.get("load"))
     ticks = _dict(load.get("ticks"))
@@ -168,7 +202,21 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
         tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
         bool(launch), load_line(load), overrun_line(ticks), memory_line(load),
         silent_followers(metrics), recording_line(metrics), launch_refusals(launch),
+        law_line(info, metrics, launch), network_lines(metrics),
     )
+
+
+def network_lines(metrics: dict[str, Any]) -> tuple[str, ...]:
+    """One line per network fault of metrics.json's "net_faults"."""
+    lines = []
+    for f in metrics.get("net_faults") or []:
+        if not isinstance(f, dict):
+            continue
+        back, sep = _num(f.get("recovery_s")), _num(f.get("min_separation_m"))
+        lines.append(f"{f.get('label')}: " + ("never back inside the bounds" if back is None
+                                              else f"back inside the bounds {back:.1f} s after")
+                     + ("" if sep is None else f", closest approach {sep:.2f} m"))
+    return tuple(lines)
 
 
 def verdict_json(v: Verdict) -> dict[str, Any]:
@@ -186,6 +234,8 @@ def verdict_json(v: Verdict) -> dict[str, Any]:
         "memory": v.memory,
         "late_ticks": v.ticks,
         "recording": v.recording,
+        "law": v.law,
+        "network": list(v.network),
         "run_dir": str(v.run_dir),
     }}
 
@@ -211,12 +261,14 @@ def print_verdict(console: Console, v: Verdict) -> None:
         grid.add_column()
     if v.error is None:
         for c in v.checks:
-            u = f" {c.unit}" if c.unit else ""
-            mark = Text("ok", style="green") if c.inside else Text("OVER", style="bold red")
-            grid.add_row(f"  {c.label}", c.text(), f"< {c.bound:g}{u}", mark)
+            over = "UNDER" if c.floor else "OVER"
+            mark = Text("ok", style="green") if c.inside else Text(over, style="bold red")
+            grid.add_row(f"  {c.label}", c.text(), c.bound_text(), mark)
         console.print(grid)
     settle = _num(v.metrics.get("settle_time_s"))
     rows = [] if v.error else [("settle time", "never" if settle is None else f"{settle:.1f} s")]
+    rows += [("law", v.law)] if v.law else []
+    rows += [("network", line) for line in v.network]
     if v.silent:
         n = len(v.metrics.get("followers") or {}) or None
         rows.append(("silent", silent_text(v.silent, n)))

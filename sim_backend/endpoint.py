@@ -12,7 +12,13 @@ ardupilotmega, or garbage that happens to frame) cannot be CRC-checked: it is co
 
 Replies (COMMAND_ACK, PARAM_VALUE, requested messages) go to the sender; streamed
 telemetry goes to the PX4-SITL-style default destination and to every address
-that talked to the vehicle recently, bundled into one datagram per tick.
+that talked to the vehicle recently (its peers), bundled into one datagram per tick.
+A vehicle that enforces signing takes as a peer only an address that sent it a frame
+signed with its key: an unsigned HEARTBEAT (accepted, as on PX4) buys no telemetry, and
+a full peer table refuses a newcomer (`peers_refused`) rather than evict a live peer.
+Without signing, any sender is a peer and a newcomer evicts the stalest (as PX4 SITL).
+
+What is read per tick is bounded (agents.mavlink.rx_gate: `gate`, `VEHICLE_BUDGET`).
 """
 
 from __future__ import annotations
@@ -25,7 +31,8 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from agents.mavlink.signing import SignatureVerifier
+from agents.mavlink.rx_gate import VEHICLE_BUDGET, RxGate
+from agents.mavlink.signing import IFLAG_SIGNED, SignatureVerifier
 from agents.mavlink.wire import MAVLinkMessage as Msg
 from agents.mavlink.wire import decode_datagram, encode, new_codec, sign_outgoing, signature_ok
 from agents.scenario.model import HomeConfig
@@ -96,18 +103,29 @@ class VehicleEndpoint:
         # Set when the vehicle enforces MAVLink 2 signing (like PX4 with a key): received
         # messages failing it are dropped and counted (signing_rejected_<reason>).
         self.verifier: SignatureVerifier | None = None
+        self.gate = RxGate(f"vehicle {sysid}", VEHICLE_BUDGET, counters)
         protocols.apply_params(self)
 
-    def enforce_signing(self, key: bytes, link_id: int = 0) -> None:
+    def enforce_signing(self, key: bytes, link_id: int = 0,
+                        key_of_vehicle: Callable[[int], bytes | None] | None = None) -> None:
         """Behave as a PX4 vehicle with a signing key: drop what is not signed with it, and
-        sign everything sent, so that forged telemetry is told apart at the agent too."""
-        self.verifier = SignatureVerifier(key)
+        sign everything sent, so that forged telemetry is told apart at the agent too.
+        `key_of_vehicle`: the other vehicles' keys, to name the key of a frame signed with
+        one of them (agents.mavlink.signing.SignatureVerifier)."""
+        self.verifier = SignatureVerifier(key, key_of_vehicle=key_of_vehicle)
+        self.gate.verifier = self.verifier
         sign_outgoing(self.mav, key, link_id, self.verifier.now_ticks())
 
     # ---- receive ------------------------------------------------------------------------
     def on_datagram(self, data: bytes, addr: Addr, now_s: float, row: tm.Row) -> None:
         """The one entry point for a received UDP datagram; never raises."""
         self.counters["rx_datagrams"] += 1
+        admitted = self.gate.admit(data, addr, now_s)
+        if admitted:
+            self.parse_datagram(admitted, addr, now_s, row)
+
+    def parse_datagram(self, data: bytes, addr: Addr, now_s: float, row: tm.Row) -> None:
+        """Decode, verify and dispatch a datagram the gate let through; never raises."""
         decoded = decode_datagram(self.rx_codec, data)
         if decoded.bad:
             self.counters["bad_packets"] += decoded.bad
@@ -115,8 +133,10 @@ class VehicleEndpoint:
             self.counters["unknown_types"] += decoded.unknown
         messages = [m for m in decoded.messages
                     if signature_ok(self.verifier, m, self.counters)]
-        if messages:
+        if self.verifier is None and messages:
             self._remember(addr, now_s)
+        elif any(m._header.incompat_flags & IFLAG_SIGNED for m in messages):
+            self._remember_signed(addr, now_s)
         rx = Rx(addr, now_s, row)
         for msg in messages:
             self.dispatch(msg, rx)
@@ -162,6 +182,17 @@ class VehicleEndpoint:
         if addr not in self.peers and len(self.peers) >= MAX_PEERS:
             oldest = min(self.peers, key=self.peers.__getitem__)
             del self.peers[oldest]
+        self.peers[addr] = now_s
+
+    def _remember_signed(self, addr: Addr, now_s: float) -> None:
+        """A signed sender's address as a peer; a full table makes room only from a peer
+        silent for PEER_TIMEOUT_S (it would have been dropped at the next telemetry)."""
+        if addr not in self.peers and len(self.peers) >= MAX_PEERS:
+            stale = min(self.peers, key=self.peers.__getitem__)
+            if now_s - self.peers[stale] <= PEER_TIMEOUT_S:
+                self.counters["peers_refused"] += 1
+                return
+            del self.peers[stale]
         self.peers[addr] = now_s
 
     # ---- send ---------------------------------------------------------------------------

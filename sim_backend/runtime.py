@@ -41,7 +41,6 @@ log = logging.getLogger(__name__)
 TickHook = Callable[[float, model.FleetState], None]
 MAX_CATCHUP_S = 30.0  # a longer stall (a debugger, a laptop lid) is dropped, counted, logged
 MAX_VEHICLES = 255
-CATCH_UP_DRAIN = 1024  # datagrams per vehicle taken before a catch-up (a socket buffer's worth)
 QUEUED_ROUNDS = 16  # rounds over the ready sockets when taking what is queued
 
 
@@ -50,6 +49,8 @@ class Simulator:
 
     def __init__(self, spawn_ned_m: np.ndarray, vehicle: VehicleConfig, home: HomeConfig,
                  cfg: SimConfig, clock: Callable[[], float] = time.monotonic) -> None:
+        if cfg.signing_secret is not None and cfg.signing_key is not None:
+            raise SimulatorError("signing: a run secret (a key per vehicle) or one key, not both")
         if cfg.flavour not in FLAVOURS:
             raise SimulatorError(f"flavour must be one of {FLAVOURS}, got {cfg.flavour!r}")
         if not 1 <= len(spawn_ned_m) <= MAX_VEHICLES:
@@ -70,6 +71,7 @@ class Simulator:
         self._clock = clock
         self._origin_s: float | None = None  # clock reading at boot time 0 while run() paces
         self._selector = selectors.DefaultSelector()
+        self._resting: list[int] = []  # vehicles off the selector: their tick's budget is spent
         self.endpoints: list[VehicleEndpoint] = []
         self.clocks: list[ClockService] = []
         self._rows: list[Row] = []
@@ -80,6 +82,8 @@ class Simulator:
             self.close()
             raise SimulatorError(f"cannot bind vehicle {len(self.endpoints)}: {exc}") from exc
         self._rows = self._build_rows()
+        self._keys = {i + 1: ep.verifier.key for i, ep in enumerate(self.endpoints)
+                      if ep.verifier is not None}
 
     def _open_endpoint(self, i: int, vehicle: VehicleConfig, home: HomeConfig) -> VehicleEndpoint:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -98,8 +102,9 @@ class Simulator:
         endpoint = VehicleEndpoint(sysid, sock, dest, autopilot, store, home,
                                    self.cfg.telemetry_hz, self.counters, index=i, tick_s=self.dt_s,
                                    messages=self.messages)
-        if self.cfg.signing_key is not None:
-            endpoint.enforce_signing(self.cfg.signing_key)
+        key = self.cfg.vehicle_key(sysid)
+        if key is not None:  # the others' keys: built once every endpoint is open
+            endpoint.enforce_signing(key, key_of_vehicle=lambda s: self._keys.get(s))
         self._selector.register(sock, selectors.EVENT_READ, i)
         self.clocks.append(ClockService(endpoint.mav, endpoint.send_to, self.boot_time_s, time.time,
                                         self.counters).attach(endpoint))
@@ -113,8 +118,9 @@ class Simulator:
         return [ep.sock.getsockname()[1] for ep in self.endpoints]
 
     def close(self) -> None:
-        for ep in self.endpoints:
-            self._selector.unregister(ep.sock)
+        for i, ep in enumerate(self.endpoints):
+            if i not in self._resting:
+                self._selector.unregister(ep.sock)
             ep.sock.close()
         self.endpoints = []
         self.clocks = []
@@ -154,6 +160,24 @@ class Simulator:
         for hook in self.on_tick:
             hook(self.sim_time_s, self.state)
         self.stats.ticks += 1
+        self._new_budgets()
+
+    def _new_budgets(self) -> None:
+        """A new tick: every vehicle's receive budget afresh (first the datagram the last
+        one had no room for), every socket read again."""
+        self._take_carried()
+        for i in self._resting:
+            self._selector.register(self.endpoints[i].sock, selectors.EVENT_READ, i)
+        self._resting.clear()
+
+    def _take_carried(self) -> None:
+        """Handle the datagrams the last tick read but had no budget left to parse (each
+        gate then starts a new tick): at a tick's end, and when the run stops, so that a
+        datagram taken off its socket is never lost."""
+        for i, ep in enumerate(self.endpoints):
+            carried = ep.gate.new_tick()
+            if carried is not None and carried[1] is not None:
+                ep.parse_datagram(carried[0], carried[1], self.boot_time_s(), self._rows[i])
 
     def _write_control(self, changed: list[tuple[int, ControlRow]]) -> None:
         """Changed control rows (every vehicle, while setpoints stream): one write per field."""
@@ -197,8 +221,17 @@ class Simulator:
                 return
 
     def _take(self, i: int) -> bool:
-        """Handle one datagram of vehicle i's socket; False when none was queued."""
+        """Handle one datagram of vehicle i's socket; False when none was queued or its
+        budget for this tick is spent (its socket then rests off the selector until the
+        next tick: the rest waits in its buffer, and a flood on one vehicle's port costs
+        the simulator one budget a tick, agents.mavlink.rx_gate)."""
         ep = self.endpoints[i]
+        if not ep.gate.open:
+            if i not in self._resting:
+                self._selector.unregister(ep.sock)
+                self._resting.append(i)
+            self.counters["mav_budget_spent"] += 1
+            return False
         try:
             data, addr = ep.sock.recvfrom(65535)
         except (BlockingIOError, InterruptedError):
@@ -209,10 +242,9 @@ class Simulator:
         ep.on_datagram(data, addr, self.boot_time_s(), self._rows[i])
         return True
 
-    def _drain(self, i: int, most: int) -> None:
-        for _ in range(most):  # bounded so one chatty peer cannot starve the others
-            if not self._take(i):
-                return
+    def _drain(self, i: int) -> None:
+        while self._take(i):  # bounded by the vehicle's budget for the tick
+            pass
 
     # ---- real time ----------------------------------------------------------------------
     def boot_time_s(self) -> float:
@@ -240,6 +272,7 @@ class Simulator:
                     self.stats.overruns += 1
                     self.stats.max_late_s = max(self.stats.max_late_s, late_s)
         finally:
+            self._take_carried()
             self._origin_s = None
         return self.stats
 
@@ -252,7 +285,7 @@ class Simulator:
         # Everything that waited out the stall, on every socket, is taken now (stamped with
         # the boot time it is taken at): a setpoint sent in time must not count as missing.
         for i in range(self.n):
-            self._drain(i, CATCH_UP_DRAIN)
+            self._drain(i)
         limit = int(MAX_CATCHUP_S / self.dt_s)
         if behind > limit:
             dropped_s = (behind - limit) * self.dt_s

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.frames import enu_to_ned
+from agents.mavlink.signing import vehicle_key
 from agents.scenario.model import Scenario
 
 
@@ -26,7 +27,16 @@ class SimConfig:
     host: str = "127.0.0.1"
     listen_base_port: int = 14580
     send_base_port: int = 14540
-    signing_key: bytes | None = None  # vehicles enforce MAVLink 2 signing with this key
+    # Vehicles enforce MAVLink 2 signing: each with its own key derived from this run
+    # secret (agents.mavlink.signing.vehicle_key), or all with one key.  At most one of them.
+    signing_secret: bytes | None = None
+    signing_key: bytes | None = None
+
+    def vehicle_key(self, sysid: int) -> bytes | None:
+        """The key vehicle `sysid` signs and verifies with; None: unsigned."""
+        if self.signing_secret is not None:
+            return vehicle_key(self.signing_secret, sysid)
+        return self.signing_key
 
 
 @dataclass(frozen=True)

@@ -82,12 +82,13 @@ class SynthRun:
     def state(self, stamper: Stamper, i: int, t_s: float) -> FollowerState:
         pos = formation_m(self.scenario, t_s)[i]
         u = (0.1 * math.cos(t_s), 0.1 * math.sin(t_s))
-        # A second-order follower's state (codec v3): rv and one velocity-stage flow, so the
-        # recorder's paths (MCAP JSON, read-back) carry every field.
+        # Its law's fields (the robust estimator's link sums and rates towards its
+        # successor), so the recorder's paths (MCAP JSON, read-back) carry them.
+        succ = (i + 1) % self.scenario.n
+        law = {"link_sums_m": ((succ, 0.01, -0.01),), "link_rates_m_s": ((succ, 0.0, 0.5),)}
         return FollowerState(stamper.header(self.start_stamp_s + t_s), i, vec2(lap_m(t_s)),
-                             LAP_VEL_M_S, (0.0, 0.0), vec2(pos), LAP_VEL_M_S, u,
-                             self.start_stamp_s + t_s, rv_m_s=LAP_VEL_M_S,
-                             rv_flows=(((i + 1) % self.scenario.n, 0.01, -0.01, 0.0, 0.5),))
+                             LAP_VEL_M_S, vec2(pos), LAP_VEL_M_S, u,
+                             self.start_stamp_s + t_s, law)
 
     def control(self, stamper: Stamper, command: str) -> RunControl:
         return RunControl(stamper.header(), command, self.start_stamp_s, self.duration_s)

@@ -15,9 +15,9 @@ process holding the right key could still send wrong -- or what arrives with `--
   same rule holds the stamps inside a message (a state's vehicle stamp, an observation's
   observed stamp), and an observation cannot be observed after it was sent;
 - values: every number finite, positions within `max_pos_m` of the origin, speeds below
-  `max_speed_m_s` (no vehicle flies faster: a value beyond is a forgery or a fault),
-  accelerations (the rates of the second-order estimator's velocity flows) below
-  `max_accel_m_s2`.
+  `max_speed_m_s` (no vehicle flies faster: a value beyond is a forgery or a fault); a
+  law's own fields are held to the kinds and bounds it declared by a receiver that knows
+  the law (transport.law_fields, in the decoder), and are finite once decoded.
 A refusal is a short reason string, counted by the decoder as `drop_rejected_<reason>`.
 
 Every message a process accepts passes here, so the common case is cheap: the numbers of
@@ -52,10 +52,6 @@ class Limits:
     max_age_s: float = 60.0
     max_pos_m: float = 1e5
     max_speed_m_s: float = 1e3
-    # Rates of the second-order estimator's velocity-stage flows (FollowerState.rv_flows):
-    # finite-time consensus drives them hard for a moment, so the bound only catches a
-    # forgery or a fault, as the others do (no vehicle or target accelerates at 1000 g).
-    max_accel_m_s2: float = 1e4
 
 
 DEFAULT_LIMITS = Limits()
@@ -192,21 +188,18 @@ def _observation_reason(msg: TargetObservation, now_s: float, lim: Limits) -> st
 
 
 def _follower_reason(msg: FollowerState, now_s: float, lim: Limits) -> str | None:
-    """As _follower_reason_exact, in straight-line code when every number is finite."""
+    """As _follower_reason_exact, in straight-line code when every number is finite.  The
+    law's fields are not looked at: the codec decodes only finite ones, and a receiver
+    that knows the law holds them to its declaration (transport.law_fields.reason, in
+    transport.decoder)."""
     try:
         r0, r1 = msg.r_m
-        p0, p1 = msg.phi_m
         x0, x1 = msg.pos_m
         d0, d1 = msg.dr_m_s
         v0, v1 = msg.vel_m_s
         u0, u1 = msg.u_m_s
-        w0, w1 = msg.rv_m_s
         vst = msg.vehicle_stamp_s
-        s = r0 + r1 + p0 + p1 + x0 + x1 + d0 + d1 + v0 + v1 + u0 + u1 + w0 + w1 + vst
-        for _, fx, fy, rx, ry in msg.link_flows:
-            s += fx + fy + rx + ry
-        for _, fx, fy, rx, ry in msg.rv_flows:
-            s += fx + fy + rx + ry
+        s = r0 + r1 + x0 + x1 + d0 + d1 + v0 + v1 + u0 + u1 + vst
     except (TypeError, ValueError, OverflowError):  # not numbers, or not pairs
         return _follower_reason_exact(msg, now_s, lim)
     if not (type(s) is float and s - s == 0.0):
@@ -214,38 +207,22 @@ def _follower_reason(msg: FollowerState, now_s: float, lim: Limits) -> str | Non
     if vst > now_s + lim.future_s:
         return "future_stamp"
     hypot, pos_max, speed_max = math.hypot, lim.max_pos_m, lim.max_speed_m_s
-    if not (hypot(r0, r1) <= pos_max and hypot(p0, p1) <= pos_max and hypot(x0, x1) <= pos_max
+    if not (hypot(r0, r1) <= pos_max and hypot(x0, x1) <= pos_max
             and hypot(d0, d1) <= speed_max and hypot(v0, v1) <= speed_max
-            and hypot(u0, u1) <= speed_max and hypot(w0, w1) <= speed_max):
+            and hypot(u0, u1) <= speed_max):
         return "impossible"
-    for _, fx, fy, rx, ry in msg.link_flows:
-        if not (hypot(fx, fy) <= pos_max and hypot(rx, ry) <= speed_max):
-            return "impossible"
-    accel_max = lim.max_accel_m_s2
-    for _, fx, fy, rx, ry in msg.rv_flows:
-        if not (hypot(fx, fy) <= speed_max and hypot(rx, ry) <= accel_max):
-            return "impossible"
     return None
 
 
 def _follower_reason_exact(msg: FollowerState, now_s: float, lim: Limits) -> str | None:
-    positions = [msg.r_m, msg.phi_m, msg.pos_m]
-    speeds = [msg.dr_m_s, msg.vel_m_s, msg.u_m_s, msg.rv_m_s]
-    flows = [f[1:] for f in msg.link_flows]
-    rv_flows = [f[1:] for f in msg.rv_flows]
-    numbers = [*(x for v in positions + speeds + flows + rv_flows for x in v),
-               msg.vehicle_stamp_s]
+    positions = [msg.r_m, msg.pos_m]
+    speeds = [msg.dr_m_s, msg.vel_m_s, msg.u_m_s]
+    numbers = [*(x for v in positions + speeds for x in v), msg.vehicle_stamp_s]
     if not _finite(numbers):
         return "nonfinite"
     if msg.vehicle_stamp_s > now_s + lim.future_s:
         return "future_stamp"
     if not (_bounded(positions, lim.max_pos_m) and _bounded(speeds, lim.max_speed_m_s)):
-        return "impossible"
-    if not _bounded([f[:2] for f in flows], lim.max_pos_m) or not _bounded(
-            [f[2:] for f in flows], lim.max_speed_m_s):
-        return "impossible"
-    if not _bounded([f[:2] for f in rv_flows], lim.max_speed_m_s) or not _bounded(
-            [f[2:] for f in rv_flows], lim.max_accel_m_s2):
         return "impossible"
     return None
 

@@ -4,7 +4,7 @@ Processes on several hosts stamp with clocks that differ (an offset of seconds, 
 of up to 100 ppm).  To test that data stamped on one host are aged correctly on another
 without several machines, a process can be given a skewed clock through its environment:
 
-    ENCLOSE_CLOCK_OFFSET_S=1.3 ENCLOSE_CLOCK_DRIFT_PPM=50 python -m agents.follower ...
+    ENCLOSE_CLOCK_OFFSET_S=1.3 ENCLOSE_CLOCK_DRIFT_PPM=50 python -m agents.follower.main ...
 
 Every stamp the process makes (bus.now_s(), hence headers, ticks, the MAVLink clock map)
 then comes from this clock.  Used by tests and `enclose run --hosts K` only; unset, the

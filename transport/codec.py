@@ -30,6 +30,7 @@ import msgpack
 from transport import codec_fast
 from transport.codec_twins import TWINS
 from transport.errors import CodecError
+from transport.law_fields import MAX_FIELDS, MAX_LINKS, MAX_NAME, LawValue
 from transport.messages import (
     PROCESS_STATES,
     RUN_COMMANDS,
@@ -43,8 +44,9 @@ from transport.messages import (
     TruthSnapshot,
 )
 
-# 2: FollowerState.link_flows (robust estimator); 3: its rv_m_s, rv_flows (second order)
-CODEC_VERSION = 3
+# 2: FollowerState.link_flows (robust estimator); 3: its rv_m_s, rv_flows (second order);
+# 4: the law's fields in FollowerState.law, in place of its paper-law fields
+CODEC_VERSION = 4
 MIN_VERSION = 1
 MAX_PAYLOAD_BYTES = 1 << 16
 _MAX_ITEMS = 256  # longest list/map accepted (vehicles in a snapshot, counters)
@@ -54,17 +56,15 @@ _HEADER_LEN = 5
 @dataclass(frozen=True)
 class Field:
     name: str
-    kind: str  # int float opt_float str state command vec2 vec2s vec3s counters flows echoes
+    kind: str  # int float opt_float str state command vec2 vec2s vec3s counters echoes law
     since: int = 1
 
 
 SCHEMAS: dict[type, tuple[int, tuple[Field, ...]]] = {
     FollowerState: (1, (
         Field("index", "int"), Field("r_m", "vec2"), Field("dr_m_s", "vec2"),
-        Field("phi_m", "vec2"), Field("pos_m", "vec2"), Field("vel_m_s", "vec2"),
-        Field("u_m_s", "vec2"), Field("vehicle_stamp_s", "float"),
-        Field("link_flows", "flows", since=2),
-        Field("rv_m_s", "vec2", since=3), Field("rv_flows", "flows", since=3),
+        Field("pos_m", "vec2"), Field("vel_m_s", "vec2"), Field("u_m_s", "vec2"),
+        Field("vehicle_stamp_s", "float"), Field("law", "law", since=4),
     )),
     TargetObservation: (2, (
         Field("observer_index", "int"), Field("target_index", "int"), Field("pos_m", "vec2"),
@@ -86,6 +86,9 @@ SCHEMAS: dict[type, tuple[int, tuple[Field, ...]]] = {
     ClockProbe: (6, (Field("epoch_s", "float"), Field("echoes", "echoes"))),
 }
 _BY_TAG = {tag: (cls, fields) for cls, (tag, fields) in SCHEMAS.items()}
+# A type whose earlier fields were removed: its older payloads are refused ("version").
+# FollowerState before 4 carried the paper's law in fixed fields.
+_SINCE = {1: 4}
 
 
 def _fail(reason: str, detail: str) -> CodecError:
@@ -125,11 +128,30 @@ def _vec(v: Any, name: str, dim: int) -> tuple[float, ...]:
     return tuple(_float(x, name) for x in _seq(v, name, dim))
 
 
-def _flow(v: Any, name: str) -> tuple[int, float, float, float, float]:
-    """(neighbour index, running sum x, y, current rate x, y): [m], [m/s] for link_flows,
-    one derivative up for rv_flows."""
-    j, fx, fy, rx, ry = _seq(v, name, 5)
-    return (_int(j, name), _float(fx, name), _float(fy, name), _float(rx, name), _float(ry, name))
+def _law(v: Any, name: str) -> dict[str, LawValue]:
+    """A law's fields (transport.law_fields): a map of <= MAX_FIELDS names to a float, a
+    pair of floats, or a list of <= MAX_LINKS (neighbour, x, y)."""
+    if not isinstance(v, dict) or len(v) > MAX_FIELDS:
+        raise _fail("type", f"{name} must be a map of <= {MAX_FIELDS} fields")
+    out: dict[str, LawValue] = {}
+    for key, value in v.items():
+        if not isinstance(key, str) or not 0 < len(key) <= MAX_NAME:
+            raise _fail("type", f"{name}: a field name must be a string of <= {MAX_NAME}")
+        where = f"{name}.{key}"
+        if isinstance(value, list | tuple) and value and not isinstance(value[0], list | tuple):
+            out[key] = (_float(_seq(value, where, 2)[0], where), _float(value[1], where))
+        elif isinstance(value, list | tuple):
+            if len(value) > MAX_LINKS:
+                raise _fail("type", f"{where}: more than {MAX_LINKS} links")
+            out[key] = tuple(_link(x, where) for x in value)
+        else:
+            out[key] = _float(value, where)
+    return out
+
+
+def _link(v: Any, name: str) -> tuple[int, float, float]:
+    j, x, y = _seq(v, name, 3)
+    return (_int(j, name), _float(x, name), _float(y, name))
 
 
 def _echo(v: Any, name: str) -> tuple[str, float, float]:
@@ -170,15 +192,17 @@ def _check(kind: str, v: Any, name: str) -> Any:
         return tuple(_vec(x, name, dim) for x in _seq(v, name))
     if kind == "counters":
         return _counters(v, name)
-    if kind == "flows":
-        return tuple(_flow(x, name) for x in _seq(v, name))
+    if kind == "law":
+        return _law(v, name)
     if kind == "echoes":
         return tuple(_echo(x, name) for x in _seq(v, name))
     raise AssertionError(f"unknown field kind {kind}")
 
 
 def _wire(kind: str, v: Any) -> Any:
-    if kind in ("vec2", "vec2s", "vec3s", "flows", "echoes"):
+    if kind == "law":
+        return dict(v)  # msgpack packs a tuple as it does a list
+    if kind in ("vec2", "vec2s", "vec3s", "echoes"):
         return [list(x) for x in v] if kind != "vec2" else list(v)
     return v
 
@@ -287,6 +311,8 @@ def _decode_walk(obj: list[Any]) -> Message:
     if isinstance(tag, bool) or not isinstance(tag, int | str) or tag not in _BY_TAG:
         raise _fail("unknown_type", f"type tag {tag!r}")
     cls, fields = _BY_TAG[tag]
+    if version < _SINCE.get(tag, MIN_VERSION):
+        raise _fail("version", f"{cls.__name__} v{version} is older than v{_SINCE[tag]}")
     present = [f for f in fields if f.since <= version]
     if len(obj) != _HEADER_LEN + len(present):
         raise _fail("schema", f"{cls.__name__} v{version} needs {len(present)} fields")

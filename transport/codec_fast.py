@@ -28,16 +28,16 @@ from collections.abc import Callable
 from typing import Any
 
 from transport.fastbuild import NEW, SET
+from transport.law_fields import MAX_FIELDS, MAX_LINKS, MAX_NAME, LawValue
 from transport.messages import (
     FollowerState,
     Header,
-    LinkFlow,
     Message,
     TargetObservation,
     TruthSnapshot,
 )
 
-VERSION = 3  # the codec version the twins write and read
+VERSION = 4  # the codec version the twins write and read
 MAX_STR = 256
 MAX_ITEMS = 256
 _NAN = float("nan")
@@ -91,82 +91,111 @@ def _vec3s_sum(vecs: Any, seq_type: Any) -> float:
     return s
 
 
-def _flows_in(flows: Any) -> tuple[LinkFlow, ...] | None:
-    """The link flows in a decoded list of <= MAX_ITEMS lists of a non-negative int and 4 exact
-    floats, as tuples; None if it is not one, or a number is not finite."""
-    if type(flows) is not list or len(flows) > MAX_ITEMS:
-        return None
-    if not flows:
-        return ()
+def _law_sum(law: Any, seq_type: Any) -> float:
+    """Sum of the numbers of a law's fields (transport.law_fields), given as a dict of
+    <= MAX_FIELDS str keys to an exact float, a `seq_type` of 2 exact floats, or a
+    `seq_type` of <= MAX_LINKS `seq_type`s of a non-negative int and 2 exact floats; NaN
+    if it is not one."""
+    if type(law) is not dict or len(law) > MAX_FIELDS:
+        return _NAN
     s = 0.0
-    out = []
-    for j, fx, fy, rx, ry in flows:
-        if not (type(j) is int and j >= 0 and type(fx) is float and type(fy) is float
-                and type(rx) is float and type(ry) is float):
+    for key, value in law.items():
+        if type(key) is not str or not 0 < len(key) <= MAX_NAME:
+            return _NAN
+        if type(value) is float:
+            s += value
+        elif type(value) is not seq_type or len(value) > MAX_LINKS:
+            return _NAN
+        elif value and type(value[0]) is float:
+            x, y = value
+            if type(y) is not float:
+                return _NAN
+            s += x + y
+        else:
+            for link in value:
+                if type(link) is not seq_type:
+                    return _NAN
+                j, x, y = link
+                if not (type(j) is int and j >= 0 and type(x) is float and type(y) is float):
+                    return _NAN
+                s += x + y
+    return s
+
+
+def _law_in(law: Any) -> dict[str, LawValue] | None:
+    """A decoded law map (transport.law_fields) with its lists as tuples, checked as
+    _law_sum checks it, in one pass; None if it is not one."""
+    if type(law) is not dict or len(law) > MAX_FIELDS:
+        return None
+    out: dict[str, LawValue] = {}
+    s = 0.0
+    for key, value in law.items():
+        if type(key) is not str or not 0 < len(key) <= MAX_NAME:
             return None
-        s += fx + fy + rx + ry
-        out.append((j, fx, fy, rx, ry))
-    return tuple(out) if s - s == 0.0 else None
+        if type(value) is float:
+            s += value
+            out[key] = value
+        elif type(value) is not list or len(value) > MAX_LINKS:
+            return None
+        elif value and type(value[0]) is float:
+            x, y = value
+            if type(y) is not float:
+                return None
+            s += x + y
+            out[key] = (x, y)
+        else:
+            links = []
+            for j, x, y in value:
+                if not (type(j) is int and j >= 0 and type(x) is float and type(y) is float):
+                    return None
+                s += x + y
+                links.append((j, x, y))
+            out[key] = tuple(links)
+    return out if s - s == 0.0 else None
 
 
 # ---- FollowerState, TargetObservation, TruthSnapshot: 50-200 Hz -----------------------------
 def enc_follower_state(m: FollowerState) -> Wire | None:
     h = m.header
     sid, seq, st, idx, vst = h.sender_id, h.seq, h.stamp_s, m.index, m.vehicle_stamp_s
-    r, dr, phi, pos, vel, u, rv = m.r_m, m.dr_m_s, m.phi_m, m.pos_m, m.vel_m_s, m.u_m_s, m.rv_m_s
-    flows, rv_flows = m.link_flows, m.rv_flows
+    r, dr, pos, vel, u, law = m.r_m, m.dr_m_s, m.pos_m, m.vel_m_s, m.u_m_s, m.law
     if not (head_ok(sid, seq, st) and type(idx) is int and idx >= 0 and type(vst) is float
-            and type(r) is tuple and type(dr) is tuple and type(phi) is tuple
-            and type(pos) is tuple and type(vel) is tuple and type(u) is tuple
-            and type(rv) is tuple and type(flows) is tuple and len(flows) <= MAX_ITEMS
-            and type(rv_flows) is tuple and len(rv_flows) <= MAX_ITEMS):
+            and type(r) is tuple and type(dr) is tuple and type(pos) is tuple
+            and type(vel) is tuple and type(u) is tuple):
         return None
-    s = st + vst
-    for x, y in (r, dr, phi, pos, vel, u, rv):
+    s = st + vst + _law_sum(law, tuple)
+    for x, y in (r, dr, pos, vel, u):
         if type(x) is not float or type(y) is not float:
             return None
         s += x + y
-    for f in flows + rv_flows:  # both of exact type tuple: one loop, no copy if one is ()
-        if type(f) is not tuple:
-            return None
-        j, fx, fy, rx, ry = f
-        if not (type(j) is int and j >= 0 and type(fx) is float and type(fy) is float
-                and type(rx) is float and type(ry) is float):
-            return None
-        s += fx + fy + rx + ry
     if s - s != 0.0:
         return None
-    return [VERSION, 1, sid, seq, st, idx, r, dr, phi, pos, vel, u, vst, flows, rv, rv_flows]
+    return [VERSION, 1, sid, seq, st, idx, r, dr, pos, vel, u, vst, law]
 
 
 def dec_follower_state(o: Wire) -> FollowerState | None:
-    _, _, sid, seq, st, idx, r, dr, phi, pos, vel, u, vst, flows, rv, rv_flows = o
+    _, _, sid, seq, st, idx, r, dr, pos, vel, u, vst, law = o
     if not (head_ok(sid, seq, st) and type(idx) is int and idx >= 0 and type(vst) is float):
         return None
     r0, r1 = r
     dr0, dr1 = dr
-    phi0, phi1 = phi
     pos0, pos1 = pos
     vel0, vel1 = vel
     u0, u1 = u
-    rv0, rv1 = rv
     if not (type(r0) is float and type(r1) is float and type(dr0) is float
-            and type(dr1) is float and type(phi0) is float and type(phi1) is float
-            and type(pos0) is float and type(pos1) is float and type(vel0) is float
-            and type(vel1) is float and type(u0) is float and type(u1) is float
-            and type(rv0) is float and type(rv1) is float):
+            and type(dr1) is float and type(pos0) is float and type(pos1) is float
+            and type(vel0) is float and type(vel1) is float and type(u0) is float
+            and type(u1) is float):
         return None
-    s = (st + vst + r0 + r1 + dr0 + dr1 + phi0 + phi1 + pos0 + pos1 + vel0 + vel1 + u0 + u1
-         + rv0 + rv1)
-    out_flows, out_rv_flows = _flows_in(flows), _flows_in(rv_flows)
-    if s - s != 0.0 or out_flows is None or out_rv_flows is None:
+    s = st + vst + r0 + r1 + dr0 + dr1 + pos0 + pos1 + vel0 + vel1 + u0 + u1
+    fields = _law_in(law)
+    if s - s != 0.0 or fields is None:
         return None
     m = NEW(FollowerState)
     SET(m, "__dict__", {
         "header": header(sid, seq, st), "index": idx, "r_m": (r0, r1), "dr_m_s": (dr0, dr1),
-        "phi_m": (phi0, phi1), "pos_m": (pos0, pos1), "vel_m_s": (vel0, vel1),
-        "u_m_s": (u0, u1), "vehicle_stamp_s": vst, "link_flows": out_flows,
-        "rv_m_s": (rv0, rv1), "rv_flows": out_rv_flows})
+        "pos_m": (pos0, pos1), "vel_m_s": (vel0, vel1), "u_m_s": (u0, u1),
+        "vehicle_stamp_s": vst, "law": fields})
     return m
 
 

@@ -129,9 +129,8 @@ def dec_run_control(o: Wire) -> RunControl | None:
 # Each twin pair and the schema it implements: tag, then `name:kind` per field in order
 # (`@n`: since codec version n), as in codec.SCHEMAS.
 TWINS: dict[type, tuple[int, str, Encoder, Decoder]] = {
-    FollowerState: (1, "index:int r_m:vec2 dr_m_s:vec2 phi_m:vec2 pos_m:vec2 vel_m_s:vec2 "
-                    "u_m_s:vec2 vehicle_stamp_s:float link_flows:flows@2 rv_m_s:vec2@3 "
-                    "rv_flows:flows@3",
+    FollowerState: (1, "index:int r_m:vec2 dr_m_s:vec2 pos_m:vec2 vel_m_s:vec2 u_m_s:vec2 "
+                    "vehicle_stamp_s:float law:law@4",
                     enc_follower_state, dec_follower_state),
     TargetObservation: (2, "observer_index:int target_index:int pos_m:vec2 "
                         "observed_stamp_s:float noise_std_m:opt_float",

@@ -4,7 +4,8 @@ A `Decoder` belongs to one process loop.  Every payload that fails to decode
 is dropped and counted under its `CodecError.reason`; a message whose type is
 not expected on that subscription, or that does not belong on its key (its type, the
 index it carries: transport.checks.key_reason), is dropped too, and so, given `limits`,
-is an implausible one (transport.checks).
+is an implausible one (transport.checks), and, given `law_fields`, a FollowerState whose
+law fields are not the declared ones (transport.law_fields: `rejected_law_<why>`).
 Given `senders` -- the scenario's processes (transport.access.sender_ids) -- a message
 from any other sender is dropped (`unknown_sender`), and so is one on a key that is not
 the swarm's or names another process (`unknown_key`): every table kept per sender or key
@@ -25,7 +26,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
-from collections.abc import Collection, Iterable
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass
 
 from transport.bus import Received, Subscription
@@ -33,6 +34,8 @@ from transport.checks import Limits, check, key_reason, key_rule
 from transport.codec import decode
 from transport.errors import CodecError
 from transport.fastbuild import build
+from transport.law_fields import FieldSpec
+from transport.law_fields import reason as law_reason
 from transport.messages import (
     ClockProbe,
     FollowerState,
@@ -89,8 +92,10 @@ class Decoder:
 
     def __init__(self, expect: tuple[type, ...] | None = None,
                  limits: Limits | None = None, clocks: ClockBook = PROCESS_BOOK,
-                 senders: Collection[str] | None = None) -> None:
+                 senders: Collection[str] | None = None,
+                 law_fields: Mapping[str, FieldSpec] | None = None) -> None:
         self.expect = expect
+        self.law_fields = law_fields
         self.clocks = clocks  # stamps are mapped onto our clock (transport.peer_clock)
         self.limits = limits  # with limits, implausible messages are dropped (transport.checks)
         self.senders = None if senders is None else frozenset(senders)
@@ -125,6 +130,9 @@ class Decoder:
         msg = self.clocks.to_local(msg)
         if self.limits is not None:
             reason = check(msg, rec.key, rec.recv_stamp_s, self.limits)
+            if reason is None and self.law_fields is not None and type(msg) is FollowerState \
+                    and msg.law:
+                reason = law_reason(msg.law, self.law_fields)
             if reason is not None:
                 self._drop(f"rejected_{reason}", rec.key, msg)
                 return None

@@ -69,3 +69,16 @@ class SimulatorError(EncloseError):
 
 class DeployError(EncloseError):
     """A launched process failed to start, link or exit cleanly."""
+
+
+class JournalError(EncloseError):
+    """A follower's input journal cannot be read: another version, or a damaged record.
+
+    `path` and `offset` (bytes from the file's start) name where.
+    """
+
+    def __init__(self, path: str, offset: int, reason: str) -> None:
+        super().__init__(f"{path} at byte {offset}: {reason}")
+        self.path = path
+        self.offset = offset
+        self.reason = reason

@@ -15,6 +15,10 @@ subscriptions drain the real ones and then, per link (sender, i) -- see
 - duplicate: with probability `duplicate` a delivered message is delivered twice.
 Follower links use `network.impairment(j, i)`; the sensor link (from the simulator) uses
 `network.default`.  Control, status, truth and liveliness are never impaired.
+The run's network faults (`network.faults`, transport.net_timeline) follow the timeline:
+in a partition or isolation window a cut follower link loses every message (counted
+`cut`) and its liveliness token is hidden; in a degradation window the link draws from
+the degradation's own seeded impairer instead of its own.
 
 Arrival time is the publisher's Zenoh HLC stamp, capped at the drain stamp: on one host it
 is within ~0.1 ms of the true arrival, whereas the drain stamp lags the arrival by up to a
@@ -50,6 +54,7 @@ from transport.bus import (
     Token,
 )
 from transport.link_stats import Link, link_of
+from transport.net_timeline import CutAliveWatch, NetTimeline
 from transport.network_schema import LinkImpairment, NetworkConfig
 
 MAX_WAITING = 16  # held-back messages per link; beyond, a message goes normally
@@ -59,7 +64,8 @@ _SEED_MOD = 2**63
 if TYPE_CHECKING:
     from numpy.random import Generator
 _SENSOR_KIND, _FOLLOWER_KIND = 2, 1
-COUNTS = ("offered", "dropped", "duplicated", "reordered", "delivered", "overflow")
+_DEGRADED_KIND = 3
+COUNTS = ("offered", "dropped", "duplicated", "reordered", "delivered", "overflow", "cut")
 
 
 @dataclass
@@ -72,6 +78,7 @@ class LinkCounts:
     reordered: int = 0  # held back behind a later message
     delivered: int = 0  # handed to the agent, copies included
     overflow: int = 0  # discarded because more than `capacity` were held
+    cut: int = 0  # lost to a partition or isolation window
 
 
 @dataclass(frozen=True)
@@ -179,19 +186,26 @@ class ImpairedSubscription:
             self._ready.append(rec)
             return
         imp = self._bus.impairer(link)
-        imp.counts.offered += 1
+        counts = imp.counts  # the link's, also while a degradation draws its fates
+        counts.offered += 1
+        if link.sender is not None and self._bus.faults:
+            now = self._bus.now_s()
+            if self._bus.timeline.cut(link.sender, now):
+                counts.cut += 1
+                return
+            imp = self._bus.degraded(link, now, imp)
         if imp.identity:
-            imp.counts.delivered += 1
+            counts.delivered += 1
             self._ready.append(rec)
             return
         fate = imp.fate()
         if fate.copies == 0:
-            imp.counts.dropped += 1
+            counts.dropped += 1
             return
         release = arrival_s(rec) + fate.delay_s
         copies = [_Held(release, next(self._order), rec, link.name, k == 0)
                   for k in range(fate.copies)]
-        imp.counts.duplicated += fate.copies - 1
+        counts.duplicated += fate.copies - 1
         waiting = self._waiting.setdefault(link.name, [])
         if fate.hold and len(waiting) < MAX_WAITING:
             waiting.extend(copies)
@@ -238,8 +252,11 @@ class ImpairedBus(ClosingContext):
         self._links: dict[str, Link | None] = {}
         self._impairers: dict[str, LinkImpairer] = {}
         specs = [network.default] + [s for _, dst, s in network.links if dst == receiver]
+        self.timeline = NetTimeline(network.faults, receiver)
+        self.faults = bool(network.faults)
+        self._degraders: dict[tuple[str, int], LinkImpairer] = {}
         # Every link into this receiver left alone: drains pass samples through, counted.
-        self.identity = all(s.is_identity for s in specs)
+        self.identity = all(s.is_identity for s in specs) and not self.faults
 
     @property
     def impaired(self) -> bool:
@@ -264,6 +281,24 @@ class ImpairedBus(ClosingContext):
             entropy = [self.network.seed % _SEED_MOD, kind, sender, self.receiver]
             imp = self._impairers[link.name] = LinkImpairer(spec, entropy)
         return imp
+
+    def degraded(self, link: Link, now_s: float, own: LinkImpairer) -> LinkImpairer:
+        """The impairer a follower link draws from now: a degradation's, or its own."""
+        assert link.sender is not None
+        found = self.timeline.degradation(link.sender, now_s)
+        if found is None:
+            return own
+        number, spec = found
+        imp = self._degraders.get((link.name, number))
+        if imp is None:
+            entropy = [self.network.seed % _SEED_MOD, _DEGRADED_KIND, number, link.sender,
+                       self.receiver]
+            imp = self._degraders[(link.name, number)] = LinkImpairer(spec, entropy)
+        return imp
+
+    def set_origin(self, origin_s: float) -> None:
+        """The experiment's start on this bus's clock: the network faults' time zero."""
+        self.timeline.set_origin(origin_s)
 
     def impairer_by_name(self, name: str) -> LinkImpairer:
         return self._impairers[name]
@@ -292,7 +327,7 @@ class ImpairedBus(ClosingContext):
     def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY,
                   stamp_arrival: bool = False) -> ImpairedSubscription:
         # What the impairment holds back is in flight, not queued at the receiver: a small
-        # receive queue (agents.follower_node.PEER_QUEUE) must not cap the emulated delay.
+        # receive queue (agents.follower.node.PEER_QUEUE) must not cap the emulated delay.
         held = max(capacity, DEFAULT_CAPACITY)
         inner = self.inner.subscribe(key_expr, capacity, stamp_arrival)
         return ImpairedSubscription(self, inner, held)
@@ -301,7 +336,8 @@ class ImpairedBus(ClosingContext):
         return self.inner.declare_token(key)
 
     def watch_alive(self, key_expr: str) -> AliveWatch:
-        return self.inner.watch_alive(key_expr)
+        inner = self.inner.watch_alive(key_expr)
+        return CutAliveWatch(inner, self.timeline, self.now_s) if self.faults else inner
 
     def close(self) -> None:
         self.inner.close()

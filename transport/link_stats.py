@@ -31,7 +31,7 @@ gone from it: bounded by the scenario's senders when the decoder is given them).
 from __future__ import annotations
 
 import math
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -39,6 +39,7 @@ from transport.bus import Received
 from transport.checks import Limits
 from transport.decoder import Decoder, Inbound
 from transport.keys import parse_key
+from transport.law_fields import FieldSpec
 from transport.messages import RunControl
 
 SENSOR = "sensor"
@@ -224,8 +225,9 @@ class LinkDecoder(Decoder):
     """A Decoder that also tallies, per link, unique deliveries and their age."""
 
     def __init__(self, expect: tuple[type, ...] | None = None,
-                 limits: Limits | None = None, senders: Collection[str] | None = None) -> None:
-        super().__init__(expect, limits, senders=senders)
+                 limits: Limits | None = None, senders: Collection[str] | None = None,
+                 law_fields: Mapping[str, FieldSpec] | None = None) -> None:
+        super().__init__(expect, limits, senders=senders, law_fields=law_fields)
         self.tallies: dict[str, LinkTally] = {}  # per key
         # Per link, what the processes gone from it delivered: one tally per link however
         # often its sender leaves and returns (a flapping token must not grow this).

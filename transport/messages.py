@@ -21,10 +21,10 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 from transport.bus import Clock
+from transport.law_fields import LawFields
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
-LinkFlow = tuple[int, float, float, float, float]
 ClockEcho = tuple[str, float, float]  # (peer sender id, its probe's stamp, our receive time)
 
 PROCESS_STATES = ("starting", "linked", "running", "flying", "stopping", "done", "failed")
@@ -73,25 +73,22 @@ class Stamper:
 
 @dataclass(frozen=True)
 class FollowerState:
-    """What follower `index` tells its neighbours (and the recorder) every cycle."""
+    """What follower `index` tells its neighbours (and the recorder) every step: what the
+    platform always publishes, and its law's own fields (transport.law_fields)."""
 
     header: Header
     index: int
-    r_m: Vec2  # estimate r_i of the targets' centre (LAP)
+    r_m: Vec2  # its law's estimate r_i of the targets' centre (LAP)
     dr_m_s: Vec2  # its derivative dr_i/dt
-    phi_m: Vec2  # estimator integral state Phi_i  (r_i = Phi_i + p~_i)
-    pos_m: Vec2  # own position used this cycle
-    vel_m_s: Vec2  # own velocity used this cycle
-    u_m_s: Vec2  # velocity command sent this cycle
+    pos_m: Vec2  # own position used this step
+    vel_m_s: Vec2  # own velocity used this step
+    u_m_s: Vec2  # velocity command sent this step
     vehicle_stamp_s: float  # stamp of the vehicle state used
-    # Robust estimator (codec v2): per neighbour j, (j, running sum of this follower's
-    # flow on link j [m] x, y, its current rate [m/s] x, y).  Empty for the paper's.
-    link_flows: tuple[LinkFlow, ...] = ()
-    # Second-order robust estimator (codec v3): the follower's consensus estimate of the
-    # targets' mean velocity rv_i [m/s], and per neighbour j its velocity stage's link flow
-    # (j, running sum x, y [m/s], current rate x, y [m/s^2]).  Zero and empty at order 1.
-    rv_m_s: Vec2 = (0.0, 0.0)
-    rv_flows: tuple[LinkFlow, ...] = ()
+    # The fields its law declared, by name (codec v4): a float, a Vec2, or per neighbour j
+    # (j, x, y).  The paper's law: nothing with its own estimator; with the robust one its
+    # link sums and their rates, and at order 2 rv_m_s and the velocity stage's
+    # (agents.law.paper).
+    law: LawFields = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

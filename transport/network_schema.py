@@ -35,6 +35,39 @@ class LinkImpairment:
         return self == LinkImpairment()
 
 
+NET_FAULT_ACTIONS = ("partition", "isolate", "degrade")
+
+
+@dataclass(frozen=True)
+class NetFault:
+    """A change of the follower links for a window of experiment time (transport.net_timeline).
+
+    partition: a link between followers of different `groups` is cut (followers named
+    in no group form one more group); isolate: `groups` is the one follower cut off from
+    every other; degrade: the links in `links` (all follower links when empty) follow
+    `impairment` instead of their own.  The simulator's sensor link is never cut: what a
+    vehicle observes of the targets is its own sensing, not the network's."""
+
+    action: str
+    at_s: float
+    duration_s: float
+    groups: tuple[frozenset[int], ...] = ()  # 0-based followers
+    links: tuple[tuple[int, int], ...] = ()  # degrade: (from, to) 0-based; () all
+    impairment: LinkImpairment = field(default_factory=LinkImpairment)
+
+    @property
+    def end_s(self) -> float:
+        return self.at_s + self.duration_s
+
+    def label(self) -> str:
+        """How figures and the verdict name it, with the file's 1-based numbers."""
+        if self.action == "degrade":
+            what = "all" if not self.links else ",".join(f"{a + 1}>{b + 1}" for a, b in self.links)
+        else:
+            what = "|".join(",".join(str(k + 1) for k in sorted(g)) for g in self.groups)
+        return f"{self.action} {what} {self.at_s:g}-{self.end_s:g} s"
+
+
 @dataclass(frozen=True)
 class NetworkConfig:
     """Estimator variant, Zenoh link protocol and runtime, impairment of the follower links."""
@@ -51,6 +84,7 @@ class NetworkConfig:
     # apply_agent_sched): their wake-ups no longer preempt the simulator, which stands for
     # the physical world, on a machine they oversubscribe (ring64 on 2 cores).
     agent_sched: str = "normal"
+    faults: tuple[NetFault, ...] = ()  # partitions, isolations, degradations on a timeline
 
     def impairment(self, sender: int, receiver: int) -> LinkImpairment:
         for src, dst, spec in self.links:

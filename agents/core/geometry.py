@@ -1,24 +1,14 @@
-"""Small geometric primitives shared by the estimator, the controller and the metrics."""
+"""Small numpy geometric primitives: the metrics' included angles, plane/complex views."""
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
 
-# The float twins (numpy-free, for the follower process) and the constants both use.
-from agents.core.geometry_one import NO_CAP_PER_S as NO_CAP_PER_S
-from agents.core.geometry_one import TWO_PI as TWO_PI
-from agents.core.geometry_one import limited_sig_one as limited_sig_one
-from agents.core.geometry_one import rate_cap as rate_cap
+from agents.law.enclosing import TWO_PI
 
 FloatArray = NDArray[np.float64]
-
-
-def sig(x: FloatArray, exponent: float) -> FloatArray:
-    """sig(x)^a = sign(x) * |x|^a, elementwise (the paper's odd-ratio power)."""
-    if exponent == 1.0 / 3.0:
-        return np.cbrt(x)  # exact and one call: the paper's alpha = 3
-    return np.copysign(np.abs(x) ** exponent, x)
+ComplexArray = NDArray[np.complex128]
 
 
 def wrap_2pi(angle_rad: FloatArray) -> FloatArray:
@@ -35,29 +25,16 @@ def included_angles(pos_m: FloatArray, succ_pos_m: FloatArray, center_m: FloatAr
     """Angle from each follower to its successor seen from `center_m`, in [0, 2 pi).
 
     `center_m` is (..., 2) and broadcast against the positions: the true LAP for the
-    real errors, each follower's own estimate r_i for the controller.
+    real errors.
     """
     return wrap_2pi(bearing(succ_pos_m - center_m) - bearing(pos_m - center_m))
 
 
-def rotate_ccw(vec: FloatArray) -> FloatArray:
-    """(..., 2) vectors rotated by +90 degrees."""
-    out = np.empty_like(vec)
-    out[..., 0] = -vec[..., 1]
-    out[..., 1] = vec[..., 0]
-    return out
+def as_complex(vec_m: FloatArray) -> ComplexArray:
+    """(..., 2) float rows as (...) complex x + iy (a view when contiguous)."""
+    return np.ascontiguousarray(vec_m, dtype=np.float64).view(np.complex128)[..., 0]
 
 
-def limited_sig(
-    x: FloatArray, exponent: float, gain: float, rate_cap_per_s: FloatArray | float
-) -> FloatArray:
-    """gain * sig(x)^a, its magnitude capped at rate_cap_per_s * |x|.
-
-    A law with a < 1 has unbounded gain near zero, so an explicit step of dt
-    overshoots zero and settles into a 2-cycle (the numerical dithering the paper
-    claims to avoid).  Capping the rate at fraction/dt * |x| lets one step remove
-    at most that fraction of the error; as dt -> 0 the cap vanishes and the law
-    is the paper's.  `NO_CAP_PER_S` gives the plain law (geometry_one: `rate_cap`).
-    """
-    mag = np.abs(x)
-    return np.copysign(np.minimum(gain * mag**exponent, rate_cap_per_s * mag), x)
+def as_plane(vec: ComplexArray) -> FloatArray:
+    """(...) complex back to (..., 2) float rows, without copying."""
+    return vec.view(np.float64).reshape(*vec.shape, 2)

@@ -30,9 +30,10 @@ from agents.mavlink.modes import (
     decode_custom_mode,
     flavour_of_autopilot,
 )
+from agents.mavlink.rx_gate import ADAPTER_BUDGET, RxGate
 from agents.mavlink.signing import SignatureVerifier, signing_timestamp
 from agents.mavlink.timemap import VehicleClock, kernel_arrival_s
-from agents.mavlink.udp import bind_udp
+from agents.mavlink.udp import ANCILLARY_BYTES, bind_udp, kernel_drops
 from agents.mavlink.vehicle_types import NO_STATE, AdapterConfig, VehicleState
 from agents.mavlink.velocity_setpoint import velocity_fields
 from agents.mavlink.wire import (
@@ -72,6 +73,8 @@ class MavlinkAdapter:
             self.tx = new_codec(cfg.own_sysid, cfg.own_compid, lean_common)
             sign_outgoing(self.tx, cfg.signing_key, cfg.signing_link_id,
                           signing_timestamp(time.time()))
+        self.gate = RxGate(f"vehicle {cfg.target_sysid or '?'} link", ADAPTER_BUDGET,
+                           self.counters, self.verifier)
         self.sysid = cfg.target_sysid
         self.flavour: str | None = None
         self.remote: Addr | None = None if cfg.remote_port is None else (cfg.remote_host,
@@ -128,32 +131,28 @@ class MavlinkAdapter:
         return self._last_rx_s > -math.inf
 
     def poll(self) -> VehicleState:
-        """Drain the socket, keep our heartbeat going, update the link flag; never blocks."""
+        """Read what the tick's budget allows (agents.mavlink.rx_gate: the rest waits in the
+        socket), keep our heartbeat going, update the link flag; never blocks."""
         now = self.clock()
         self._poll_s = now
-        while self.sock is not None:
+        gate = self.gate
+        carried = gate.new_tick()
+        if carried is not None and carried[1] is not None:  # last tick had no room for it
+            self._datagram(carried[0], carried[1], carried[2])
+        while self.sock is not None and gate.open:
             try:
-                data, anc, _flags, addr = self.sock.recvmsg(65535, socket.CMSG_SPACE(16))
+                data, anc, _flags, addr = self.sock.recvmsg(65535, ANCILLARY_BYTES)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError:
                 self.counters["rx_errors"] += 1
                 break
-            decoded = decode_datagram(self.mav, data)
-            self.counters["bad_packets"] += decoded.bad
-            if decoded.unknown:  # BATTERY_STATUS, PARAM_VALUE...: framed, not ours
-                self.counters["unknown_types"] += decoded.unknown
+            if anc and (dropped := kernel_drops(anc)) is not None:
+                self.counters["mav_kernel_drops"] = dropped
             received = kernel_arrival_s(anc, time.time(), self.clock())
-            for msg in decoded.messages:
-                if not signature_ok(self.verifier, msg, self.counters):
-                    continue
-                try:
-                    self.handle(msg, addr, received)
-                except Exception:  # a hostile or odd packet must not stop the follower
-                    self.counters["handler_errors"] += 1
-                    if self.counters["handler_errors"] <= 5:
-                        log.exception("vehicle %s: cannot handle %s", self.sysid,
-                                      msg.get_type())
+            admitted = gate.admit(data, addr, received)
+            if admitted:
+                self._datagram(admitted, addr, received)
         if now - self._last_hb_tx_s >= HEARTBEAT_PERIOD_S and self.remote is not None:
             self._last_hb_tx_s = now
             self._send(self.mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER,
@@ -162,6 +161,21 @@ class MavlinkAdapter:
             self._last_ts_tx_s = now
             self._send(self.mav.timesync_encode(0, self.vclock.request(self.clock())))
         return self._update_link(now)
+
+    def _datagram(self, data: bytes, addr: Addr, received: float) -> None:
+        decoded = decode_datagram(self.mav, data)
+        self.counters["bad_packets"] += decoded.bad
+        if decoded.unknown:  # BATTERY_STATUS, PARAM_VALUE...: framed, not ours
+            self.counters["unknown_types"] += decoded.unknown
+        for msg in decoded.messages:
+            if not signature_ok(self.verifier, msg, self.counters):
+                continue
+            try:
+                self.handle(msg, addr, received)
+            except Exception:  # a hostile or odd packet must not stop the follower
+                self.counters["handler_errors"] += 1
+                if self.counters["handler_errors"] <= 5:
+                    log.exception("vehicle %s: cannot handle %s", self.sysid, msg.get_type())
 
     def wait_readable(self, timeout_s: float) -> None:
         """Block until a datagram is queued or timeout_s passes (start-up helpers only)."""

@@ -9,8 +9,23 @@ timestamp *before* it checks the signature, so one forged packet with a future
 timestamp and the right (link id, sysid, compid) locks the real sender out for good
 (measured: notes/security.md).  Here the signature is checked first; only a good one
 moves a stream's timestamp.  Replays (timestamp not above the stream's last) and new
-streams more than a minute behind our time are rejected, as the spec says.  Messages
-PX4 always accepts unsigned (HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION) pass.
+streams more than a minute behind our time are rejected, as the spec says; so are frames
+stamped more than FUTURE_LIMIT ahead of our clock, without moving any stream: a frame
+stamped a day ahead, even correctly signed, would otherwise make its stream refuse the
+sender's real frames for a day.  A new stream (a restarted sender, on a new link id or
+with timestamps that continue on the wall clock) is accepted.  Messages PX4 always accepts
+unsigned (HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION) pass.
+
+A key per vehicle: vehicle `sysid`'s key is derived from a run secret,
+
+    passphrase = hex(HMAC-SHA256(run secret, "enclose-mavlink-vehicle-<sysid>"))
+    key        = SHA-256(passphrase)
+
+so that whoever holds the secret (the simulator, an operator's ground station) holds every
+vehicle's key, each agent only its own, and the key is also what MAVProxy's `signing key
+<passphrase>` makes of the passphrase (it hashes passphrases with SHA-256).  A vehicle
+that knows the other vehicles' keys tells a frame signed with one of them (`wrong_key`,
+and whose) from one signed with no key it knows (`bad_signature`).
 """
 
 from __future__ import annotations
@@ -29,10 +44,13 @@ from transport.errors import ConfigError
 KEY_LEN = 32
 SIGNATURE_LEN = 13
 IFLAG_SIGNED = 0x01
-STX_V2 = 0xFD
+STX_V2, STX_V1 = 0xFD, 0xFE
 EPOCH_2015_S = 1420070400.0
 TICKS_PER_S = 100_000  # timestamp unit: 10 µs
 NEW_STREAM_WINDOW = 60 * TICKS_PER_S
+# Clocks of signing hosts agree to well under a second (NTP); a few seconds of slack.
+FUTURE_LIMIT = 5 * TICKS_PER_S
+VEHICLE_KEY_LABEL = "enclose-mavlink-vehicle-{sysid}"
 # PX4 accepts these unsigned on a signing link (message_signing docs).
 ALLOWED_UNSIGNED = frozenset({0, 109, 246, 247})  # HEARTBEAT, RADIO_STATUS, ADSB, COLLISION
 
@@ -45,16 +63,34 @@ def signing_timestamp(unix_s: float) -> int:
 def write_key(path: Path) -> bytes:
     """A fresh random 32-byte key, written raw to `path` with 0600 rights from the start."""
     key = os.urandom(KEY_LEN)
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "wb") as out:
-        out.write(key)
-    os.chmod(path, 0o600)
+    write_raw_key(path, key)
     return key
 
 
 def key_from_passphrase(passphrase: str) -> bytes:
     """MAVProxy's `signing setup <passphrase>` key: sha256 of the passphrase."""
     return hashlib.sha256(passphrase.encode()).digest()
+
+
+def vehicle_passphrase(run_secret: bytes, sysid: int) -> str:
+    """Vehicle `sysid`'s signing passphrase (64 hex digits): what a ground station is given."""
+    if not 1 <= sysid <= 255:
+        raise ConfigError("sysid", f"a MAVLink system id is 1..255, got {sysid}")
+    label = VEHICLE_KEY_LABEL.format(sysid=sysid).encode()
+    return hmac.new(run_secret, label, hashlib.sha256).hexdigest()
+
+
+def vehicle_key(run_secret: bytes, sysid: int) -> bytes:
+    """Vehicle `sysid`'s 32-byte signing key, derived from the run secret (module docstring)."""
+    return key_from_passphrase(vehicle_passphrase(run_secret, sysid))
+
+
+def write_raw_key(path: Path, key: bytes) -> None:
+    """`key` written raw to `path`, 0600 from the start."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "wb") as out:
+        out.write(key)
+    os.chmod(path, 0o600)
 
 
 def load_key(path: str | Path) -> bytes:
@@ -89,48 +125,99 @@ class SignatureVerifier:
     """Accepts or rejects received frames; one per link end (vehicle), not thread-safe.
 
     `check(frame, msg_id, sysid, compid)` returns None when accepted, else the reason
-    (`unsigned`, `bad_signature`, `replay`), also counted in `counters` as rejected_<reason>.
+    (`unsigned`, `bad_signature`, `wrong_key`, `future`, `replay`), also counted in
+    `counters` as rejected_<reason>.  `screen(datagram)` judges a datagram's first frame
+    the same way without changing any state: a receiver drops a datagram it refuses
+    unparsed (a flood of badly signed frames costs one hash per datagram).
+
+    `key_of_vehicle` (sysid -> key, or None): the keys of the other vehicles, known to a
+    receiver that holds them all (the simulator).  A frame on link k that fails our key is
+    tried against vehicle k+1's key alone (the agent of vehicle index k signs on link k):
+    one more hash, and a match names whose key signed it (`wrong_key_sysid`).
     """
 
     def __init__(self, key: bytes, clock: Callable[[], float] = time.time,
-                 allowed_unsigned: frozenset[int] = ALLOWED_UNSIGNED) -> None:
+                 allowed_unsigned: frozenset[int] = ALLOWED_UNSIGNED,
+                 key_of_vehicle: Callable[[int], bytes | None] | None = None) -> None:
         if len(key) != KEY_LEN:
             raise ConfigError("signing_key", f"a key is {KEY_LEN} bytes")
         self.key = key
         self.clock = clock
         self.allowed_unsigned = allowed_unsigned
+        self.key_of_vehicle = key_of_vehicle
         self.streams: dict[tuple[int, int, int], int] = {}
         self.latest = 0  # highest timestamp seen in a good signature
+        self.wrong_key_sysid = 0  # the vehicle whose key signed the last `wrong_key` frame
         self.counters: Counter[str] = Counter()
 
     def now_ticks(self) -> int:
         return max(self.latest, signing_timestamp(self.clock()))
 
     def check(self, frame: bytes, msg_id: int, sysid: int, compid: int) -> str | None:
-        reason = self._reason(frame, msg_id, sysid, compid)
+        reason = self._reason(frame, msg_id, sysid, compid, commit=True)
         self.counters["accepted_signed" if reason is None and _signed(frame) else
                       "accepted_unsigned" if reason is None else f"rejected_{reason}"] += 1
         return reason
 
-    def _reason(self, frame: bytes, msg_id: int, sysid: int, compid: int) -> str | None:
+    def screen(self, data: bytes) -> str | None:
+        """The verdict `check` would give the first frame of datagram `data` (`malformed`
+        when it starts with no whole frame), without moving any stream."""
+        n = len(data)
+        if n < (12 if data[:1] == b"\xfd" else 8) or data[0] not in (STX_V2, STX_V1):
+            reason: str | None = "malformed"
+        elif data[0] == STX_V1:
+            reason = None if data[5] in self.allowed_unsigned else "unsigned"
+        else:
+            end = 12 + data[1] + (SIGNATURE_LEN if data[2] & IFLAG_SIGNED else 0)
+            msg_id = data[7] | data[8] << 8 | data[9] << 16
+            reason = "malformed" if end > n else self._reason(
+                data[:end], msg_id, data[5], data[6], commit=False)
+        if reason is not None:
+            self.counters[f"rejected_{reason}"] += 1
+        return reason
+
+    def count_rejection(self, reason: str, counters: Counter[str]) -> None:
+        """Count a rejection in a receiver's counters: signing_rejected_<reason>, and for a
+        frame signed with another vehicle's key, whose (signing_wrong_key_vehicle_<sysid>)."""
+        counters[f"signing_rejected_{reason}"] += 1
+        if reason == "wrong_key":
+            counters[f"signing_wrong_key_vehicle_{self.wrong_key_sysid}"] += 1
+
+    def _reason(self, frame: bytes, msg_id: int, sysid: int, compid: int,
+                commit: bool) -> str | None:
         if not _signed(frame):
             return None if msg_id in self.allowed_unsigned else "unsigned"
         if len(frame) < 12 + SIGNATURE_LEN:
             return "bad_signature"
         # Signature first: nothing about a badly signed frame may change our state.
-        if not hmac.compare_digest(signature(self.key, frame[:-6]), frame[-6:]):
-            return "bad_signature"
-        link_id = frame[-SIGNATURE_LEN]
+        signed_part, link_id = frame[:-6], frame[-SIGNATURE_LEN]
+        if not hmac.compare_digest(signature(self.key, signed_part), frame[-6:]):
+            return "wrong_key" if self._other_vehicles_key(signed_part, frame[-6:],
+                                                           link_id) else "bad_signature"
         stamp = int.from_bytes(frame[-12:-6], "little")
+        wall = signing_timestamp(self.clock())
+        if stamp > wall + FUTURE_LIMIT:
+            return "future"
         stream = (link_id, sysid, compid)
         last = self.streams.get(stream)
         if last is not None and stamp <= last:
             return "replay"
-        if last is None and stamp + NEW_STREAM_WINDOW < self.now_ticks():
+        if last is None and stamp + NEW_STREAM_WINDOW < max(self.latest, wall):
             return "replay"
-        self.streams[stream] = stamp
-        self.latest = max(self.latest, stamp)
+        if commit:
+            self.streams[stream] = stamp
+            self.latest = max(self.latest, stamp)
         return None
+
+    def _other_vehicles_key(self, signed_part: bytes, sig: bytes, link_id: int) -> bool:
+        if self.key_of_vehicle is None:
+            return False
+        key = self.key_of_vehicle(link_id + 1)
+        if key is None or key == self.key or not hmac.compare_digest(
+                signature(key, signed_part), sig):
+            return False
+        self.wrong_key_sysid = link_id + 1
+        return True
 
 
 def _signed(frame: bytes) -> bool:

@@ -74,8 +74,8 @@ def sign_outgoing(mav: Codec, key: bytes, link_id: int, timestamp: int) -> None:
 def signature_ok(verifier: SignatureVerifier | None, msg: MAVLinkMessage,
                  counters: Counter[str]) -> bool:
     """Whether a received message passes `verifier` (always, when there is none); a
-    rejection is counted as signing_rejected_<reason>.  Never raises: a frame must not
-    stop the receiver."""
+    rejection is counted as signing_rejected_<reason> (SignatureVerifier.count_rejection).
+    Never raises: a frame must not stop the receiver."""
     if verifier is None:
         return True
     try:
@@ -85,7 +85,7 @@ def signature_ok(verifier: SignatureVerifier | None, msg: MAVLinkMessage,
     except Exception:  # hostile bytes: counted below
         reason = "error"
     if reason is not None:
-        counters[f"signing_rejected_{reason}"] += 1
+        verifier.count_rejection(reason, counters)
     return reason is None
 
 

@@ -11,6 +11,7 @@ duration_s.  restart: SIGTERM (a clean stop) and a new process at once, or after
 duration_s.  leave: SIGTERM, and with duration_s it joins again after that long.
 On the command line (`enclose run --fault`, and `fault` in a sweep) a fault is
 "AT_S:ACTION:TARGET[:DURATION_S]", e.g. "30:kill:follower-1"; "none" is no fault.
+The network faults (partition, isolate, degrade) share the table: agents.scenario.net_faults.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from transport.errors import ScenarioError
+from transport.network_schema import NET_FAULT_ACTIONS
 
 FAULT_ACTIONS = ("kill", "pause", "restart", "leave")
 FAULT_KEYS = ("at_s", "action", "target", "duration_s")
@@ -33,6 +35,14 @@ class FaultSpec:
     action: str
     process: str  # the launcher's (0-based) process name: follower-0 is the file's follower-1
     duration_s: float | None = None
+
+
+def is_net_action(raw: Any) -> bool:
+    """True when a `[[faults]]` table (or a --fault text) is a network fault."""
+    if isinstance(raw, dict):
+        return raw.get("action") in NET_FAULT_ACTIONS
+    parts = raw.split(":") if isinstance(raw, str) else []
+    return len(parts) >= 2 and parts[1] in NET_FAULT_ACTIONS
 
 
 def parse_fault_table(raw: Any, where: str, n: int, m: int) -> FaultSpec:
@@ -60,7 +70,8 @@ def parse_faults(raw: Any, n: int, m: int) -> tuple[FaultSpec, ...]:
         return ()
     if not isinstance(raw, list):
         raise ScenarioError("faults", "must be an array of tables: [[faults]]")
-    faults = [parse_fault_table(t, f"faults[{k}]", n, m) for k, t in enumerate(raw)]
+    faults = [parse_fault_table(t, f"faults[{k}]", n, m) for k, t in enumerate(raw)
+              if not is_net_action(t)]
     return tuple(sorted(faults, key=lambda f: f.at_s))
 
 

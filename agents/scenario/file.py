@@ -8,12 +8,16 @@ from __future__ import annotations
 
 import math
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
+from agents.law.loader import make_law
 from agents.scenario.checks import check_admissible
 from agents.scenario.faults import parse_faults
 from agents.scenario.fields import Table, positive, table_of, vec2
+from agents.scenario.law import parse_law
 from agents.scenario.model import Scenario
+from agents.scenario.net_faults import parse_net_faults
 from agents.scenario.network import network
 from agents.scenario.tables import (
     parse_edges,
@@ -41,7 +45,7 @@ def load_scenario(source: str | Path | None = None, whole_run: bool = True) -> S
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ScenarioError("scenario", f"cannot read {path}: {exc.strerror}") from exc
-    return parse_scenario(text, origin=str(path), whole_run=whole_run)
+    return parse_scenario(text, origin=str(path), whole_run=whole_run, base=path.parent)
 
 
 def shipped_text(name: str) -> str:
@@ -59,16 +63,19 @@ def shipped_text(name: str) -> str:
     return ref.read_text(encoding="utf-8")
 
 
-def parse_scenario(text: str, origin: str = "<string>", whole_run: bool = True) -> Scenario:
+def parse_scenario(text: str, origin: str = "<string>", whole_run: bool = True,
+                   base: Path | None = None) -> Scenario:
+    """`base`: the folder a `[law] module` is imported from (the file's; None: the
+    current directory)."""
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError("scenario", f"{origin} is not valid TOML: {exc}") from exc
-    return build_scenario(doc, default_name=Path(origin).stem, whole_run=whole_run)
+    return build_scenario(doc, default_name=Path(origin).stem, whole_run=whole_run, base=base)
 
 
 def build_scenario(doc: Table, default_name: str = "scenario",
-                   whole_run: bool = True) -> Scenario:
+                   whole_run: bool = True, base: Path | None = None) -> Scenario:
     followers = doc.get("followers")
     if not isinstance(followers, list) or len(followers) < 2:
         raise InadmissibleError("followers", "needs at least 2 [[followers]] tables")
@@ -83,6 +90,9 @@ def build_scenario(doc: Table, default_name: str = "scenario",
     pattern = parse_pattern(pattern_t, n)
     center = tuple(math.fsum(t.initial_pos_m[k] for t in targets) / len(targets) for k in (0, 1))
     successor = parse_successor(pattern_t, f_pos, center, n)
+    run = parse_run(table_of(doc, "run"))
+    net = replace(network(table_of(doc, "network"), n),
+                  faults=parse_net_faults(doc.get("faults"), n, run.duration_s))
     name = doc.get("name", default_name)
     if not isinstance(name, str) or not name:
         raise ScenarioError("name", "must be a non-empty string")
@@ -95,11 +105,13 @@ def build_scenario(doc: Table, default_name: str = "scenario",
         successor=successor,
         pattern=pattern,
         gains=parse_gains(table_of(doc, "gains")),
-        run=parse_run(table_of(doc, "run")),
+        run=run,
         vehicle=parse_vehicle(table_of(doc, "vehicle")),
         home=parse_home(table_of(doc, "home")),
-        network=network(table_of(doc, "network"), n),
+        network=net,
         faults=parse_faults(doc.get("faults"), n, len(targets)),
+        law=parse_law(table_of(doc, "law"), base),
     )
     check_admissible(scenario, whole_run)
+    make_law(scenario)  # the law checks its own table now, before any process starts
     return scenario

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from agents.scenario.faults import FaultSpec
 from transport.network_schema import NetworkConfig
@@ -108,6 +108,8 @@ class RunConfig:
     eps_rho_m: float = 0.0999
     eps_delta: float = 0.0199
     target_start_s: float = 0.0
+    # Two vehicles closer than this are a near collision: the verdict and live view say so.
+    safety_distance_m: float = 1.0
 
     @property
     def estimator_hz(self) -> float:
@@ -141,6 +143,27 @@ class HomeConfig:
 
 
 @dataclass(frozen=True)
+class LawSpec:
+    """The scenario's `[law]`: a shipped law by name, or the user's own class by module
+    reference, and the law's own parameters (checked by the law: agents.law.loader)."""
+
+    name: str = "paper"  # a shipped law (agents.law.shipped); unused with `module`
+    module: str | None = None  # "package.module:Class"
+    folder: str | None = None  # absolute folder `module` is imported from
+    params: tuple[tuple[str, Any], ...] = ()  # the table's other keys, file order
+
+    @property
+    def ref(self) -> str:
+        """How the law is named in records and verdicts: its name, or its module reference."""
+        return self.name if self.module is None else self.module
+
+    @property
+    def is_paper(self) -> bool:
+        """The paper's law: the lock-step engine has a compiled path for it."""
+        return self.module is None and self.name == "paper"
+
+
+@dataclass(frozen=True)
 class Scenario:
     """Everything one run needs; built only by `agents.scenario.file`."""
 
@@ -157,6 +180,7 @@ class Scenario:
     home: HomeConfig = field(default_factory=HomeConfig)
     network: NetworkConfig = field(default_factory=NetworkConfig)
     faults: tuple[FaultSpec, ...] = ()  # injected by the launcher (agents.scenario.faults)
+    law: LawSpec = field(default_factory=LawSpec)  # [law]: what each follower flies
 
     @property
     def n(self) -> int:

@@ -175,6 +175,7 @@ def parse_run(t: Table) -> RunConfig:
         eps_rho_m=positive(t, "eps_rho_m", "run", d.eps_rho_m),
         eps_delta=positive(t, "eps_delta", "run", d.eps_delta),
         target_start_s=number(t, "target_start_s", "run", d.target_start_s),
+        safety_distance_m=positive(t, "safety_distance_m", "run", d.safety_distance_m),
     )
 
 

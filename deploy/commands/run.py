@@ -10,8 +10,10 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from agents.law_args import add_law_arguments, apply_law_arguments
 from agents.network_args import NetworkOptions, add_network_arguments, apply_network_arguments
 from agents.scenario.file import load_scenario
+from agents.scenario.net_faults import check_window
 from deploy.launch import Launch
 from deploy.launch_options import LaunchOptions
 from deploy.live_args import LiveOptions, add_live_arguments
@@ -52,10 +54,16 @@ def register(sub: Any) -> None:
         action="store_true",
         help="no Zenoh authentication/access control and no MAVLink signing (not recommended)",
     )
+    p.add_argument(
+        "--journal", action=argparse.BooleanOptionalAction, default=True,
+        help="every follower journals its law's inputs into RUN/journal (enclose replay; "
+        "default: on)",
+    )
     add_live_arguments(p)
     add_json_argument(p)
     add_supervision_arguments(p)
     add_network_arguments(p)
+    add_law_arguments(p)
     add_netns_arguments(p)
     add_hosts_arguments(p)
     p.set_defaults(func=_main)
@@ -88,9 +96,12 @@ def _main(args: argparse.Namespace) -> int:
 def run(opts: RunOptions) -> int:
     launch = opts.launch
     scenario = apply_network_arguments(load_scenario(launch.scenario), launch.network)
+    scenario = apply_law_arguments(scenario, launch.law)  # a bad law fails here, first
     duration = scenario.run.duration_s if opts.duration_s is None else opts.duration_s
     if duration <= 0:
         raise DeployError("--duration must be > 0")
+    for fault in scenario.network.faults:
+        check_window(fault, "--duration", duration)
     if scenario.network.link != "tcp" and not launch.insecure:
         raise DeployError(
             f"network.link = {scenario.network.link!r} cannot be authenticated (Zenoh mTLS "

@@ -48,9 +48,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="vehicle i listens on BASE+i (PX4 SITL: 14580)")
     parser.add_argument("--send-base-port", type=int, default=14540,
                         help="vehicle i sends telemetry to SEND_BASE+i (PX4 SITL: 14540)")
-    parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="32-byte MAVLink 2 signing key: vehicles drop unsigned or badly "
-                        "signed messages (default: unsigned, so any ground station connects)")
+    keys = parser.add_mutually_exclusive_group()
+    keys.add_argument("--signing-key", default=None, metavar="FILE",
+                      help="32-byte MAVLink 2 signing key of every vehicle: they drop unsigned "
+                      "or badly signed messages (default: unsigned, so any ground station "
+                      "connects)")
+    keys.add_argument("--signing-secret", default=None, metavar="FILE",
+                      help="32-byte run secret: each vehicle enforces signing with its own "
+                      "key derived from it (`enclose vehicle-key FILE SYSID` prints one)")
     parser.add_argument("--duration-s", type=float, default=None,
                         help="stop after this much simulated time (default: until Ctrl-C)")
 
@@ -67,14 +72,15 @@ class SimOptions:
     host: str = "127.0.0.1"
     base_port: int = 14580
     send_base_port: int = 14540
-    signing_key: str | None = None  # key file
+    signing_key: str | None = None  # key file: one key for every vehicle
     duration_s: float | None = None  # simulated time; None: until Ctrl-C
+    signing_secret: str | None = None  # run secret file: a key per vehicle
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SimOptions:
         return cls(args.scenario, args.vehicles, args.flavour, args.rate_hz, args.telemetry_hz,
                    args.host, args.base_port, args.send_base_port, args.signing_key,
-                   args.duration_s)
+                   args.duration_s, args.signing_secret)
 
 
 def build_simulator(opts: SimOptions) -> Simulator:
@@ -88,7 +94,9 @@ def build_simulator(opts: SimOptions) -> Simulator:
     cfg = SimConfig(rate_hz=opts.rate_hz, telemetry_hz=opts.telemetry_hz,
                     flavour=opts.flavour or vehicle.flavour, host=opts.host,
                     listen_base_port=opts.base_port, send_base_port=opts.send_base_port,
-                    signing_key=None if opts.signing_key is None else load_key(opts.signing_key))
+                    signing_key=None if opts.signing_key is None else load_key(opts.signing_key),
+                    signing_secret=None if opts.signing_secret is None
+                    else load_key(opts.signing_secret))
     return Simulator(spawn, vehicle, home, cfg)
 
 

@@ -1,4 +1,8 @@
-"""`enclose simulate`: the paper's closed loop integrated in lock-step, no network."""
+"""`enclose simulate`: a scenario's closed loop integrated in lock-step, no network.
+
+The paper's law runs in its compiled engine (agents.core.lockstep); any other law, or the
+paper's with --through-interface, through the law interface (agents.core.lockstep_law).
+"""
 
 from __future__ import annotations
 
@@ -6,12 +10,17 @@ import argparse
 import logging
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from agents.core.lockstep import ENGINES, simulate_lockstep
+from agents.core.lockstep_law import simulate_law
+from agents.core.timeseries import RunSeries
+from agents.law.loader import make_law
+from agents.law_args import LawOptions, add_law_arguments, apply_law_arguments
 from agents.scenario.file import load_scenario
+from agents.scenario.model import Scenario
 from deploy.report import write_run_outputs
 from deploy.rundir import RunInfo
 from deploy.verdict import add_json_argument, announce
@@ -41,15 +50,22 @@ def register(sub: Any) -> None:
         "--engine",
         choices=ENGINES,
         default="auto",
-        help="numba: compiled loop (default when installed); numpy: reference functions",
+        help="numba: the law compiled into the loop (default when installed); python: the "
+             "same functions interpreted (slow)",
     )
     parser.add_argument(
         "--estimator-dt", type=float, default=None,
         help="estimator step in seconds, dividing --dt (default: the scenario's "
              "estimator_rate_hz, as the followers run it; --dt if that is coarser)",
     )
+    parser.add_argument(
+        "--through-interface", action="store_true",
+        help="run the paper's law through the law interface, as any other law runs, "
+             "instead of its compiled engine",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_json_argument(parser)
+    add_law_arguments(parser)
     parser.set_defaults(func=_main)
 
 
@@ -84,11 +100,14 @@ class SimulateOptions:
     estimator_dt_s: float | None = None  # None: the scenario's estimator rate
     progress: bool = True
     json: bool = False
+    law: LawOptions = field(default_factory=LawOptions)  # --law, --law-param
+    through_interface: bool = False  # the paper's law through the interface too
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SimulateOptions:
         return cls(args.scenario, args.dt, args.duration, args.out, args.engine,
-                   args.estimator_dt, not args.no_progress, args.json)
+                   args.estimator_dt, not args.no_progress, args.json,
+                   LawOptions.from_namespace(args), args.through_interface)
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -96,7 +115,7 @@ def _main(args: argparse.Namespace) -> int:
 
 
 def simulate(opts: SimulateOptions) -> int:
-    scenario = load_scenario(opts.scenario)
+    scenario = apply_law_arguments(load_scenario(opts.scenario), opts.law)
     dt = scenario.run.dt_s if opts.dt_s is None else opts.dt_s
     duration = scenario.run.duration_s if opts.duration_s is None else opts.duration_s
     if not 0.0 < dt < duration:
@@ -117,14 +136,30 @@ def simulate(opts: SimulateOptions) -> int:
     start = time.perf_counter()
     bar = ProgressBar("simulate", opts.progress)
     try:
-        series = simulate_lockstep(scenario, dt, duration, bar, opts.engine, est_dt)
+        series, law_extra = _integrate(scenario, opts, dt, duration, est_dt, bar)
     except ValueError as exc:
         raise ScenarioError("--estimator-dt", str(exc)) from exc
     wall = time.perf_counter() - start
     info = RunInfo.from_scenario(scenario, "lockstep", duration)
     extra = {"dt_s": dt, "estimator_dt_s": est_dt, "engine": opts.engine,
-             "integration_wall_s": wall}
+             "integration_wall_s": wall, **law_extra}
     write_run_outputs(out, series, info, extra)
     log.info("integration took %.2f s wall; outputs in %s", wall, out)
     announce(out.resolve(), f"enclose simulate {scenario.name}", opts.json)
     return 0
+
+
+def _integrate(scenario: Scenario, opts: SimulateOptions, dt: float, duration: float,
+               est_dt: float, bar: ProgressBar) -> tuple[RunSeries, dict[str, Any]]:
+    """The series, by the paper's compiled engine or through the law interface, and what
+    metrics.json says of the law."""
+    if scenario.law.is_paper and not opts.through_interface:
+        series = simulate_lockstep(scenario, dt, duration, bar, opts.engine, est_dt)
+        return series, {"law": scenario.law.ref, "law_path": "compiled"}
+    # Lock-step commands act at once: no delay for a law to lead (Gains.lead_s).
+    law = make_law(replace(scenario, gains=replace(scenario.gains, lead_s=0.0)))
+    run = simulate_law(scenario, law, dt, duration, bar, est_dt)
+    if run.law_failures:
+        log.warning("the law failed %d times (its vehicle held each time)", run.law_failures)
+    return run.series, {"law": scenario.law.ref, "law_path": "interface",
+                        "law_failures": run.law_failures}

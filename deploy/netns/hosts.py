@@ -116,8 +116,11 @@ def linked_namespaces(dep: Deployment, hub: str) -> Iterator[None]:
 
 
 def inner_argv(opts: LaunchOptions, out: Path, duration_s: float) -> list[str]:
+    # `enclose host` takes no network flags: the network faults go as --fault, and are cut
+    # where messages are received, as on one machine.
+    net_faults = [arg for text in opts.network.net_faults for arg in ("--fault", text)]
     return ["host", str(out / "deployment.toml"), "--all", "--out", str(out),
-            "--duration", repr(duration_s), *opts.supervision_argv()]
+            "--duration", repr(duration_s), *opts.supervision_argv(), *net_faults]
 
 
 def run_on_hosts(hosts: HostsOptions, scenario: Scenario, opts: LaunchOptions, out: Path,

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
 
+from agents.law_args import law_overrides
 from agents.lifeline import launcher_env
 from agents.network_args import network_overrides
 from deploy.launch_options import LaunchOptions
@@ -63,7 +64,7 @@ def inner_argv(opts: LaunchOptions, out: Path, swarm: str, duration_s: float) ->
     argv.append("--no-live")
     if opts.json:
         argv.append("--json")
-    return argv + network_overrides(opts.network)
+    return argv + network_overrides(opts.network) + law_overrides(opts.law)
 
 
 def run_forwarding_signals(argv: Sequence[str]) -> int:

@@ -10,6 +10,7 @@ status heard is used if that never comes, and `final` says which).  Per link:
   of j's states the recorder heard (unimpaired) -- and for the sensor the span of sequence
   numbers the follower saw (the simulator publishes long before a follower listens);
 - `sent_source`: "states_sent" | "recorder" | "seq_span";
+An `rx_<x>` counter whose x names no link is skipped (counted by `unreadable_links`).
 - `delivered_ratio` = rx / sent;
 - `age_p50_ms`, `age_p99_ms`: age at delivery (receive stamp - sender stamp);
 - `impairment`: what the impairment did (offered, dropped, duplicated, reordered, ...).
@@ -25,6 +26,22 @@ from transport.link_stats import SENSOR
 from transport.messages import ProcessStatus
 
 FINAL_STATES = ("done", "failed")
+RX = "rx_"
+
+
+def is_link(name: str) -> bool:
+    """`sensor` or `f<j>` with j in ASCII digits: a status may carry any `rx_<x>` counter,
+    and only these name a link (int() would take "f\u0663" or raise on "fx")."""
+    return name == SENSOR or (name[:1] == "f" and name[1:].isascii() and name[1:].isdigit())
+
+
+def _rx_names(c: Mapping[str, int]) -> list[str]:
+    return [k[len(RX):] for k in c if k.startswith(RX) and not k.startswith("rx_dup")]
+
+
+def unreadable_links(statuses: Mapping[int, ProcessStatus]) -> int:
+    """How many `rx_<x>` counters of the followers' statuses name no link (skipped)."""
+    return sum(not is_link(n) for s in statuses.values() for n in _rx_names(s.counters))
 
 
 def _sent(
@@ -68,7 +85,7 @@ def link_report(
     out: dict[str, Any] = {}
     for i, status in sorted(statuses.items()):
         c = status.counters
-        for link in sorted(k[3:] for k in c if k.startswith("rx_") and not k.startswith("rx_dup")):
+        for link in sorted(filter(is_link, _rx_names(c))):
             entry = link_entry(link, c, statuses, recorded_states)
             out[f"{link}->f{i}"] = {**entry, "final": status.state in FINAL_STATES}
     return out

@@ -15,12 +15,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from agents.law.loader import make_law
 from agents.liveness import MembershipWatch
 from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.link_history import LinkHistory
-from deploy.recording.links import FINAL_STATES, link_report
+from deploy.recording.links import FINAL_STATES, link_report, unreadable_links
 from deploy.recording.live_server import LiveServer
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
 from deploy.recording.progress import PROGRESS_FILE, behind_s, live_errors
@@ -65,8 +66,11 @@ class Recorder:
         self.newest_stamp_s = -math.inf  # newest sender stamp processed: how far behind we are
         self.mcap = McapLog(run_dir / MCAP_FILE, chunk_size=chunk_bytes,
                             metadata={"swarm": swarm, "scenario": scenario.name})
-        # Implausible messages, and any not from the process its key names, dropped, counted.
-        self.decoder = Decoder(limits=RECORDER_LIMITS, senders=sender_ids(scenario.n, scenario.m))
+        # Implausible messages, and any not from the process its key names, dropped,
+        # counted; a state whose law fields are not what the scenario's law declares too,
+        # as its followers drop it (transport.law_fields).
+        self.decoder = Decoder(limits=RECORDER_LIMITS, senders=sender_ids(scenario.n, scenario.m),
+                               law_fields=make_law(scenario).declared())
         self.asm = RunAssembler(scenario.n, scenario.m, spill_dir=run_dir)  # rows on disk
         self.state = "starting"
         self.stop_reason = ""
@@ -228,6 +232,8 @@ class Recorder:
         dropped = dict(self.decoder.dropped) | {
             f"assembler_{k}": v for k, v in self.asm.drops.items()
         }
+        if skipped := unreadable_links(self.follower_status):
+            dropped["link_counters_unreadable"] = skipped
         return {
             "recorder": {
                 "messages_per_topic": dict(sorted(self.mcap.messages.items())),

@@ -2,7 +2,8 @@
 
 Frame "world" is the run's local ENU frame, metres, z up.  Entities (ids stable across
 updates, so each update replaces the last):
-- `follower-<i>`: a sphere at the vehicle's true position (simulator truth) and its label;
+- `follower-<i>`: a sphere at the vehicle's true position (simulator truth) and its label,
+  red while another vehicle is closer than the scenario's safety distance;
 - `target-<j>`: a cube at the target's true position, on the ground (z = 0);
 - `estimate-<i>`: follower i's estimate r_i of the targets' centre, on the ground;
 - `centre`: the true centre (mean of the targets), on the ground;
@@ -33,6 +34,7 @@ LINK_SIDE_OFFSET_M = 0.25
 
 _IDENTITY = fm.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
 FOLLOWER_RGBA = (0.20, 0.55, 1.00, 1.0)
+TOO_CLOSE_RGBA = (0.95, 0.05, 0.05, 1.0)
 TARGET_RGBA = (1.00, 0.45, 0.10, 1.0)
 ESTIMATE_RGBA = (0.60, 0.30, 0.90, 0.9)
 CIRCLE_RGBA = (0.60, 0.60, 0.60, 0.8)
@@ -97,11 +99,20 @@ def circle_points(cx: float, cy: float, radius_m: float, z: float) -> list[fm.Po
             for k in range(CIRCLE_SEGMENTS + 1)]
 
 
-def _vehicles(truth: TruthSnapshot, stamp: fm.Timestamp) -> list[fm.SceneEntity]:
+def too_close(truth: TruthSnapshot, distance_m: float) -> list[tuple[float, int, int]]:
+    """(distance, i, j) of each pair of vehicles closer than `distance_m` (horizontal)."""
+    pos = truth.follower_pos_m
+    return [(d, i, j) for i in range(len(pos)) for j in range(i + 1, len(pos))
+            if (d := math.hypot(pos[i][0] - pos[j][0], pos[i][1] - pos[j][1])) < distance_m]
+
+
+def _vehicles(truth: TruthSnapshot, stamp: fm.Timestamp,
+              close: frozenset[int]) -> list[fm.SceneEntity]:
     out = []
     for i, (x, y, z) in enumerate(truth.follower_pos_m):
+        rgba = TOO_CLOSE_RGBA if i in close else FOLLOWER_RGBA
         out.append(_entity(f"follower-{i}", stamp, spheres=[fm.SpherePrimitive(
-            pose=_pose(x, y, z), size=_size(VEHICLE_SIZE_M), color=_color(FOLLOWER_RGBA))],
+            pose=_pose(x, y, z), size=_size(VEHICLE_SIZE_M), color=_color(rgba))],
             texts=[_label(f"f{i}", x, y, z)]))
     for j, (x, y) in enumerate(truth.target_pos_m):
         out.append(_entity(f"target-{j}", stamp, cubes=[fm.CubePrimitive(
@@ -146,8 +157,10 @@ def _links(truth: TruthSnapshot, links: Sequence[LinkView],
 
 
 def scene_update(truth: TruthSnapshot, states: Mapping[int, FollowerState],
-                 links: Sequence[LinkView], rho_d_m: float) -> fm.SceneUpdate:
-    """The whole scene at the truth's instant (its sender stamp)."""
+                 links: Sequence[LinkView], rho_d_m: float,
+                 close: frozenset[int] = frozenset()) -> fm.SceneUpdate:
+    """The whole scene at the truth's instant (its sender stamp); `close`: the vehicles
+    drawn red (too_close)."""
     stamp = timestamp(truth.header.stamp_s)
     cx, cy = centre_m(truth)
     zs = [p[2] for p in truth.follower_pos_m]
@@ -157,7 +170,7 @@ def scene_update(truth: TruthSnapshot, states: Mapping[int, FollowerState],
                               points=circle_points(cx, cy, rho_d_m, altitude_m),
                               color=_color(CIRCLE_RGBA))
     entities = [
-        *_vehicles(truth, stamp),
+        *_vehicles(truth, stamp, close),
         *_estimates(states, stamp),
         _entity("centre", stamp, spheres=[fm.SpherePrimitive(
             pose=_pose(cx, cy, 0.0), size=_size(ESTIMATE_SIZE_M), color=_color(TARGET_RGBA))]),

@@ -24,11 +24,11 @@ from typing import Any
 import numpy as np
 from foxglove import messages as fm
 
-from agents.core.metrics import error_series
+from agents.core.metrics import error_series, separation_series
 from agents.core.timeseries import RunSeries
 from deploy.recording.live_links import LinkTracker
 from deploy.recording.mcap_log import RawFrame, RawSchema
-from deploy.recording.scene import LinkView, scene_update, timestamp
+from deploy.recording.scene import LinkView, scene_update, timestamp, too_close
 from deploy.refusals import refusals
 from deploy.rundir import RunInfo
 from transport.messages import FollowerState, Message, ProcessStatus, RunControl, TruthSnapshot
@@ -62,7 +62,7 @@ SCHEMAS = {
         k: _NUMS if k.startswith(("e_", "est")) else _NUM
         for k in ("t_s", "e_rho_m", "e_delta", "estimator_error_m", "max_abs_e_rho_m",
                   "max_abs_e_delta", "max_estimator_error_m", "bound_rho_m", "bound_delta",
-                  "bound_estimator_m")}),
+                  "bound_estimator_m", "min_separation_m", "safety_distance_m")}),
     LINKS_TOPIC: _json_schema("enclose.LiveLinks", {
         "links": {"type": "array", "items": {"type": "object"}}}),
     STATUS_TOPIC: _json_schema("enclose.LiveStatus", {
@@ -95,7 +95,9 @@ def errors_now(truth: TruthSnapshot, states: Mapping[int, FollowerState],
             "max_abs_e_delta": _finite(np.abs(delta).max())[0],
             "max_estimator_error_m": _finite(est_err.max())[0],
             "bound_rho_m": info.eps_rho_m, "bound_delta": info.eps_delta,
-            "bound_estimator_m": info.eps_rho_m}
+            "bound_estimator_m": info.eps_rho_m,
+            "min_separation_m": _finite(separation_series(pos[None]))[0],
+            "safety_distance_m": info.safety_distance_m}
 
 
 def _json(topic: str, body: dict[str, Any], log_time_ns: int) -> ViewFrame:
@@ -119,6 +121,8 @@ class LiveView:
         self._members: frozenset[int] | None = None
         self._pending_log: list[ViewFrame] = []
         self._recorded_states = [0] * info.n
+        self._too_close = False  # two vehicles under the safety distance at the last scene
+        self._network_said: set[tuple[int, str]] = set()  # network fault windows logged
 
     def add(self, msg: Message, recv_stamp_s: float) -> None:
         if isinstance(msg, TruthSnapshot):
@@ -144,6 +148,18 @@ class LiveView:
             self.follower_status[msg.index] = msg
             self.links.update(msg, self.follower_status, self._recorded_states)
 
+    def _network_marks(self, now_s: float) -> None:
+        """A log line as each network fault's window opens and closes."""
+        if self.start_stamp_s is None:
+            return
+        t = now_s - self.start_stamp_s
+        for k, (label, at_s, end_s) in enumerate(self.info.net_faults):
+            for edge, what in ((at_s, "begins"), (end_s, "ends")):
+                if t >= edge and (k, what) not in self._network_said:
+                    self._network_said.add((k, what))
+                    self._log(f"network fault {label} {what}", fm.LogLevel.Warning, now_s,
+                              "network")
+
     def _log(self, text: str, level: fm.LogLevel, stamp_s: float, name: str) -> None:
         msg = fm.Log(timestamp=timestamp(stamp_s), level=level, message=text, name=name)
         self._pending_log.append(ViewFrame(LOG_TOPIC, SCHEMAS[LOG_TOPIC], msg.encode(),
@@ -160,7 +176,15 @@ class LiveView:
         log_ns = int(recv_s * _NS)
         drawn = [LinkView(k.sender, k.receiver, k.health) for k in self.links.links()
                  if k.sender is not None]
-        scene = scene_update(truth, self.states, drawn, self.info.rho_d_m)
+        pairs = too_close(truth, self.info.safety_distance_m)
+        close = frozenset(k for _, i, j in pairs for k in (i, j))
+        if pairs and not self._too_close:
+            d, i, j = min(pairs)
+            self._log(f"followers {i} and {j} {d:.2f} m apart: under the safety distance "
+                      f"({self.info.safety_distance_m:g} m)", fm.LogLevel.Error, recv_s,
+                      "safety")
+        self._too_close = bool(pairs)
+        scene = scene_update(truth, self.states, drawn, self.info.rho_d_m, close)
         out.append(ViewFrame(SCENE_TOPIC, SCHEMAS[SCENE_TOPIC], scene.encode(), log_ns))
         errors = errors_now(truth, self.states, self.info)
         if errors is not None:
@@ -173,6 +197,7 @@ class LiveView:
         if members is not None and members != self._members:
             self._members = members
             self._log(f"members {sorted(members)}", fm.LogLevel.Info, now_s, "membership")
+        self._network_marks(now_s)
         ns = int(now_s * _NS)
         procs = [{"name": k, "state": s.state, "detail": s.detail}
                  for k, s in sorted(self.processes.items())]

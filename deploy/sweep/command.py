@@ -27,6 +27,7 @@ from typing import Any
 from rich.console import Console
 
 from deploy.json_files import read_json
+from deploy.sweep.figure_by_law import law_figures
 from deploy.sweep.figures import write_figures
 from deploy.sweep.parallel import StopSignals, run_parallel
 from deploy.sweep.progress import SweepProgress
@@ -44,7 +45,8 @@ TIMEOUT_MARGIN_S = 300.0  # link wait (up to 120 s) + recorder writing (up to 12
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
-        "sweep", help="a grid of real runs over network settings: resumable, table and figures"
+        "sweep",
+        help="a grid of real runs over network settings and laws: resumable, table and figures",
     )
     p.add_argument("sweep_file", type=Path, help="sweep TOML file (see bench/sweeps/)")
     p.add_argument("--out", type=Path, default=None, help="sweep directory (default: file's out)")
@@ -268,5 +270,6 @@ def report(spec: SweepSpec, figures: bool = True) -> None:
     if spec.repeats > 1:
         path = write_summary(spec, rows, md_path)
         log.info("mean and spread over %d seeds: %s", spec.repeats, path.name)
-    paths = write_figures(spec, [r for r in rows if r.state.done]) if figures else []
+    finished = [r for r in rows if r.state.done]
+    paths = [*write_figures(spec, finished), *law_figures(spec, finished)] if figures else []
     print_sweep_verdict(Console(), spec, rows, paths)

@@ -19,8 +19,9 @@ from matplotlib.axes import Axes
 from matplotlib.colors import LogNorm, Normalize
 from matplotlib.ticker import FuncFormatter
 
-from deploy.sweep.spec import SweepSpec, Value, format_value
-from deploy.sweep.table import DELIVERED, METRICS, Row
+from deploy.sweep.spec import SweepSpec
+from deploy.sweep.table import DELIVERED, METRICS, RECOVERY, Row
+from deploy.sweep.values import Value, format_value
 
 log = logging.getLogger("enclose.sweep")
 Point = tuple[Value, ...]
@@ -31,6 +32,8 @@ STYLE: dict[str, tuple[str, bool, str | None]] = {
     "angle_error": ("|e_delta|", True, "delta"),
     "settle_time_s": ("settle time [s]", False, None),
     "command_jump_m_s": ("command jump [m/s]", False, None),
+    "min_separation_m": ("closest approach [m]", False, None),
+    RECOVERY: ("recovery after the network fault [s]", False, None),
     DELIVERED: ("delivered ratio", False, None),
 }
 PLAIN = FuncFormatter(lambda v, _: f"{v:g}")  # 0.06, not 6 x 10^-2, on log axes
@@ -51,7 +54,7 @@ def write_figures(spec: SweepSpec, rows: Sequence[Row]) -> list[Path]:
     if axes is None:
         log.info("heatmaps skipped: fewer than two grid axes with more than one value")
     else:
-        for metric in (*METRICS, DELIVERED):
+        for metric in (*METRICS, DELIVERED, RECOVERY):
             if any(r.state.metrics.get(metric) is not None for r in rows):
                 paths.append(spec.out / f"heatmap_{metric}.png")
                 heatmap(spec, rows, metric, (axes[0], axes[1]), paths[-1])

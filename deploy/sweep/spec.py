@@ -1,4 +1,5 @@
-"""A sweep file (TOML): a grid of `enclose run` network flags, validated once; its cells."""
+"""A sweep file (TOML): a grid of `enclose run` network and law flags, validated once; its
+cells.  The law and its parameters as axes: deploy.sweep.laws."""
 
 from __future__ import annotations
 
@@ -9,31 +10,24 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.scenario.faults import parse_fault_flag
 from agents.scenario.file import load_scenario
 from agents.scenario.model import ESTIMATORS
+from agents.scenario.net_faults import check_fault_flag
 from agents.scenario.network import IMPAIRMENT_KEYS, choice, impairment
 from deploy.restarts import RESTART_POLICIES
+from deploy.sweep.laws import check_laws, is_law_key, law_flags, law_keys, law_value
+from deploy.sweep.values import Value, format_value
 from transport.errors import ConfigError, ScenarioError
 from transport.network_schema import LINK_PROTOCOLS, LinkImpairment
 
 # The network flags of `enclose run`, as sweep keys (--impair-seed comes from seed0 + repeat).
 # `fault` ("AT_S:ACTION:TARGET[:DURATION_S]" or "none") and `restart` sweep like them.
-AXIS_KEYS: tuple[str, ...] = ("estimator", "link", *IMPAIRMENT_KEYS, "fault", "restart")
+AXIS_KEYS: tuple[str, ...] = ("estimator", "link", *IMPAIRMENT_KEYS, "fault", "restart", "law")
 TOP_KEYS = ("scenario", "duration_s", "out", "repeats", "seed0", "grid", "fixed", "heatmap")
-Value = str | float
 
 
 def flag(key: str) -> str:
     return "--" + key.replace("_", "-")
-
-
-def format_value(value: Value) -> str:
-    """Stable text of a value, for directory names and tables: 50.0 -> "50", 0.1 -> "0.1"."""
-    if isinstance(value, str):
-        return value
-    text = repr(float(value))
-    return text[:-2] if text.endswith(".0") else text
 
 
 @dataclass(frozen=True)
@@ -47,7 +41,8 @@ class Cell:
     @property
     def name(self) -> str:
         parts = [f"{k}={format_value(v)}" for k, v in self.values]
-        return "__".join([*parts, f"seed={self.seed}"])
+        # A law's module reference may name a folder: not a directory level here.
+        return "__".join([*parts, f"seed={self.seed}"]).replace("/", "_")
 
     def label(self) -> str:
         return " ".join([*(f"{k}={format_value(v)}" for k, v in self.values), f"seed={self.seed}"])
@@ -97,7 +92,10 @@ class SweepSpec:
         argv = ["run", self.scenario, "--duration", format_value(self.duration_s)]
         argv += ["--out", str(cell_dir)]
         for key, value in (*self.fixed, *cell.values):
-            argv += [flag(key), format_value(value)]
+            if is_law_key(key):
+                argv += law_flags(self.path.parent, key, value)
+            else:
+                argv += [flag(key), format_value(value)]
         if ("link", "udp") in (*self.fixed, *cell.values):
             argv.append("--insecure")  # Zenoh's authenticated links (mTLS) are TCP only
         return [*argv, "--impair-seed", str(cell.seed)]
@@ -123,8 +121,8 @@ def parse_sweep(doc: dict[str, Any], path: Path, out_override: Path | None = Non
         scenario = load_scenario(scenario_ref)
     except ScenarioError as exc:
         raise ConfigError("scenario", str(exc)) from exc
-    grid = _table(doc.get("grid", {}), "grid")
-    fixed = _table(doc.get("fixed", {}), "fixed")
+    grid = _table(law_keys(doc.get("grid", {})), "grid")
+    fixed = _table(law_keys(doc.get("fixed", {})), "fixed")
     axes = tuple(_axis(key, raw) for key, raw in grid.items())
     flat = [k for keys, _ in axes for k in keys]
     twice = sorted({k for k in flat if flat.count(k) > 1} | (set(flat) & set(fixed)))
@@ -144,6 +142,7 @@ def parse_sweep(doc: dict[str, Any], path: Path, out_override: Path | None = Non
         eps_rho_m=scenario.run.eps_rho_m,
         eps_delta=scenario.run.eps_delta,
     )
+    check_laws(((*spec.fixed, *cell.values) for cell in spec.cells()), path.parent, scenario)
     return spec
 
 
@@ -153,9 +152,9 @@ def _check_faults(axes: Any, fixed: dict[str, Any], n: int, m: int) -> None:
         for k, point in enumerate(points):
             for key, value in zip(keys, point, strict=True):
                 if key == "fault":
-                    parse_fault_flag(str(value), n, m, f"grid.{key}[{k}]")
+                    check_fault_flag(str(value), n, m, f"grid.{key}[{k}]")
     if "fault" in fixed:
-        parse_fault_flag(str(fixed["fault"]), n, m, "fixed.fault")
+        check_fault_flag(str(fixed["fault"]), n, m, "fixed.fault")
 
 
 def _scenario(raw: Any, base: Path) -> str:
@@ -194,10 +193,11 @@ def _table(raw: Any, where: str) -> dict[str, Any]:
         for key in name.split("+") if where == "grid" else [name]:
             if key == "impair_seed":
                 raise ConfigError(f"{where}.{key}", "comes from seed0 and repeats; set those")
-            if key not in AXIS_KEYS:
+            if key not in AXIS_KEYS and not is_law_key(key):
                 raise ConfigError(
                     f"{where}.{name}",
-                    f"{key!r} is not a network flag of enclose run ({', '.join(AXIS_KEYS)})",
+                    f"{key!r} is not a flag of enclose run ({', '.join(AXIS_KEYS)}, "
+                    "law.<parameter>)",
                 )
     return raw
 
@@ -234,8 +234,10 @@ def _value(key: str, raw: Any, where: str) -> Value:
         if key == "restart":
             return choice(raw, RESTART_POLICIES, where)
         if key == "fault":  # the format here; the follower numbers against the scenario below
-            parse_fault_flag(_string(raw, where), 10**6, 10**6, where)
+            check_fault_flag(_string(raw, where), 10**6, 10**6, where)
             return str(raw)
+        if is_law_key(key):
+            return law_value(key, raw, where)
         checked = impairment({key: raw}, "x", LinkImpairment())
     except ScenarioError as exc:
         raise ConfigError(where, exc.reason) from exc

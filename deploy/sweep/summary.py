@@ -12,14 +12,15 @@ import statistics
 from collections.abc import Sequence
 from pathlib import Path
 
-from deploy.sweep.spec import SweepSpec, Value, format_value
-from deploy.sweep.table import DELIVERED, METRICS, Row, write_csv_atomic
+from deploy.sweep.spec import SweepSpec
+from deploy.sweep.table import DELIVERED, METRICS, RECOVERY, Row, write_csv_atomic
+from deploy.sweep.values import Value, format_value
 
 SUMMARY_CSV = "results_summary.csv"
 
 
 def metrics_of(rows: Sequence[Row]) -> tuple[str, ...]:
-    extra = (DELIVERED,) if any(DELIVERED in r.state.metrics for r in rows) else ()
+    extra = tuple(k for k in (DELIVERED, RECOVERY) if any(k in r.state.metrics for r in rows))
     return (*METRICS, *extra)
 
 

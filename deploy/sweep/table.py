@@ -10,13 +10,17 @@ from pathlib import Path
 from typing import Any
 
 from deploy.json_files import read_json
-from deploy.sweep.spec import Cell, SweepSpec, format_value
+from deploy.sweep.spec import Cell, SweepSpec
+from deploy.sweep.values import format_value
 from deploy.verdict import silent_followers
 
 RECORD = "sweep_cell.json"  # written by the sweep: the cell's argv, exit code, wall time
 METRICS = ("estimator_error_m", "radius_error_m", "angle_error", "settle_time_s",
-           "command_jump_m_s")
+           "command_jump_m_s", "min_separation_m")
 DELIVERED = "delivered_ratio"
+# The slowest recovery over a cell's network faults (metrics.json "net_faults"); empty
+# when one never came back inside the bounds, or the cell had none.
+RECOVERY = "net_fault_recovery_s"
 INTERRUPTED_EXIT = 130
 RUN_COLUMNS = ("wall_s", "jobs", "load_1min", "host")
 
@@ -95,6 +99,10 @@ def pick_metrics(doc: dict[str, Any]) -> dict[str, float | None]:
     ratio = mean_delivered(doc.get("links"))
     if ratio is not None:
         out[DELIVERED] = ratio
+    faults = doc.get("net_faults")
+    if isinstance(faults, list) and faults:
+        times = [number(f.get("recovery_s")) if isinstance(f, dict) else None for f in faults]
+        out[RECOVERY] = None if None in times else max(t for t in times if t is not None)
     return out
 
 
@@ -129,7 +137,7 @@ def collect(spec: SweepSpec) -> list[Row]:
 
 
 def columns(spec: SweepSpec, rows: list[Row]) -> list[str]:
-    extra = [DELIVERED] if any(DELIVERED in r.state.metrics for r in rows) else []
+    extra = [k for k in (DELIVERED, RECOVERY) if any(k in r.state.metrics for r in rows)]
     return [*spec.axes, "seed", "status", "exit_code", *METRICS, *extra, *RUN_COLUMNS, "cell"]
 
 
@@ -143,7 +151,7 @@ def row_values(spec: SweepSpec, row: Row, cols: list[str], digits: int = 6) -> d
     out["jobs"] = "" if s.jobs is None else str(s.jobs)
     out["load_1min"] = "" if s.load_1min is None else f"{s.load_1min:.2f}"
     out["host"] = s.host or ""
-    for key in (*METRICS, DELIVERED):
+    for key in (*METRICS, DELIVERED, RECOVERY):
         if key in cols:
             v = s.metrics.get(key)
             out[key] = "" if v is None else f"{v:.{digits}g}"

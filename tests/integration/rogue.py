@@ -9,10 +9,13 @@
   port in the vehicle's name (HEARTBEAT disarmed, LOCAL_POSITION_NED 700 m away), as often.
 - Zenoh without credentials: a plain peer connecting to the swarm's endpoint, publishing
   forged follower states on every follower key at 50 Hz; records whether it ever linked.
-- Zenoh with follower j's certificate (`--fuzz-identity`): K random and mutated payloads on
+- Zenoh with follower j's certificate (`--fuzz-identity`; in an --insecure run none, and j
+  is `--follower`): K random and mutated payloads on
   follower j's state key, all of them invalid (garbage, wrong types, wrong sender or index,
   non-finite, impossible or future-stamped values), paced over the run; and forged states on
   follower j+1's key, which its rights do not cover.
+- Tokens (part `tokens`): the identity part's tokens alone (for an --insecure run, where
+  nothing stops them before the receivers).
 - Identity (part `identity`, with follower j's certificate): statuses forged as the
   simulator, on the simulator's key and on follower j's own; 2000 made-up roles, on keys
   of their own and on follower j's; a "stop" word on follower j's state key; liveliness
@@ -50,7 +53,7 @@ BAD_TOKENS = ("9", "4", "123456789", "99999999999", "-1", "01", "\u00b2", "\u066
 
 
 def forged_state(i: int, seq: int, **kw: object) -> FollowerState:
-    f: dict[str, object] = dict(r_m=(500.0, -500.0), dr_m_s=(0.0, 0.0), phi_m=(0.0, 0.0),
+    f: dict[str, object] = dict(r_m=(500.0, -500.0), dr_m_s=(0.0, 0.0),
                                 pos_m=(500.0, -500.0), vel_m_s=(0.0, 0.0), u_m_s=(0.0, 0.0),
                                 vehicle_stamp_s=time.time())
     f.update(kw)
@@ -127,6 +130,25 @@ def forged_status(sender: str, role: str, index: int, seq: int) -> bytes:
                                 {"forged": 1, "ticks": 10**9}, "forged"))
 
 
+class TokenAttack:
+    """Liveliness tokens out of range and malformed, declared once, and follower j's own
+    token declared and withdrawn at every `step`, beside the real follower j's."""
+
+    def __init__(self, bus: ZenohBus, keys: SwarmKeys, j: int, report: dict[str, int]) -> None:
+        self.bus, self.key, self.report = bus, keys.alive("follower", j), report
+        self.bad = [bus.declare_token(f"{keys.prefix}/alive/follower/{t}") for t in BAD_TOKENS]
+        report["tokens_declared"] = len(self.bad)
+        self.flap: object | None = None
+
+    def step(self) -> None:
+        if self.flap is None:
+            self.flap = self.bus.declare_token(self.key)
+        else:
+            self.flap.close()  # type: ignore[attr-defined]
+            self.flap = None
+        self.report["token_flaps"] += 1
+
+
 class IdentityAttack:
     """Follower j's certificate used to pass for others (see the module docstring); one
     `step` every 0.2 s spreads the made-up roles over the attack."""
@@ -134,10 +156,7 @@ class IdentityAttack:
     def __init__(self, bus: ZenohBus, keys: SwarmKeys, j: int, report: dict[str, int]) -> None:
         self.bus, self.keys, self.j, self.report = bus, keys, j, report
         self.own = bus.declare_publisher(keys.status("follower", j))
-        self.tokens = [bus.declare_token(f"{keys.prefix}/alive/follower/{t}")
-                       for t in BAD_TOKENS]
-        report["tokens_declared"] = len(self.tokens)
-        self.flap: object | None = None
+        self.tokens = TokenAttack(bus, keys, j, report)
         self.seq = 0
 
     def step(self) -> None:
@@ -161,12 +180,7 @@ class IdentityAttack:
                           time.time(), 0.0)
         self.bus.publish(keys.follower_state(self.j), encode(stop))
         r["control_forged_sent"] += 1
-        if self.flap is None:  # our own token, beside the real follower j's
-            self.flap = self.bus.declare_token(keys.alive("follower", self.j))
-        else:
-            self.flap.close()  # type: ignore[attr-defined]
-            self.flap = None
-        r["token_flaps"] += 1
+        self.tokens.step()
 
 
 def run(args: argparse.Namespace) -> dict[str, int]:
@@ -181,13 +195,18 @@ def run(args: argparse.Namespace) -> dict[str, int]:
     sock.setblocking(False)
     ports = [args.vehicle_port + k for k in range(args.vehicles)]
     agent_ports = [args.agent_port + k for k in range(args.vehicles)]
-    ident = Identity.load(args.fuzz_identity)
-    j = int(ident.name.rsplit("-", 1)[1])
+    # Without a certificate (an --insecure run) it passes for follower `--follower`.
+    ident = None if args.fuzz_identity is None else Identity.load(args.fuzz_identity)
+    j = args.follower if ident is None else int(ident.name.rsplit("-", 1)[1])
     with ZenohBus(ZenohConfig(connect=(args.endpoint,))) as plain, \
             ZenohBus(ZenohConfig(connect=(args.endpoint,), identity=ident)) as insider:
         fuzz_pub = insider.declare_publisher(keys.follower_state(j))
         wait_running(Path(args.progress))
-        identity = IdentityAttack(insider, keys, j, report) if "identity" in PARTS else None
+        identity: IdentityAttack | TokenAttack | None = None
+        if "identity" in PARTS:
+            identity = IdentityAttack(insider, keys, j, report)
+        elif "tokens" in PARTS:
+            identity = TokenAttack(insider, keys, j, report)
         t0 = time.monotonic()
         next_attack = t0
         while (elapsed := time.monotonic() - t0) < args.seconds:
@@ -227,7 +246,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--endpoint", required=True)
     p.add_argument("--swarm", required=True)
     p.add_argument("--followers", type=int, required=True)
-    p.add_argument("--fuzz-identity", required=True)
+    p.add_argument("--fuzz-identity", default=None, help="a follower's identity file")
+    p.add_argument("--follower", type=int, default=0, help="the follower it passes for "
+                   "without --fuzz-identity")
     p.add_argument("--fuzz-count", type=int, default=100_000)
     p.add_argument("--seconds", type=float, required=True)
     p.add_argument("--out", required=True)

@@ -90,7 +90,7 @@ def test_attack_changes_nothing_and_every_hostile_input_is_counted(tmp_path: Pat
     assert recorder["decoder"]["seq_stale"] == 0
     # The insider's fuzz: all of it reached the recorder and was refused there.  Each
     # follower listening to follower 0 refused what it read; its queue for follower 0 holds
-    # 8 (agents.follower_node.PEER_QUEUE), so the flood's overflow was discarded unread.
+    # 8 (agents.follower.node.PEER_QUEUE), so the flood's overflow was discarded unread.
     assert rep["fuzz_sent"] == FUZZ_COUNT
     assert drops(recorder["decoder"]) == FUZZ_COUNT
     listeners = [c for name, c in status.items() if name.startswith("follower-")

@@ -139,6 +139,38 @@ def test_mavproxy_scripted_gets_params_switches_mode_arms_takes_off_and_flies() 
     assert_all_answered(sim.output())
 
 
+def test_mavproxy_flies_a_signing_vehicle_with_the_passphrase_enclose_gives(
+        tmp_path: Path) -> None:
+    """docs/sim.md's recipe: `enclose vehicle-key SECRET 2` prints vehicle 2's passphrase,
+    MAVProxy's `signing key <passphrase>` makes the same key; vehicle 2 then obeys it."""
+    from agents.mavlink.signing import write_key
+    from deploy.cli import main as enclose
+
+    write_key(tmp_path / "secret.bin")
+    printed = subprocess.run([sys.executable, "-m", "deploy.cli", "vehicle-key",
+                              str(tmp_path / "secret.bin"), "2"], capture_output=True,
+                             text=True, check=True).stdout.strip()
+    assert enclose(["vehicle-key", str(tmp_path / "secret.bin"), "2"]) == 0
+    sim = start_sim("--flavour", "ardupilot", "--signing-secret", str(tmp_path / "secret.bin"),
+                    vehicles=2)
+    mp = MavProxy(sim.send_base + 1)
+    try:
+        mp.expect("Detected vehicle 2:1", 20.0)  # HEARTBEATs: signed, read without a key
+        mp.send("module load signing")
+        mp.expect("Loaded module signing", 5.0)
+        mp.send(f"signing key {printed}")
+        mp.expect("Setup signing key", 5.0)
+        mp.send("mode GUIDED")
+        mp.expect("GUIDED>", 5.0)
+        mp.send("arm throttle")
+        mp.expect("ARMED", 5.0)
+    finally:
+        mp.stop()
+        code = sim.stop()
+    assert code == 0
+    assert "signing_rejected_bad_signature" not in sim.output()
+
+
 def test_dronekit_connects_ready_arms_and_flies() -> None:
     from dronekit import VehicleMode, connect
 

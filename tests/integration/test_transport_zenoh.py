@@ -54,8 +54,8 @@ def echo_peer(swarm: str, endpoint: str) -> Iterator[subprocess.Popen[bytes]]:
 
 
 def state(stamper: Stamper, x: float = 1.0) -> FollowerState:
-    return FollowerState(stamper.header(), 0, (x, 2.0), (0.1, 0.2), (0.0, 0.0), (5.0, 6.0),
-                         (0.5, 0.6), (0.7, 0.8), time.time())
+    return FollowerState(stamper.header(), 0, (x, 2.0), (0.1, 0.2), (5.0, 6.0),
+                         (0.5, 0.6), (0.7, 0.8), time.time(), {"phi_m": (0.0, 0.0)})
 
 
 @pytest.mark.timeout(60)

@@ -70,8 +70,9 @@ def test_enclose_keys_makes_a_swarms_credentials(tmp_path: Path) -> None:
 
     assert main(["keys", str(tmp_path / "k"), "paper", "--swarm", "field"]) == 0
     files = {f.name: f for f in (tmp_path / "k" / "h0").iterdir()}  # one host: all processes
-    assert {"ca.pem", "acl.json", "mavlink-signing-key.bin", "launcher.json",
-            "follower-3.json", "target-1.key", "router-0.json"} <= set(files)
+    assert {"ca.pem", "acl.json", "mavlink-secret.bin", "launcher.json",
+            "follower-3.json", "target-1.key", "router-0.json", "follower-3.mavlink-key.bin",
+            "target-1.mavlink-key.bin"} <= set(files)
     assert "ca.key" not in files and (tmp_path / "k" / "operator" / "ca.key").is_file()
     assert all(stat.S_IMODE(f.stat().st_mode) == 0o600 for f in files.values())
     ident = Identity.load(files["follower-3.json"])

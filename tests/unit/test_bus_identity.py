@@ -200,7 +200,7 @@ def test_refusals_sum_over_processes_and_name_the_senders() -> None:
 
 def test_a_follower_state_index_must_be_its_keys() -> None:
     z = (0.0, 0.0)
-    msg = FollowerState(Header("follower-1", 0, NOW), 1, z, z, z, z, z, z, NOW, ())
+    msg = FollowerState(Header("follower-1", 0, NOW), 1, z, z, z, z, z, NOW)
     assert key_reason(msg, KEYS.follower_state(1)) is None
     assert key_reason(msg, KEYS.follower_estimate(1)) is None
     assert key_reason(msg, KEYS.follower_state(2)) == "key_mismatch"

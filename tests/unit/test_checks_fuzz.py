@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import msgpack
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -14,6 +15,8 @@ from transport.codec import decode, encode
 from transport.decoder import Decoder
 from transport.errors import CodecError
 from transport.keys import SwarmKeys
+from transport.law_fields import FieldSpec
+from transport.law_fields import reason as law_reason
 from transport.messages import FollowerState, Header, RunControl, TargetObservation
 
 KEYS = SwarmKeys("chk")
@@ -21,9 +24,9 @@ NOW = 1_800_000_000.0
 
 
 def state(i: int = 1, sender: str | None = None, stamp: float = NOW, **kw: object) -> FollowerState:
-    fields: dict[str, object] = dict(r_m=(1.0, 2.0), dr_m_s=(0.1, 0.0), phi_m=(0.5, 0.5),
+    fields: dict[str, object] = dict(r_m=(1.0, 2.0), dr_m_s=(0.1, 0.0),
                                      pos_m=(3.0, 4.0), vel_m_s=(1.0, 1.0), u_m_s=(1.0, 0.0),
-                                     vehicle_stamp_s=stamp - 0.01, link_flows=())
+                                     vehicle_stamp_s=stamp - 0.01, law={"phi_m": (0.5, 0.5)})
     fields.update(kw)
     return FollowerState(Header(sender or f"follower-{i}", 0, stamp), i, **fields)  # type: ignore[arg-type]
 
@@ -37,30 +40,34 @@ def test_plausible_state_passes_and_each_fault_is_named() -> None:
     assert check(state(r_m=(math.nan, 0.0)), key, NOW) == "nonfinite"
     assert check(state(pos_m=(1e7, 0.0)), key, NOW) == "impossible"
     assert check(state(vel_m_s=(0.0, 5e3)), key, NOW) == "impossible"
-    assert check(state(link_flows=((0, 1.0, 1.0, math.inf, 0.0),)), key, NOW) == "nonfinite"
+    with pytest.raises(CodecError):  # a law's fields: finite on the wire, by the codec
+        encode(state(law={"s": ((0, 1.0, math.inf),)}))
     ctl = RunControl(Header("follower-1", 0, NOW), "stop", NOW, 0.0)
     assert check(ctl, KEYS.control(), NOW) == "sender"
     obs = TargetObservation(Header("sim-0", 0, NOW), 1, 0, (1e9, 0.0), NOW)
     assert check(obs, KEYS.sensor_targets(1), NOW) == "impossible"
 
 
-def test_second_order_fields_checked() -> None:
-    """rv_m_s is a speed, rv_flows' sums speeds and their rates accelerations: a NaN or a
-    forged value beyond the limits is refused, and named."""
+def test_law_fields_checked_against_the_declaration() -> None:
+    """A receiver that knows the law drops a state whose fields are not the declared ones:
+    an undeclared name, the wrong kind, a value beyond its bound; each counted by reason."""
     key = KEYS.follower_state(1)
-    accel = DEFAULT_LIMITS.max_accel_m_s2
-    fine = state(rv_m_s=(0.5, -0.5), rv_flows=((0, 0.25, 0.0, accel, 0.0),))
-    assert check(fine, key, NOW) is None
-    assert check(state(rv_m_s=(math.nan, 0.0)), key, NOW) == "nonfinite"
-    assert check(state(rv_m_s=(0.0, 2e3)), key, NOW) == "impossible"
-    assert check(state(rv_flows=((0, 0.0, math.inf, 0.0, 0.0),)), key, NOW) == "nonfinite"
-    assert check(state(rv_flows=((0, 2e3, 0.0, 0.0, 0.0),)), key, NOW) == "impossible"
-    forged = state(rv_flows=((0, 0.25, 0.0, 0.0, 1.5 * accel),))
-    assert check(forged, key, NOW) == "impossible"
-    dec = Decoder(limits=DEFAULT_LIMITS)  # and off the wire: dropped and counted
-    for msg in (fine, forged):
+    specs = {"rv_m_s": FieldSpec("rv_m_s", "vec2", 1e3),
+             "sums": FieldSpec("sums", "per_link", 1e5, rate="rates"),
+             "rates": FieldSpec("rates", "per_link", 1e4), "gain": FieldSpec("gain", "scalar", 1.0)}
+    fine = state(law={"rv_m_s": (0.5, -0.5), "sums": ((0, 0.25, 0.0),), "rates": (),
+                      "gain": -1.0})
+    bad = {"law_undeclared": state(law={"phi_m": (0.0, 0.0)}),
+           "law_kind": state(law={"gain": (1.0, 0.0)}),
+           "law_bound": state(law={"rates": ((0, 0.0, 1.5e4),)})}
+    dec = Decoder(limits=DEFAULT_LIMITS, law_fields=specs)
+    for msg in (fine, *bad.values()):
         dec.decode(Received(key, encode(msg), NOW))
-    assert dec.accepted == 1 and dec.dropped == {"rejected_impossible": 1}
+    assert dec.accepted == 1
+    assert dec.dropped == {f"rejected_{why}": 1 for why in bad}
+    assert all(law_reason(m.law, specs) == why for why, m in bad.items())
+    lax = Decoder(limits=DEFAULT_LIMITS)  # a receiver that knows no law: structure only
+    assert all(lax.decode(Received(key, encode(m), NOW)) for m in bad.values())
 
 
 def test_one_future_stamped_state_cannot_freeze_the_view() -> None:
@@ -84,21 +91,17 @@ vec = st.tuples(anyfloat, anyfloat)
 
 
 @settings(max_examples=300, deadline=None)
-@given(vec, vec, vec, vec, vec, vec, anyfloat, anyfloat)
+@given(vec, vec, vec, vec, anyfloat, anyfloat)
 def test_check_never_raises_and_refuses_every_nonfinite(r: tuple[float, float],
                                                         dr: tuple[float, float],
                                                         pos: tuple[float, float],
                                                         vel: tuple[float, float],
-                                                        rv: tuple[float, float],
-                                                        rv_rate: tuple[float, float],
                                                         stamp: float, vstamp: float) -> None:
-    msg = state(r_m=r, dr_m_s=dr, pos_m=pos, vel_m_s=vel, vehicle_stamp_s=vstamp, rv_m_s=rv,
-                rv_flows=((0, 0.0, 0.0, *rv_rate),))
+    msg = state(r_m=r, dr_m_s=dr, pos_m=pos, vel_m_s=vel, vehicle_stamp_s=vstamp)
     msg = FollowerState(Header("follower-1", 0, stamp), *[getattr(msg, f) for f in (
-        "index", "r_m", "dr_m_s", "phi_m", "pos_m", "vel_m_s", "u_m_s", "vehicle_stamp_s",
-        "link_flows", "rv_m_s", "rv_flows")])
+        "index", "r_m", "dr_m_s", "pos_m", "vel_m_s", "u_m_s", "vehicle_stamp_s", "law")])
     verdict = check(msg, KEYS.follower_state(1), NOW)
-    numbers = [*r, *dr, *pos, *vel, *rv, *rv_rate, stamp, vstamp]
+    numbers = [*r, *dr, *pos, *vel, stamp, vstamp]
     if not all(math.isfinite(x) for x in numbers):
         assert verdict is not None
 
@@ -106,8 +109,9 @@ def test_check_never_raises_and_refuses_every_nonfinite(r: tuple[float, float],
 @settings(max_examples=300, deadline=None)
 @given(finite, finite, st.integers(0, 2**31), finite)
 def test_codec_round_trips_any_finite_state(x: float, y: float, seq: int, stamp: float) -> None:
-    msg = FollowerState(Header("follower-3", seq, stamp), 3, (x, y), (y, x), (x, x), (y, y),
-                        (0.0, x), (y, 0.0), stamp, ((1, x, y, x, y),), (y, x), ((2, y, x, y, x),))
+    msg = FollowerState(Header("follower-3", seq, stamp), 3, (x, y), (y, x), (y, y),
+                        (0.0, x), (y, 0.0), stamp,
+                        {"phi_m": (x, x), "s": ((1, x, y), (2, y, x)), "k": y})
     assert decode(encode(msg)) == msg
 
 

@@ -129,3 +129,15 @@ def test_the_simulator_and_recorder_open_their_bus_on_the_scenario_they_loaded(
     assert len(loaded) == 2 and len(opened) == 2  # once per process
     for (opts, network), scenario in zip(opened, loaded, strict=True):
         assert opts.swarm == "s" and network.link == "udp" != scenario.network.link
+
+
+def test_network_faults_reach_a_namespaced_run_and_hosts_once(tmp_path: Path) -> None:
+    part, kill = "40:partition:1,2|3,4:15", "3:kill:follower-1"
+    first = run_options("--netns", "--fault", part, "--fault", kill)
+    assert first.launch.faults == (kill,) and first.launch.network.net_faults == (part,)
+    argv = netns_run.inner_argv(first.launch, tmp_path / "out", "sw", 60.0)
+    again = RunOptions.from_namespace(build_parser(argv).parse_args(argv))
+    assert again.launch.faults == (kill,) and again.launch.network.net_faults == (part,)
+    argv = netns_hosts.inner_argv(first.launch, tmp_path, 60.0)
+    host = HostOptions.from_namespace(build_parser(argv).parse_args(argv))
+    assert host.launch.faults == (kill,) and host.launch.network.net_faults == (part,)

@@ -1,4 +1,4 @@
-"""The follower's numpy-free setup (agents.follower_setup) against the numpy reference,
+"""The follower's numpy-free setup (agents.follower.membership) against the numpy reference,
 and what a follower process leaves out of a scenario's checks (issue 15: lean processes)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agents.core.estimator import edge_fractions, observation_weights
-from agents.follower_setup import FollowerSetup
+from agents.follower.membership import setup_for
 from agents.membership import membership
 from agents.scenario.file import load_scenario, parse_scenario, shipped_text
 from agents.scenario.model import ccw_order
@@ -30,12 +30,14 @@ def test_weights_and_edge_fractions_match_the_numpy_reference(name: str, data: s
     if members == set(range(s.n)):  # everyone: the paper's W from the observation matrix
         np.testing.assert_allclose(form.weights(), observation_weights(s.observation()))
     for i in members:
-        setup = FollowerSetup.from_scenario(s, i, members)
+        setup = setup_for(s, i, members)
         nbrs = np.asarray(setup.neighbours, int)
         want = edge_fractions(adjacency, np.full(len(nbrs), i), nbrs)
         assert setup.nbr_fractions == pytest.approx(tuple(want), rel=0, abs=0)
-        assert setup.weights == pytest.approx(tuple(form.weights()[i]), rel=0, abs=0)
-        assert setup.observed == tuple(int(j) for j in np.nonzero(form.weights()[i])[0])
+        row = form.weights()[i]
+        assert setup.observed == tuple(int(j) for j in np.nonzero(row)[0])
+        assert setup.weights == tuple((j, float(row[j])) for j in setup.observed)
+        assert setup.peers == tuple(sorted({*setup.neighbours, setup.successor}))
 
 
 @given(st.lists(st.tuples(st.floats(-1e3, 1e3), st.floats(-1e3, 1e3)), min_size=2,

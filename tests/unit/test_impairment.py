@@ -260,7 +260,7 @@ def test_held_messages_are_bounded_but_not_by_a_small_receive_queue() -> None:
 
 def state(j: int, seq: int, stamp_s: float) -> bytes:
     z = (0.0, 0.0)
-    return encode(FollowerState(Header(f"follower-{j}", seq, stamp_s), j, z, z, z, z, z, z, 0.0))
+    return encode(FollowerState(Header(f"follower-{j}", seq, stamp_s), j, z, z, z, z, z, 0.0))
 
 
 @pytest.mark.timeout(30)

@@ -43,8 +43,8 @@ def imported_by(code: str) -> set[str]:
 
 # What a follower does before its loop, in a fresh interpreter: what it imports then.
 FOLLOWER_SET_UP = """
-import agents.follower
-from agents.follower_fast import FastSetup
+import agents.follower.main
+from agents.follower.membership import setup_for
 from agents.scenario.file import load_scenario
 from transport.impairment import ImpairedBus
 from transport.keys import SwarmKeys
@@ -52,7 +52,7 @@ from transport.link_stats import AgeHistogram
 for name in ("paper", "ring16"):
     s = load_scenario(name, whole_run=False)
     for i in range(s.n):
-        FastSetup.from_scenario(s, i, set(range(s.n)) - {(i + 1) % s.n})
+        setup_for(s, i, set(range(s.n)) - {(i + 1) % s.n})
     bus = ImpairedBus(None, s.network, receiver=0)
     bus.impairer(bus.link(SwarmKeys("lean").follower_state(1)))
     ages = AgeHistogram()
@@ -63,7 +63,7 @@ for name in ("paper", "ring16"):
 
 @pytest.mark.timeout(90)
 def test_a_follower_and_the_launcher_import_none_of_the_heavy_packages() -> None:
-    swarm = imported_by("import agents.follower, agents.target, deploy.swarm_sim")
+    swarm = imported_by("import agents.follower.main, agents.target, deploy.swarm_sim")
     assert "numpy" in swarm and "zenoh" in swarm  # the check can fail
     assert not swarm & set(NOT_IN_A_FOLLOWER)
     # Not even numpy (16.7 MB) in a follower (issue 15: <= 50 MB per follower).
@@ -197,7 +197,7 @@ def test_phase_stamps_round_trip_through_a_log_line(caplog: pytest.LogCaptureFix
 
 def rec(seq: int, stamp_s: float, arrival_s: float | None, hlc_s: float | None) -> Received:
     z = (0.0, 0.0)
-    payload = encode(FollowerState(Header("follower-0", seq, stamp_s), 0, z, z, z, z, z, z, 0.0))
+    payload = encode(FollowerState(Header("follower-0", seq, stamp_s), 0, z, z, z, z, z, 0.0))
     return Received(K.follower_state(0), payload, stamp_s + 0.01, hlc_s, None, arrival_s)
 
 

@@ -62,7 +62,7 @@ def truth(stamp_s: float = START_S + 0.25) -> TruthSnapshot:
 
 def state(i: int, r_m: tuple[float, float], stamp_s: float = START_S) -> FollowerState:
     z = (0.0, 0.0)
-    return FollowerState(Header(f"follower-{i}", 0, stamp_s), i, r_m, (1.0, 0.0), z, z, z, z, 0.0)
+    return FollowerState(Header(f"follower-{i}", 0, stamp_s), i, r_m, (1.0, 0.0), z, z, z, 0.0)
 
 
 def entities(update: fm.SceneUpdate) -> dict[str, Any]:

@@ -10,7 +10,7 @@ from typing import Any, cast
 import numpy as np
 import pytest
 
-from agents.follower import FollowerNode
+from agents.follower.node import FollowerNode
 from agents.liveness import REFRESH_MAX_S, REFRESH_S, MembershipWatch, StallGuard, TokenSet
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.scenario.file import load_scenario
@@ -64,17 +64,17 @@ def test_watch_and_follower_node_reform_when_a_follower_leaves_and_returns() -> 
     node = FollowerNode(load_scenario("paper"), 0, bus, cast(MavlinkAdapter, FakeVehicle()), "t")
     node.start_s = bus.now_s() + 1e6  # the start word was heard (membership applies)
     node.tick(bus.now_s())
-    assert node.members == {0, 1, 2, 3} and node.setup.neighbours == (1, 3)
+    assert node.members == {0, 1, 2, 3} and node.runner.setup.neighbours == (1, 3)
     tokens[3].close()  # index 3 is killed: 0's ring neighbours are now 1 and 2
     node.tick(bus.now_s())
     assert node.members == {0, 1, 2}
-    assert node.setup.neighbours == (1, 2) and node.setup.successor == 1
+    assert node.runner.setup.neighbours == (1, 2) and node.runner.setup.successor == 1
     assert set(node.peer_subs) == {1, 2}
     tokens[3] = others[3].declare_token(KEYS.alive("follower", 3))
     for i in (1, 2, 3):
         status(others[i], i)
     node.tick(bus.now_s())
-    assert node.members == {0, 1, 2, 3} and node.setup.neighbours == (1, 3)
+    assert node.members == {0, 1, 2, 3} and node.runner.setup.neighbours == (1, 3)
     assert node.status.counters["membership_changes"] == 2
     watch = MembershipWatch(MemoryBus(hub, "sim"), KEYS, n_followers=4)
     assert watch.members(bus.now_s()) == {0, 1, 2, 3}
@@ -140,7 +140,7 @@ def test_a_returning_peer_numbering_from_zero_is_neither_stale_nor_duplicate() -
     z = (0.0, 0.0)
 
     def rec(seq: int) -> Received:
-        msg = FollowerState(Header("follower-3", seq, 1.0 + seq), 3, z, z, z, z, z, z, 0.0, ())
+        msg = FollowerState(Header("follower-3", seq, 1.0 + seq), 3, z, z, z, z, z, 0.0)
         return Received(key, encode(msg), 2.0 + seq)
 
     dec = LinkDecoder()
@@ -164,7 +164,7 @@ def test_before_the_start_word_the_planned_ring_stands_and_alone_means_no_self_l
     assert node.members == {0, 1, 2, 3} and set(node.peer_subs) == {1, 3}
     node.start_s = bus.now_s() + 1e6  # the start word was heard (membership applies)
     node.tick(bus.now_s())
-    assert node.members == {0} and node.setup.successor == 0
+    assert node.members == {0} and node.runner.setup.successor == 0
     assert 0 not in node.peer_subs
     others = {i: MemoryBus(hub, f"f{i}") for i in (1, 2, 3)}
     for i, b in others.items():

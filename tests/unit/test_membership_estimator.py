@@ -1,129 +1,136 @@
 """The robust estimator stays unbiased across a leave and a rejoin; the paper's does not.
 
-Lock-step, one-tick-old views (extrapolated to now, as the follower does): every
-member rebuilds its FollowerSetup for the new member set and carries its memory over
-with `regroup`; a rejoining follower starts from an empty memory, as a new process.
+Lock-step, one-tick-old views (extrapolated to now, as the follower does): every member
+rebuilds its Setup for the new member set and carries its law over (LawRunner.regroup); a
+rejoining follower starts afresh, as a new process.
 """
 
 from __future__ import annotations
 
 import copy
 import dataclasses
+from collections.abc import Mapping
 
 import numpy as np
 import pytest
 
-from agents.follower_logic import (
-    FollowerMemory,
-    FollowerSetup,
-    PeerView,
-    Sample,
-    follower_tick,
-    link_flows,
-    observe_target,
-    ready,
-    reference,
-)
-from agents.follower_membership import join_running, regroup, with_missing
+from agents.follower.inputs import Latest
+from agents.follower.membership import setup_for, stand_ins
+from agents.follower.runner import LawRunner
+from agents.law.interface import Peer, Sample
+from agents.law.paper import PaperLaw
 from agents.scenario.file import load_scenario
+from transport.messages import FollowerState, Header
 from transport.network_schema import NetworkConfig
 
 DT = 0.02
-TARGETS = np.array([[0.0, 0.0], [6.0, 4.0]])  # still: the LAP is their mean
-LAP = TARGETS.mean(axis=0)
+TARGETS = (0j, 6 + 4j)  # still: the LAP is their mean
+LAP = sum(TARGETS) / 2
 
 
 class Swarm:
     def __init__(self, estimator: str) -> None:
         self.s = dataclasses.replace(load_scenario("paper"), network=NetworkConfig(estimator))
+        self.law = PaperLaw.from_params({}, self.s)
         self.members = set(range(self.s.n))
-        self.setups = {i: FollowerSetup.from_scenario(self.s, i) for i in self.members}
-        self.memories = {i: FollowerMemory() for i in self.members}
-        self.published: dict[int, tuple[Sample, Sample, dict[int, Sample]]] = {}
+        self.runners = {i: LawRunner(self.law, setup_for(self.s, i)) for i in self.members}
+        self.inputs = {i: Latest(i, self.runners[i].declared) for i in self.members}
+        self.published: dict[int, FollowerState] = {}
         self.t = 0.0
         for i in self.members:
-            self._publish(i, *reference(self.memories[i], self.setups[i], 0.0))
+            self._publish(i, self.runners[i].standing_estimate({}, 0.0), 0j, {})
 
-    def _publish(self, i: int, r: np.ndarray, dr: np.ndarray) -> None:
-        flows = {j: Sample(np.array([sx, sy]), np.array([fx, fy]), self.t)
-                 for j, sx, sy, fx, fy in link_flows(self.memories[i], self.setups[i])}
-        pos = Sample(np.asarray(self.s.follower_pos_m[i], float), np.zeros(2), self.t)
-        self.published[i] = (Sample(r, dr, self.t), pos, flows)
+    def _publish(self, i: int, r: complex, dr: complex, fields: dict[str, object]) -> None:
+        pos = self.s.follower_pos_m[i]
+        self.published[i] = FollowerState(Header(f"follower-{i}", 0, self.t), i,
+                                          (r.real, r.imag), (dr.real, dr.imag), pos,
+                                          (0.0, 0.0), (0.0, 0.0), self.t, fields)
 
     def regroup(self, members: set[int], join: bool = False) -> None:
-        """Every member regroups; a newcomer starts from an empty memory, as a new process,
-        and publishes p~ first -- or, with `join`, joins the running ring (--join)."""
+        """Every member regroups; a newcomer starts afresh, as a new process, and
+        publishes p~ first -- or, with `join`, joins the running ring (--join)."""
         for gone in self.members - members:
-            del self.published[gone], self.setups[gone], self.memories[gone]
+            del self.published[gone], self.runners[gone], self.inputs[gone]
         for i in members:
-            new = FollowerSetup.from_scenario(self.s, i, members)
+            new = setup_for(self.s, i, members)
             if i in self.members:
-                self.memories[i] = regroup(self.memories[i], self.setups[i], new)
-            else:  # a new process: empty memory, publishes its p~ first
-                self.memories[i] = FollowerMemory()
-            self.setups[i] = new
+                self.runners[i].regroup(new)
+                self.inputs[i].regroup(new)
+            else:  # a new process
+                self.runners[i] = LawRunner(self.law, new)
+                self.inputs[i] = Latest(i, self.runners[i].declared)
         self.members = set(members)
         for i in members - set(self.published):
             if join:
-                views = self.views(i)
-                self.memories[i] = join_running(self.memories[i], self.setups[i], views, self.t)
+                self.runners[i].join(self.views(i), self.t)
             else:
-                self._publish(i, *reference(self.memories[i], self.setups[i], self.t))
+                self._publish(i, self.runners[i].standing_estimate({}, self.t), 0j, {})
 
-    def views(self, i: int) -> dict[int, PeerView]:
-        return {j: PeerView(r, pos, flows.get(i))
-                for j, (r, pos, flows) in self.published.items() if j != i}
+    def views(self, i: int) -> Mapping[int, Peer]:
+        latest = self.inputs[i]
+        for j, msg in self.published.items():
+            if j != i:
+                latest.receive(msg, self.t)
+        return latest.peers
 
     def step(self) -> None:
         self.t += DT
         outs = {}
         for i in sorted(self.members):
-            setup = self.setups[i]
+            runner, latest = self.runners[i], self.inputs[i]
+            setup = runner.setup
             for j in setup.observed:
-                self.memories[i] = observe_target(self.memories[i], setup, j, TARGETS[j], self.t)
-            views = self.views(i)
-            assert self.memories[i].last_r is not None or ready(self.memories[i], setup, views)
-            views = with_missing(views, setup, self.memories[i], self.t)
-            own = Sample(np.asarray(self.s.follower_pos_m[i], float), np.zeros(2), self.t)
-            self.memories[i], out = follower_tick(self.memories[i], setup, own, views, self.t)
-            outs[i] = out
-        for i, out in outs.items():
-            self._publish(i, out.r_m, out.dr_m_s)
+                latest.observe(setup, j, TARGETS[j], self.t)
+            self.views(i)
+            assert runner.last_r is not None or latest.ready(setup)
+            peers = stand_ins(latest.peers, setup, runner.last_r, self.t)
+            own = Sample(complex(*self.s.follower_pos_m[i]), 0j, self.t)
+            stepped = runner.step(self.t, True, own, latest.targets, peers)
+            assert stepped is not None
+            outs[i] = stepped
+        for i, (out, fields) in outs.items():
+            self._publish(i, out.r_m, out.dr_m_s, dict(fields))
 
     def run(self, seconds: float) -> None:
         for _ in range(round(seconds / DT)):
             self.step()
 
-    def sum_phi(self) -> np.ndarray:
-        return np.sum([self.memories[i].phi_m for i in self.members], axis=0)
+    def phi(self, i: int) -> complex:
+        phi: complex = self.runners[i].state.phi_m
+        return phi
+
+    def sum_phi(self) -> complex:
+        return sum((self.phi(i) for i in self.members), 0j)
+
+    def r(self, i: int) -> complex:
+        return complex(*self.published[i].r_m)
 
     def mean_r_error_m(self) -> float:
-        mean_r = np.mean([self.published[i][0].value for i in self.members], axis=0)
-        return float(np.linalg.norm(mean_r - LAP))
+        return abs(sum(self.r(i) for i in self.members) / len(self.members) - LAP)
 
     def max_r_error_m(self) -> float:
-        return max(float(np.linalg.norm(self.published[i][0].value - LAP)) for i in self.members)
+        return max(abs(self.r(i) - LAP) for i in self.members)
 
 
 def test_robust_sums_of_a_leaving_link_drop_out_on_both_ends_and_rejoin_from_zero() -> None:
     swarm = Swarm("robust")
     swarm.run(10.0)
     assert swarm.max_r_error_m() < 0.01  # converged: every Phi_i is far from zero
-    assert np.linalg.norm(swarm.memories[0].phi_m) > 1.0
+    assert abs(swarm.phi(0)) > 1.0
     swarm.regroup({1, 2, 3})  # follower 0 leaves: 1 and 3 link to each other
-    assert swarm.setups[1].neighbours == (2, 3)
+    assert swarm.runners[1].setup.neighbours == (2, 3)
     for _ in range(100):  # at every tick after the change, not only in the end
         swarm.step()
-        np.testing.assert_allclose(swarm.sum_phi(), 0.0, atol=1e-9)
+        assert abs(swarm.sum_phi()) < 1e-9
         assert swarm.mean_r_error_m() < 1e-9
     swarm.run(10.0)
     assert swarm.max_r_error_m() < 0.01  # and the three agree on the LAP again
     swarm.regroup({0, 1, 2, 3})  # it comes back as a new process: fresh links at zero
-    assert swarm.memories[1].link_sums_m is not None
-    np.testing.assert_allclose(swarm.memories[1].link_sums_m[0], 0.0)  # link 1-0 is new
+    sums = swarm.runners[1].state.link_sums_m
+    assert sums is not None and sums[0] == 0j  # link 1-0 is new
     for _ in range(100):
         swarm.step()
-        np.testing.assert_allclose(swarm.sum_phi(), 0.0, atol=1e-9)
+        assert abs(swarm.sum_phi()) < 1e-9
     swarm.run(20.0)  # its neighbours' carries (tau 3 s) decay too
     assert swarm.max_r_error_m() < 0.01
 
@@ -143,7 +150,7 @@ def test_paper_estimator_loses_the_leavers_phi_for_good() -> None:
 
 
 def test_estimates_stay_continuous_across_a_leave_and_a_join() -> None:
-    """Without the carry (agents.estimate_carry) follower 2's r jumped 1.8 m here at the
+    """Without the carry (agents.law.carry) follower 2's r jumped 1.8 m here at the
     leave (in a real run 30 s in: 15 m); joining from p~ threw the ring as far."""
     swarm = Swarm("robust")
     swarm.run(10.0)
@@ -152,17 +159,15 @@ def test_estimates_stay_continuous_across_a_leave_and_a_join() -> None:
     for _ in range(150):
         swarm.step()
         worst = max(worst, swarm.max_r_error_m())
-        np.testing.assert_allclose(swarm.sum_phi(), 0.0, atol=1e-9)
+        assert abs(swarm.sum_phi()) < 1e-9
     assert worst < 0.05
     swarm.run(10.0)
     assert swarm.max_r_error_m() < 1e-3  # the carry has decayed: the exact LAP again
-    before = copy.copy(swarm)  # shallow: its dicts are copied below
-    before.memories, before.published = dict(swarm.memories), dict(swarm.published)
-    before.setups = dict(swarm.setups)
+    before = copy.deepcopy(swarm)
     worst = {}
     for join, ring in ((True, swarm), (False, before)):
         ring.regroup({0, 1, 2, 3}, join=join)
-        assert (ring.memories[0].last_r is not None) == join  # neighbours' mean, not p~
+        assert (ring.runners[0].last_r is not None) == join  # neighbours' mean, not p~
         worst[join] = max(_worst_over(ring, 500), 0.0)
     # Joining from p~ throws the ring by metres; joining the neighbours' estimate keeps it
     # within the paper's estimator bound while the newcomer's carry decays (tau 3 s).
@@ -180,12 +185,12 @@ def _worst_over(swarm: Swarm, ticks: int) -> float:
 
 
 def test_carry_makes_r_continuous_then_decays() -> None:
-    from agents.estimate_carry import REBASE_TAU_S, next_carry
-    raw = np.array([10.0, -5.0])
-    carry = next_carry(np.zeros(2), raw, np.array([1.0, 1.0]), 0.02)
-    np.testing.assert_allclose(raw + carry, [1.0, 1.0])  # continuous at the change
+    from agents.law.carry import REBASE_TAU_S, next_carry
+    raw = 10 - 5j
+    carry = next_carry(0j, raw, 1 + 1j, 0.02)
+    assert raw + carry == 1 + 1j  # continuous at the change
     later = next_carry(carry, raw, None, REBASE_TAU_S)
-    np.testing.assert_allclose(later, carry / np.e)
+    assert later == pytest.approx(carry / np.e)
 
 
 def test_a_joiner_ticks_before_it_hears_its_targets_or_all_peers() -> None:
@@ -195,10 +200,13 @@ def test_a_joiner_ticks_before_it_hears_its_targets_or_all_peers() -> None:
     swarm.regroup({1, 2, 3})
     swarm.run(5.0)
     swarm.regroup({0, 1, 2, 3}, join=True)
-    setup, memory = swarm.setups[0], swarm.memories[0]
-    assert setup.observed and not memory.targets  # it observes a target, not heard yet
-    views = with_missing({}, setup, memory, swarm.t)  # and no peer heard either
-    own = Sample(np.zeros(2), np.zeros(2), swarm.t)
-    memory, out = follower_tick(memory, setup, own, views, swarm.t + DT)
-    assert f"target{setup.observed[0]}" in out.stale and np.all(np.isfinite(out.u_m_s))
-    np.testing.assert_allclose(out.r_m, swarm.memories[0].last_r.held(swarm.t + DT, 1.0))
+    runner, latest = swarm.runners[0], Latest(0, swarm.runners[0].declared)
+    setup, joined = runner.setup, runner.last_r
+    assert setup.observed and joined is not None  # it observes a target, not heard yet
+    now = swarm.t + DT
+    peers = stand_ins({}, setup, joined, now)  # and no peer heard either
+    stepped = runner.step(now, True, Sample(0j, 0j, swarm.t), {}, peers)
+    assert stepped is not None and runner.failures == 0
+    assert latest.stale(setup, peers, now) == len(setup.observed) + len(setup.peers)
+    assert stepped[0].r_m == pytest.approx(joined.held(now, 1.0), abs=1e-12)
+    assert runner.rebase  # carried until its targets are heard

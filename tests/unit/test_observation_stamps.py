@@ -9,7 +9,7 @@ from typing import Any, cast
 import numpy as np
 import pytest
 
-from agents.follower import FollowerNode
+from agents.follower.node import FollowerNode
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.scenario.file import load_scenario
 from transport.checks import DEFAULT_LIMITS, check
@@ -60,7 +60,7 @@ def test_a_future_stamped_observation_does_not_freeze_the_target() -> None:
     sim.publish(key, encode(obs(t0 - 0.02, t0 + 1e6, seq=2)))  # a forged send stamp
     sim.publish(key, encode(obs(t0 - 0.01, seq=3)))
     node.ingest()
-    track = node.memory.targets[0]
+    track = node.latest.targets[0]
     assert track.stamp_s == t0 - 0.01  # the newest honest observation stands
     counters = node.counters()
     assert counters["observations_rejected"] == 2

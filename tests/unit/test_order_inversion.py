@@ -14,10 +14,11 @@ import math
 import numpy as np
 import pytest
 
-from agents.core.controller import ControlGains, enclosing_control, enclosing_control_one
 from agents.core.lockstep import simulate_lockstep
 from agents.core.metrics import compute_metrics, error_series
+from agents.law.enclosing import ControlGains, enclosing_control
 from agents.scenario.file import load_scenario
+from tests.reference.law import enclosing_control as reference_control
 
 GAINS = ControlGains(2.0, 3.0, 2.0, 3.0, 8.0, 0.2, 0.25)
 
@@ -25,8 +26,11 @@ GAINS = ControlGains(2.0, 3.0, 2.0, 3.0, 8.0, 0.2, 0.25)
 def _delta(succ_bearing_rad: float, angle_rad: float) -> tuple[float, float]:
     pos, succ = complex(8.0, 0.0), 8.0 * complex(math.cos(succ_bearing_rad),
                                                    math.sin(succ_bearing_rad))
-    _, _, one = enclosing_control_one(pos, succ, 0j, 0j, angle_rad, GAINS, 0.02)
-    out = enclosing_control(np.array([[8.0, 0.0]]), np.array([[succ.real, succ.imag]]),
+    g = GAINS
+    _, _, one = enclosing_control(pos, succ, 0j, 0j, angle_rad, g.k_z, 1.0 / g.alpha2, g.k_d,
+                                  1.0 / g.alpha3, g.rho_d_m, g.w_d_rad_s, g.step_fraction,
+                                  g.spacing_gain_age, 0.02, 0.0)
+    out = reference_control(np.array([[8.0, 0.0]]), np.array([[succ.real, succ.imag]]),
                             np.zeros((1, 2)), np.zeros((1, 2)), np.array([angle_rad]), GAINS,
                             0.02)
     return one, float(out.delta[0])
@@ -48,7 +52,7 @@ def test_a_ring_with_inverted_followers_unwinds() -> None:
     pos[4], pos[5] = pos[5], pos[4]  # follower 5 one slot behind its place
     pos[8], pos[9], pos[10] = pos[9], pos[10], pos[8]  # follower 10 two slots behind
     inverted = dataclasses.replace(ring, follower_pos_m=tuple(pos))
-    series = simulate_lockstep(inverted, 0.02, 60.0, engine="numpy")
+    series = simulate_lockstep(inverted, 0.02, 60.0)
     angles = np.asarray(ring.pattern.angles_rad)
     errors = error_series(series, ring.successor, angles, ring.pattern.rho_d_m)
     metrics = compute_metrics(series, errors, 40.0, 0.0999, 0.0199)

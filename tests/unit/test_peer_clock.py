@@ -256,7 +256,7 @@ def test_peer_clock_prefers_the_least_delayed_sample_of_its_window() -> None:
 
 def _state(stamp_s: float) -> FollowerState:
     z = (0.0, 0.0)
-    return FollowerState(Header("follower-2", 0, stamp_s), 2, z, z, z, z, z, z, stamp_s - 0.01)
+    return FollowerState(Header("follower-2", 0, stamp_s), 2, z, z, z, z, z, stamp_s - 0.01)
 
 
 def test_book_maps_every_stamp_of_a_message_onto_our_clock() -> None:
@@ -271,7 +271,7 @@ def test_book_maps_every_stamp_of_a_message_onto_our_clock() -> None:
     word = RunControl(Header("follower-2", 0, 101.3), "start", 102.3, 10.0)
     assert book.to_local(word).start_stamp_s == pytest.approx(101.0)  # type: ignore[union-attr]
     assert book.to_local(_state(5.0)) != _state(5.0)
-    other = FollowerState(Header("follower-1", 0, 7.0), 1, *((0.0, 0.0),) * 6, 7.0)
+    other = FollowerState(Header("follower-1", 0, 7.0), 1, *((0.0, 0.0),) * 5, 7.0)
     assert book.to_local(other) == other  # no estimate: same clock
 
 

@@ -110,7 +110,7 @@ def test_sequence_gaps_and_stale_states_counted_per_follower(paper: Scenario) ->
 
     def state(seq: int, stamp: float) -> FollowerState:
         return FollowerState(Header("follower-1", seq, stamp), 1, (float(seq), 0.0), zero,
-                             zero, zero, zero, zero, stamp)
+                             zero, zero, zero, stamp)
 
     for seq in (0, 1, 2, 5, 6, 6, 4, 10):  # gaps 3-4 (2) and 7-9 (3); 6 again and 4: stale
         asm.add(state(seq, START_S + 0.01 * seq))
@@ -124,9 +124,9 @@ def test_truth_of_the_wrong_shape_and_bad_index_dropped(paper: Scenario) -> None
     asm.add(TruthSnapshot(Header("sim-0", 0, START_S), 0.0, ((0.0, 0.0, 0.0),), (), (), ()))
     zero = (0.0, 0.0)
     asm.add(FollowerState(Header("follower-9", 0, START_S), 9, zero, zero, zero, zero, zero,
-                          zero, START_S))
+                          START_S))
     asm.add(FollowerState(Header("follower-1", 0, START_S), 1, (0.0, 0.0, 0.0), zero, zero,
-                          zero, zero, zero, START_S))
+                          zero, zero, START_S))
     ragged = ((0.0, 0.0, 0.0), (0.0,), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
     asm.add(TruthSnapshot(Header("sim-0", 1, START_S), 0.0, ragged, ragged,
                           ((0.0, 0.0), (0.0, 0.0)), ((0.0, 0.0), (0.0, 0.0))))

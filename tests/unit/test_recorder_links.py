@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from agents.scenario.file import load_scenario
-from deploy.recording.links import link_report
+from deploy.recording.links import link_report, unreadable_links
 from deploy.recording.loop import Recorder
 from tests.recorder_synth import SynthRun
 from transport.codec import encode
@@ -90,3 +90,12 @@ def test_no_wait_when_every_follower_is_done(tmp_path: Path) -> None:
         assert sorted(recorder.follower_status) == list(range(paper.n))
         recorder.finish()
         sbus.close()
+
+
+def test_rx_counters_that_name_no_link_are_skipped_and_counted() -> None:
+    odd = status(1, "done", rx_f0=80, rx_fx=1, rx_f=2, rx_g3=3, **{"rx_f\u0663": 4,
+                 "rx_f\u00b2": 5, "rx_": 6}, states_sent=90)
+    statuses = {1: odd, 0: status(0, "done", rx_f1=90, states_sent=100)}
+    links = link_report(statuses, recorded_states=[100, 95])
+    assert set(links) == {"f0->f1", "f1->f0"}
+    assert unreadable_links(statuses) == 6

@@ -32,6 +32,8 @@ _JSON_TYPES: dict[str, Any] = {"number": (int, float), "integer": int, "string":
 
 def conforms(value: Any, schema: dict[str, Any]) -> bool:
     """The subset of JSON Schema the generated schemas use (no jsonschema package here)."""
+    if "anyOf" in schema:  # a union, e.g. a law field's value
+        return any(conforms(value, s) for s in schema["anyOf"])
     if "type" not in schema:  # an unknown property
         return False
     kinds = schema["type"] if isinstance(schema["type"], list) else [schema["type"]]
@@ -45,7 +47,7 @@ def conforms(value: Any, schema: dict[str, Any]) -> bool:
     if isinstance(value, list):
         if not schema.get("minItems", 0) <= len(value) <= schema.get("maxItems", len(value)):
             return False
-        if "prefixItems" in schema:  # a tuple of mixed types, e.g. a LinkFlow
+        if "prefixItems" in schema:  # a tuple of mixed types, e.g. a per_link entry
             return all(conforms(v, s) for v, s in zip(value, schema["prefixItems"], strict=True))
         return all(conforms(v, schema["items"]) for v in value)
     return True
@@ -110,12 +112,12 @@ def test_schema_rejects_what_the_type_forbids() -> None:
     assert not conforms({"header": {}, "r_m": [1.0]}, schema)
     assert dataclass_schema(TargetObservation)["properties"]["noise_std_m"]["type"] == [
         "number", "null"]
-    flow = [2, 0.5, 0.5, 0.0, 1.0]  # a LinkFlow: (j, sums x, y, rates x, y)
-    for name in ("link_flows", "rv_flows"):
-        assert conforms([flow], schema["properties"][name])
-        assert not conforms([flow[:4]], schema["properties"][name])
-        assert not conforms([[0.5, *flow[1:]]], schema["properties"][name])
-    assert not conforms([1.0], schema["properties"]["rv_m_s"])
+    law = schema["properties"]["law"]  # a law's fields: each kind of transport.law_fields
+    link = [2, 0.5, -0.5]  # a per_link entry: (j, x, y)
+    assert conforms({"k": 1.5, "v": [0.5, 1.0], "sums": [link], "none": []}, law)
+    assert not conforms({"sums": [link[:2]]}, law)
+    assert not conforms({"sums": [[0.5, *link[1:]]]}, law)
+    assert not conforms({"v": [1.0]}, law) and not conforms({"k": "x"}, law)
 
 
 @pytest.mark.timeout(30)

@@ -3,6 +3,7 @@ membership changes; link health over time (links.csv -> links.png)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -110,7 +111,7 @@ def short_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 4-s lock-step run with a networked run's extra files: links.csv and launch.json."""
     paper = load_scenario("paper")
     run_dir = tmp_path_factory.mktemp("run")
-    series = simulate_lockstep(paper, 0.02, 4.0, engine="numpy")
+    series = simulate_lockstep(paper, 0.02, 4.0)
     (run_dir / "launch.json").write_text(json.dumps({"events": EVENTS}))
     h = LinkHistory()
     for k in range(5):
@@ -124,7 +125,7 @@ def short_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_every_figure_draws_the_marks_of_the_run(short_run: Path, tmp_path: Path) -> None:
     paper = load_scenario("paper")
-    series = simulate_lockstep(paper, 0.02, 4.0, engine="numpy")
+    series = simulate_lockstep(paper, 0.02, 4.0)
     marks = run_marks(short_run, [2.5])
     assert [m.kind for m in marks] == ["pause", "fault", "died", "membership", "restart"]
     errors = error_series(series, paper.successor, np.asarray(paper.pattern.angles_rad),
@@ -167,7 +168,7 @@ def test_a_large_swarm_gets_a_colour_bar_not_a_legend_that_squeezes_the_panels(
     import deploy.figures as figures
 
     ring32 = load_scenario("ring32")
-    series = simulate_lockstep(ring32, 0.02, 2.0, engine="numpy")
+    series = simulate_lockstep(ring32, 0.02, 2.0)
     errors = error_series(series, ring32.successor, np.asarray(ring32.pattern.angles_rad),
                           ring32.pattern.rho_d_m)
     kept: list[object] = []
@@ -182,3 +183,25 @@ def test_a_large_swarm_gets_a_colour_bar_not_a_legend_that_squeezes_the_panels(
     legends = [ax.get_legend() for ax in [*perf.axes, *traj.axes]]  # type: ignore[attr-defined]
     assert all(len(leg.get_texts()) <= 12 for leg in legends if leg is not None)
     assert any(ax.get_ylabel() == "follower" for ax in perf.axes)  # type: ignore[attr-defined]
+
+
+def test_a_network_fault_is_banded_on_every_figure_and_measured(tmp_path: Path) -> None:
+    paper = load_scenario("paper")
+    series = simulate_lockstep(paper, 0.02, 4.0)
+    info = dataclasses.replace(RunInfo.from_scenario(paper, "networked", 4.0),
+                               net_faults=(("partition 1,2|3,4 1-2 s", 1.0, 2.0),))
+    h = LinkHistory()
+    for k in range(5):
+        h.add(status(2, 1000.0 + k, rx_f1=48 * k, seq_first_f1=0, seq_last_f1=50 * k))
+    h.write_csv(tmp_path / "links.csv", start_stamp_s=1000.0)
+    metrics = write_run_outputs(tmp_path, series, info)
+    doc = json.loads((tmp_path / "metrics.json").read_text())
+    (fault,) = doc["net_faults"]
+    assert fault["label"] == "partition 1,2|3,4 1-2 s" and fault["at_s"] == 1.0
+    assert fault["min_separation_m"] >= metrics.min_separation_m > 0.0
+    assert doc["min_separation_m"] == metrics.min_separation_m
+    assert [m.kind for m in run_marks(tmp_path, [], info.net_faults)] == ["network"]
+    assert json.loads((tmp_path / "run.json").read_text())["net_faults"] == [
+        ["partition 1,2|3,4 1-2 s", 1.0, 2.0]]
+    paths = regenerate_figures(tmp_path)  # run.json read back: the fault again
+    assert {p.name for p in paths} == {"performance.png", "trajectory.png", "links.png"}

@@ -15,7 +15,16 @@ from deploy.sweep.command import run_sweep
 from deploy.sweep.figures import error_against
 from deploy.sweep.progress import SweepProgress, clock_text
 from deploy.sweep.spec import SweepSpec, load_sweep, parse_sweep
-from deploy.sweep.table import collect
+from deploy.sweep.table import (
+    RECOVERY,
+    CellState,
+    Row,
+    collect,
+    columns,
+    markdown,
+    pick_metrics,
+    row_values,
+)
 from transport.errors import ConfigError
 
 pytestmark = pytest.mark.timeout(60)
@@ -322,3 +331,26 @@ def test_progress_eta_comes_from_the_mean_cell_time() -> None:
     progress.end(50.0)
     assert progress.eta_s() == pytest.approx(4 * 40.0)
     assert clock_text(59.6) == "1:00" and clock_text(3725) == "1:02:05"
+
+
+def test_a_cells_network_faults_give_its_slowest_recovery() -> None:
+    doc = {"min_separation_m": 0.5,
+           "net_faults": [{"recovery_s": 3.0}, {"recovery_s": 7.5}]}
+    picked = pick_metrics(doc)
+    assert picked[RECOVERY] == 7.5 and picked["min_separation_m"] == 0.5
+    doc["net_faults"].append({"recovery_s": None})  # one never came back
+    assert pick_metrics(doc)[RECOVERY] is None
+    assert RECOVERY not in pick_metrics({"min_separation_m": 0.5})
+
+
+def test_a_table_with_and_without_network_faults(tmp_path: Path) -> None:
+    grid = {"fault": ["none", "4:partition:1,2|3,4:2", "4:isolate:follower-1:2"]}
+    spec = parse_sweep(doc(grid=grid), tmp_path / "s.toml")
+    rows = [Row(c, CellState("done", 0, 1.0, {"min_separation_m": 2.0,
+                                                  **({RECOVERY: 4.0} if k else {})}))
+            for k, c in enumerate(spec.cells())]
+    cols = columns(spec, rows)
+    assert RECOVERY in cols
+    table = [row_values(spec, r, cols) for r in rows]
+    assert [t[RECOVERY] for t in table] == ["", *["4"] * (len(rows) - 1)]
+    assert "| 4 |" in markdown(spec, rows, cols, table)

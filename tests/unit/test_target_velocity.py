@@ -14,11 +14,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.core.estimator_one import finite_difference_velocity, lag_free_velocity
-from agents.follower_fast import FastSetup
-from agents.follower_fast import FollowerMemory as FastMemory
-from agents.follower_fast import observe_target as observe_fast
-from agents.follower_logic import FollowerMemory, FollowerSetup, observe_target
+from agents.follower.inputs import Latest
+from agents.follower.membership import setup_for
+from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
 from agents.scenario.file import load_scenario
 
 PERIOD_S = 0.05
@@ -92,19 +90,21 @@ def test_a_start_from_rest_overshoots_little_and_briefly() -> None:
     gaps=st.lists(st.floats(0.001, 0.3), min_size=3, max_size=40),
     ys=st.lists(st.floats(-1e3, 1e3), min_size=40, max_size=40),
 )
-def test_both_followers_keep_the_same_track_on_any_stamps(gaps: list[float],
-                                                          ys: list[float]) -> None:
-    """The reference follower and its scalar twin agree, and a finite input stays finite."""
-    scenario = load_scenario("paper")
-    setup = FollowerSetup.from_scenario(scenario, 0)
-    fast_setup = FastSetup.of(setup)
-    ref, fast = FollowerMemory(), FastMemory()
-    stamp = 10.0
-    for gap, y in zip(gaps, ys, strict=False):
-        stamp += gap
-        ref = observe_target(ref, setup, 0, np.array([y, -y]), stamp)
-        fast = observe_fast(fast, fast_setup, 0, complex(y, -y), stamp)
-    a, b = ref.targets[0], fast.targets[0]
-    assert np.all(np.isfinite(a.rate))
-    np.testing.assert_allclose([a.rate[0], a.rate[1]], [b.rate.real, b.rate.imag],
-                               rtol=1e-9, atol=1e-6)
+def test_the_followers_track_is_the_filter_on_any_stamps(gaps: list[float],
+                                                         ys: list[float]) -> None:
+    """What a follower keeps of a target (agents.follower.inputs) is the raw difference of
+    its first two samples, then `lag_free_velocity` on each new one, on any stamps; a
+    finite input stays finite."""
+    setup = setup_for(load_scenario("paper"), 0)
+    latest = Latest(0, {})
+    stamps = list(np.cumsum([10.0, *gaps]))
+    pos = [complex(y, -y) for y in ys[:len(stamps)]]
+    for stamp, p in zip(stamps, pos, strict=False):
+        latest.observe(setup, 0, p, stamp)
+    got = latest.targets[0]
+    n = len(got_stamps := stamps[:len(pos)])
+    assert got.value == pos[n - 1] and got.stamp_s == got_stamps[-1]
+    if n >= 3:
+        want, _ = track(np.array(pos[:n]), np.array(got_stamps))
+        assert got.rate == pytest.approx(complex(want[-1]), rel=1e-12, abs=1e-9)
+    assert math.isfinite(got.rate.real) and math.isfinite(got.rate.imag)

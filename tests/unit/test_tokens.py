@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.follower import FollowerNode
+from agents.follower.node import FollowerNode
 from agents.liveness import FLAP_MAX_CHANGES, FLAP_WINDOW_S, MembershipWatch, TokenSet
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.scenario.file import load_scenario
@@ -147,7 +147,7 @@ def test_alive_sets_and_link_tallies_stay_bounded() -> None:
     z = (0.0, 0.0)
     for _ in range(200):  # a peer leaving and coming back, again and again
         for seq in range(2):
-            msg = FollowerState(Header("follower-3", seq, 1.0), 3, z, z, z, z, z, z, 0.0, ())
+            msg = FollowerState(Header("follower-3", seq, 1.0), 3, z, z, z, z, z, 0.0)
             dec.decode(Received(key, encode(msg), 2.0))
         dec.forget(key)
     assert len(dec.tallies) + len(dec.retired) == 1

@@ -35,20 +35,21 @@ def follower_state(**over: object) -> FollowerState:
         index=1,
         r_m=(1.0, 2.0),
         dr_m_s=(0.1, -0.2),
-        phi_m=(0.0, 0.5),
         pos_m=(10.0, -20.0),
         vel_m_s=(0.3, 0.4),
         u_m_s=(0.5, 0.6),
         vehicle_stamp_s=1699999999.9,
+        law={"phi_m": (0.0, 0.5)},
     )
     return dataclasses.replace(base, **over)  # type: ignore[arg-type]
 
 
 ALL_MESSAGES: list[Message] = [
     follower_state(),
-    follower_state(link_flows=((0, 0.5, -0.25, 0.01, 0.0), (2, -1.0, 2.0, 0.0, -0.02))),
-    follower_state(link_flows=((0, 0.5, -0.25, 0.01, 0.0),), rv_m_s=(0.25, -0.125),
-                   rv_flows=((0, 0.05, -0.02, 1.5, 0.0),)),
+    follower_state(law={}),
+    follower_state(law={"phi_m": (0.0, 0.5), "link_sums_m": ((0, 0.5, -0.25), (2, -1.0, 2.0)),
+                        "link_rates_m_s": ((0, 0.01, 0.0), (2, 0.0, -0.02)), "gain": 2.5,
+                        "none_yet": ()}),
     TargetObservation(H, 1, 0, (3.0, 4.0), 1700000000.1, 0.05),
     TargetObservation(H, 2, 1, (3.0, 4.0), 1700000000.1),
     TruthSnapshot(
@@ -166,50 +167,36 @@ def test_unknown_process_state_rejected() -> None:
         encode(ProcessStatus(H, "follower", 0, "sleeping"))
 
 
-def test_version_1_follower_state_decodes_without_link_flows() -> None:
-    v1 = msgpack.unpackb(encode(follower_state()))[:-3]
-    v1[0] = 1
-    assert decode(bytes(msgpack.packb(v1))) == follower_state()
+@pytest.mark.parametrize("version", [1, 2, 3])
+def test_a_follower_state_older_than_the_law_fields_is_refused(version: int) -> None:
+    """Before codec v4 a FollowerState carried the paper's law in fixed fields: no law of
+    today can read it by name, so it is dropped as a version mismatch, never misread."""
+    v3 = [version, 1, H.sender_id, H.seq, H.stamp_s, 1, [1.0, 2.0], [0.1, -0.2], [0.0, 0.5],
+          [10.0, -20.0], [0.3, 0.4], [0.5, 0.6], 1699999999.9, [], [0.0, 0.0], []]
+    with pytest.raises(CodecError) as err:
+        decode(bytes(msgpack.packb(v3[:{1: 13, 2: 14, 3: 16}[version]])))
+    assert err.value.reason == "version"
+    older = RunControl(H, "start", 1.0, 2.0)  # other types of older versions still read
+    payload = msgpack.unpackb(encode(older))
+    payload[0] = 1
+    assert decode(bytes(msgpack.packb(payload))) == older
 
 
-def test_version_2_follower_state_decodes_with_first_order_defaults() -> None:
-    """An older peer (codec v2, before the second-order estimator) still reads: rv is zero."""
-    flows = [[0, 0.5, -0.25, 0.01, 0.0]]
-    v2 = [2, 1, H.sender_id, H.seq, H.stamp_s, 1, [1.0, 2.0], [0.1, -0.2], [0.0, 0.5],
-          [10.0, -20.0], [0.3, 0.4], [0.5, 0.6], 1699999999.9, flows]
-    out = decode(bytes(msgpack.packb(v2)))
-    assert isinstance(out, FollowerState)
-    assert out.rv_m_s == (0.0, 0.0) and out.rv_flows == ()
-    assert out == follower_state(link_flows=((0, 0.5, -0.25, 0.01, 0.0),))
-    second_order = encode(ALL_MESSAGES[2])  # what a v3 sender's rv fields look like, cut off
-    assert decode(bytes(msgpack.packb([2, *msgpack.unpackb(second_order)[1:-2]]))) == out
-    with pytest.raises(CodecError) as err:  # v2 with the v3 fields is not a v2 message
-        decode(bytes(msgpack.packb([2, *msgpack.unpackb(second_order)[1:]])))
-    assert err.value.reason == "schema"
-
-
-@pytest.mark.parametrize("position", [-3, -1], ids=["link_flows", "rv_flows"])
 @pytest.mark.parametrize(
-    "flow", [(0, 1.0, 2.0), (-1, 0.0, 0.0, 0.0, 0.0), (0, 1.0, float("nan"), 0, 0),
-             (True, 0.0, 0.0, 0.0, 0.0), (0, 1.0, 2.0, 3.0, "x")]
+    ("law", "reason"),
+    [({"x": [0.0]}, "schema"), ({"x": [0.0, float("inf")]}, "non_finite"),
+     ({"x": [0.0, None]}, "type"), ({"x": None}, "type"), ({"x": True}, "type"),
+     ({"x": [[0, 1.0]]}, "schema"), ({"x": [[-1, 1.0, 2.0]]}, "type"),
+     ({"x": [[0, 1.0, float("nan")]]}, "non_finite"), ({"x": [[True, 1.0, 2.0]]}, "type"),
+     ({"": 1.0}, "type"), ({"x" * 65: 1.0}, "type"), ([1.0], "type"),
+     ({f"f{k}": 1.0 for k in range(17)}, "type"), ({"x": [[0, 1.0, 2.0]] * 257}, "type")],
 )
-def test_malformed_flows_rejected(position: int, flow: tuple[float, ...]) -> None:
+def test_malformed_law_fields_rejected(law: object, reason: str) -> None:
     payload = msgpack.unpackb(encode(follower_state()))
-    payload[position] = [list(flow)]
-    with pytest.raises(CodecError):
-        decode(bytes(msgpack.packb(payload)))
-
-
-@pytest.mark.parametrize(("rv", "reason"), [([0.0], "schema"), ([0.0, float("inf")], "non_finite"),
-                                            ([0.0, None], "type"), (0.0, "type")])
-def test_malformed_rv_rejected(rv: object, reason: str) -> None:
-    payload = msgpack.unpackb(encode(follower_state()))
-    payload[-2] = rv
+    payload[-1] = law
     with pytest.raises(CodecError) as err:
         decode(bytes(msgpack.packb(payload)))
     assert err.value.reason == reason
-    with pytest.raises(CodecError):
-        encode(follower_state(rv_m_s=(math.nan, 0.0)))
 
 
 def test_unknown_run_command_rejected() -> None:

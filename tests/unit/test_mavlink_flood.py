@@ -1,0 +1,208 @@
+"""Bounded work under flood: a poll reads at most its budget, a vehicle's peer table is
+not the flooder's to fill, one vehicle's flooded port costs the simulator one budget."""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections import Counter
+from collections.abc import Iterator
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
+from agents.mavlink.rx_gate import ADAPTER_BUDGET, VEHICLE_BUDGET, RxBudget, RxGate
+from agents.mavlink.signing import SignatureVerifier, signing_timestamp, vehicle_key
+from agents.mavlink.wire import encode, new_codec, sign_outgoing
+from agents.scenario.model import HomeConfig, VehicleConfig
+from sim_backend.endpoint import MAX_PEERS
+from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
+
+SECRET = bytes(range(7, 39))
+
+
+class StuffedSocket:
+    """A socket whose receive buffer holds `datagrams`: counts the reads a poll makes."""
+
+    def __init__(self, datagrams: list[bytes]) -> None:
+        self.queue = list(datagrams)
+        self.reads = 0
+
+    def recvmsg(self, _size: int, _anc: int) -> tuple[bytes, list, int, tuple[str, int]]:
+        if not self.queue:
+            raise BlockingIOError
+        self.reads += 1
+        return self.queue.pop(0), [], 0, ("127.0.0.1", 4000)
+
+    def close(self) -> None:
+        pass
+
+
+def signed_position(key: bytes, x: float = 1.0, pad_to: int = 0, mav=None) -> bytes:  # type: ignore[no-untyped-def]
+    if mav is None:
+        mav = new_codec(1, 1)
+        sign_outgoing(mav, key, 0, signing_timestamp(time.time()))
+    frames = encode(mav, mav.local_position_ned_encode(10, x, 2.0, -3.0, 0, 0, 0))
+    while len(frames) < pad_to:  # more frames of the stream: a long, well-signed datagram
+        frames += encode(mav, mav.local_position_ned_encode(10, x, 2.0, -3.0, 0, 0, 0))
+    return frames
+
+
+def stuffed_adapter(datagrams: list[bytes]) -> tuple[MavlinkAdapter, StuffedSocket]:
+    ad = MavlinkAdapter(AdapterConfig(local_port=0, target_sysid=1,
+                                      signing_key=vehicle_key(SECRET, 1)))
+    sock = StuffedSocket(datagrams)
+    ad.sock = sock  # type: ignore[assignment]
+    return ad, sock
+
+
+def test_a_poll_reads_at_most_its_budget_of_a_stuffed_socket() -> None:
+    forged = signed_position(vehicle_key(SECRET, 2))  # signed, by another vehicle's key
+    ad, sock = stuffed_adapter([forged] * 499 + [signed_position(vehicle_key(SECRET, 1))])
+    ad.poll()
+    assert sock.reads == ADAPTER_BUDGET.datagrams
+    assert ad.counters["signing_rejected_bad_signature"] == ADAPTER_BUDGET.datagrams
+    assert not ad.telemetry_seen
+    ad.poll()
+    assert sock.reads == 500 and ad.telemetry_seen  # the real frame waited, it was not lost
+    assert ad.state.pos_enu_m == pytest.approx((2.0, 1.0, 3.0))
+
+
+def test_a_poll_parses_at_most_its_byte_budget_and_keeps_the_rest() -> None:
+    key = vehicle_key(SECRET, 1)
+    vehicle = new_codec(1, 1)  # one stream: each datagram stamped after the one before
+    sign_outgoing(vehicle, key, 0, signing_timestamp(time.time()))
+    bigs = [signed_position(key, x=float(k), pad_to=6000, mav=vehicle) for k in range(10)]
+    ad, sock = stuffed_adapter(bigs)
+    ad.poll()
+    per_poll = ADAPTER_BUDGET.parse_bytes // len(bigs[0])  # whole datagrams that fit
+    assert sock.reads == per_poll + 1  # the one that did not fit waits for the next poll
+    assert ad.state.pos_enu_m[1] == pytest.approx(per_poll - 1)
+    for _ in range(10):
+        ad.poll()
+    assert sock.reads == 10 and ad.state.pos_enu_m[1] == pytest.approx(9.0)
+    assert ad.counters["mav_flood_drops"] == 0 and ad.counters["signing_rejected_replay"] == 0
+    # "rx_<x>" in a follower's status is link x's count (deploy.recording.links): not ours.
+    assert not [k for k in ad.counters if k.startswith("rx_")]
+
+
+def test_a_datagram_larger_than_a_whole_budget_is_cut() -> None:
+    key = vehicle_key(SECRET, 1)
+    huge = signed_position(key, pad_to=ADAPTER_BUDGET.parse_bytes + 5000)
+    ad, _sock = stuffed_adapter([huge])
+    ad.poll()
+    assert ad.telemetry_seen and ad.counters["mav_flood_drops"] == 1
+    assert ad.counters["mav_flood_bytes"] == len(huge) - ADAPTER_BUDGET.parse_bytes
+
+
+def test_gate_screens_first_and_keeps_what_does_not_fit() -> None:
+    counters: Counter[str] = Counter()
+    key = vehicle_key(SECRET, 1)
+    gate = RxGate("t", RxBudget(datagrams=3, parse_bytes=100), counters,
+                  SignatureVerifier(key, allowed_unsigned=frozenset()))
+    good = signed_position(key)
+    assert gate.admit(b"\x00" * 64, None) is None
+    assert gate.admit(good, None) == good and gate.open
+    assert gate.admit(good * 2, ("127.0.0.1", 5), 7.0) is None and not gate.open
+    assert counters["signing_rejected_malformed"] == 1 and counters["mav_flood_drops"] == 0
+    assert gate.new_tick() == (good * 2, ("127.0.0.1", 5), 7.0)
+    assert gate.parsed_bytes == 2 * len(good) and gate.open
+    assert gate.new_tick() is None and gate.parsed_bytes == 0
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.binary(max_size=400))
+def test_screen_takes_any_bytes(data: bytes) -> None:
+    v = SignatureVerifier(vehicle_key(SECRET, 1), key_of_vehicle=lambda s: vehicle_key(SECRET, s))
+    for datagram in (data, b"\xfd" + data, b"\xfe" + data, b"\xfd" + bytes([len(data)]) + data):
+        v.screen(datagram)
+    assert v.streams == {}
+
+
+# ---- the simulated vehicle's side --------------------------------------------------------
+def make_sim(**signing: bytes) -> Simulator:
+    return Simulator(grid_spawn_ned(2), VehicleConfig(), HomeConfig(),
+                     SimConfig(listen_base_port=0, send_base_port=9, **signing))
+
+
+@pytest.fixture
+def signed_sim() -> Iterator[Simulator]:
+    s = make_sim(signing_secret=SECRET)
+    try:
+        yield s
+    finally:
+        s.close()
+
+
+def heartbeat(mav) -> bytes:  # type: ignore[no-untyped-def]
+    return encode(mav, mav.heartbeat_encode(6, 8, 0, 0, 4))
+
+
+def gcs(key: bytes | None, link_id: int = 0):  # type: ignore[no-untyped-def]
+    mav = new_codec(255, 190)
+    if key is not None:
+        sign_outgoing(mav, key, link_id, signing_timestamp(time.time()))
+    return mav
+
+
+def test_unsigned_heartbeat_registers_no_peer_when_signing(signed_sim: Simulator) -> None:
+    ep, row = signed_sim.endpoints[0], signed_sim._rows[0]
+    ep.on_datagram(heartbeat(gcs(None)), ("127.0.0.1", 5000), 0.0, row)
+    assert signed_sim.messages["HEARTBEAT:handled"] == 1  # accepted, as PX4 does ...
+    assert ep.peers == {}  # ... but it buys no telemetry
+    ep.on_datagram(heartbeat(gcs(vehicle_key(SECRET, 1))), ("127.0.0.1", 5001), 0.0, row)
+    assert list(ep.peers) == [("127.0.0.1", 5001)]
+
+
+def test_spoofed_frames_do_not_churn_the_peer_table(signed_sim: Simulator) -> None:
+    ep, row = signed_sim.endpoints[0], signed_sim._rows[0]
+    real = [("127.0.0.1", 6000 + k) for k in range(MAX_PEERS)]
+    for addr in real:
+        ep.on_datagram(heartbeat(gcs(vehicle_key(SECRET, 1))), addr, 1.0, row)
+    other = gcs(vehicle_key(SECRET, 2), link_id=1)  # vehicle 2's agent, on its own link
+    for k in range(100):
+        ep.on_datagram(heartbeat(other), ("127.0.0.1", 7000 + k), 2.0, row)
+        ep.on_datagram(heartbeat(gcs(None)), ("127.0.0.1", 8000 + k), 2.0, row)
+    assert sorted(ep.peers) == real
+    assert signed_sim.counters["signing_rejected_wrong_key"] == 100
+    assert signed_sim.counters["signing_wrong_key_vehicle_2"] == 100
+    # A newcomer with the right key does not evict a live peer either; a silent one it does.
+    ep.on_datagram(heartbeat(gcs(vehicle_key(SECRET, 1))), ("127.0.0.1", 9000), 3.0, row)
+    assert ("127.0.0.1", 9000) not in ep.peers and signed_sim.counters["peers_refused"] == 1
+    ep.on_datagram(heartbeat(gcs(vehicle_key(SECRET, 1))), ("127.0.0.1", 9000), 40.0, row)
+    assert ("127.0.0.1", 9000) in ep.peers and len(ep.peers) == MAX_PEERS
+
+
+def test_without_signing_any_sender_is_a_peer_as_before() -> None:
+    sim = make_sim()
+    try:
+        ep, row = sim.endpoints[0], sim._rows[0]
+        for k in range(MAX_PEERS + 1):
+            ep.on_datagram(heartbeat(gcs(None)), ("127.0.0.1", 6000 + k), float(k), row)
+        assert len(ep.peers) == MAX_PEERS and ("127.0.0.1", 6000) not in ep.peers
+    finally:
+        sim.close()
+
+
+def test_a_flooded_vehicle_costs_one_budget_a_tick_and_the_others_are_served(
+        signed_sim: Simulator) -> None:
+    ports = signed_sim.listen_ports()
+    flood = heartbeat(gcs(vehicle_key(SECRET, 2), link_id=1))  # wrong key for vehicle 1
+    good = gcs(vehicle_key(SECRET, 2), link_id=1)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        tx.bind(("127.0.0.1", 0))
+        for _ in range(2 * VEHICLE_BUDGET.datagrams):
+            tx.sendto(flood, ("127.0.0.1", ports[0]))
+        arm = good.command_long_encode(2, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+        tx.sendto(encode(good, arm), ("127.0.0.1", ports[1]))
+        # Serve until a deadline, as a paced tick does: vehicle 1's socket rests once its
+        # budget is spent (no busy loop on it), vehicle 2's command is handled.
+        signed_sim.receive_until(time.monotonic() + 0.3)
+        c = signed_sim.counters
+        assert c["signing_rejected_wrong_key"] == VEHICLE_BUDGET.datagrams
+        assert c["mav_budget_spent"] >= 1 and c["commands"] == 1
+        signed_sim.step_once()  # the tick ends; the next one's budget takes the rest
+        signed_sim.receive_until(time.monotonic() + 0.3)
+        assert c["signing_rejected_wrong_key"] == 2 * VEHICLE_BUDGET.datagrams

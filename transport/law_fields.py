@@ -1,0 +1,118 @@
+"""A control law's own fields in a FollowerState: their declaration and their checks.
+
+A law (agents.law.interface) declares the numeric fields it publishes to its neighbours,
+each with a kind, a bound and optionally the field that is its rate.  On the wire they
+are a map from name to value in `FollowerState.law` (transport.codec), by kind:
+- "scalar":   a float;
+- "vec2":     a plane vector (x, y);
+- "per_link": one plane vector per neighbour, ((j, x, y), ...): a receiver reads only
+  the entry addressed to it (j = its own index), as the robust estimator's link sums.
+
+The codec checks structure (types, finiteness, at most `MAX_FIELDS` names of at most
+`MAX_NAME` characters, at most `MAX_LINKS` entries per field); a receiver that knows the
+law checks the rest with `reason`: only declared names, each of its declared kind and
+within its bound.  Pure and law-agnostic: transport knows nothing of any law.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+KINDS = ("scalar", "vec2", "per_link")
+MAX_FIELDS = 16
+MAX_NAME = 64
+MAX_LINKS = 256
+MAX_BOUND = 1e150  # squared, still a finite float: magnitudes are compared squared
+
+LinkValue = tuple[int, float, float]  # (neighbour index, x, y)
+LawValue = float | tuple[float, float] | tuple[LinkValue, ...]
+LawFields = Mapping[str, LawValue]
+NO_FIELDS: LawFields = {}
+
+
+@dataclass(frozen=True)
+class FieldSpec:
+    """One field a law publishes.  `bound`: the largest magnitude (|value|, or |(x, y)|)
+    a receiver accepts (at most MAX_BOUND); beyond it the message is a forgery or a fault
+    and is dropped, as the platform's own positions beyond 100 km are.  `rate`: the name
+    of the field that is this one's time derivative (same kind): a receiver extrapolates
+    this field by it from the message's stamp, held after the hold limit, as it does the
+    estimate r."""
+
+    name: str
+    kind: str
+    bound: float
+    rate: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"field {self.name!r}: kind {self.kind!r} not in {KINDS}")
+        if not (0 < len(self.name) <= MAX_NAME and self.name.isidentifier()):
+            raise ValueError(f"field name {self.name!r}: an identifier of <= {MAX_NAME} chars")
+        if not 0.0 < self.bound <= MAX_BOUND:
+            raise ValueError(f"field {self.name!r}: bound must be in (0, {MAX_BOUND:g}]")
+
+
+def check_specs(specs: Iterable[FieldSpec]) -> dict[str, FieldSpec]:
+    """The declaration by name; ValueError naming the field if it is not a usable one."""
+    out: dict[str, FieldSpec] = {}
+    for spec in specs:
+        if spec.name in out:
+            raise ValueError(f"field {spec.name!r} declared twice")
+        out[spec.name] = spec
+    if len(out) > MAX_FIELDS:
+        raise ValueError(f"at most {MAX_FIELDS} fields, got {len(out)}")
+    for spec in out.values():
+        if spec.rate is None:
+            continue
+        rate = out.get(spec.rate)
+        if rate is None or rate is spec or rate.kind != spec.kind:
+            raise ValueError(f"field {spec.name!r}: rate {spec.rate!r} must be another "
+                             f"declared field of kind {spec.kind}")
+    return out
+
+
+def _magnitude2(kind: str, value: Any) -> float:
+    """The largest squared magnitude in `value` if it is of `kind` and finite, else NaN."""
+    if kind == "scalar":
+        ok = type(value) is float and value - value == 0.0
+        return float(value * value) if ok else math.nan
+    if type(value) is not tuple:
+        return math.nan
+    if kind == "vec2":
+        if len(value) != 2:
+            return math.nan
+        x, y = value
+        if type(x) is not float or type(y) is not float or x - x + y - y != 0.0:
+            return math.nan
+        return x * x + y * y
+    if len(value) > MAX_LINKS:
+        return math.nan
+    top, finite = 0.0, 0.0
+    for link in value:
+        if type(link) is not tuple or len(link) != 3:
+            return math.nan
+        j, x, y = link
+        if type(j) is not int or j < 0 or type(x) is not float or type(y) is not float:
+            return math.nan
+        finite += x - x + y - y
+        top = max(top, x * x + y * y)
+    return top if finite == 0.0 else math.nan
+
+
+def reason(fields: LawFields, specs: Mapping[str, FieldSpec]) -> str | None:
+    """None if `fields` hold only declared names, each of its kind, finite and in bounds;
+    else why not: "law_undeclared", "law_kind" (wrong shape or not finite), "law_bound"."""
+    for name, value in fields.items():
+        spec = specs.get(name)
+        if spec is None:
+            return "law_undeclared"
+        mag2 = _magnitude2(spec.kind, value)
+        if mag2 != mag2:  # wrong shape, or not finite
+            return "law_kind"
+        if not mag2 <= spec.bound * spec.bound:  # beyond (or, overflowed, far beyond)
+            return "law_bound"
+    return None
