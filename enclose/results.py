@@ -1,8 +1,8 @@
 """`enclose.Run`: one run directory read back (`enclose.load_run`), lock-step or networked.
 
 Reads what `enclose simulate` and `enclose run` write (deploy.rundir, deploy.launch_end,
-deploy.recording): metrics.json, run.json, launch.json, series.csv, links.csv, the figures
-and the recording. Older run directories lack some of these: what is missing reads empty.
+deploy.recording): metrics.json, run.json, launch.json, series.parquet or series.csv,
+links.csv, the figures and the recording. Older run directories lack some of these: what is missing reads empty.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ FILES: dict[str, str] = {
     "run": "run.json",
     "launch": "launch.json",
     "series": "series.csv",
+    "series_parquet": "series.parquet",
     "links": "links.csv",
     "performance": "performance.png",
     "trajectory": "trajectory.png",
@@ -62,7 +63,12 @@ class Run:
 
     @cached_property
     def series(self) -> pd.DataFrame:
-        """series.csv (columns deploy.rundir.series_columns), indexed by time t_s."""
+        """The series (columns deploy.rundir.series_columns), indexed by time t_s: from
+        series.parquet (full precision, quick for long runs) where the run has one, else
+        from series.csv."""
+        parquet = self.run_dir / FILES["series_parquet"]
+        if parquet.exists():
+            return _table(parquet, index="t_s")
         return _table(self.run_dir / FILES["series"], index="t_s")
 
     @cached_property
@@ -115,7 +121,7 @@ def _table(path: Path, index: str | None = None) -> pd.DataFrame:
     if not path.exists():
         return pd.DataFrame()
     try:
-        frame = pd.read_csv(path)
+        frame = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
     except (OSError, ValueError) as exc:
         raise ConfigError(path.name, f"cannot be read as a table: {exc}") from exc
     return frame.set_index(index) if index and index in frame.columns else frame

@@ -24,6 +24,8 @@ from agents.core.metrics import (
     MetricsAccumulator,
     compute_metrics,
     error_series,
+    least,
+    separation_series,
     settle_time,
     worst,
 )
@@ -180,6 +182,7 @@ def reference_metrics(series: RunSeries, errors: ErrorSeries, steady_from_s: flo
         (np.abs(errors.e_rho_m) < eps_rho_m) & (np.abs(errors.e_delta) < eps_delta), axis=1)
     jumps = np.linalg.norm(np.diff(series.command_m_s, axis=0), axis=2)
     steady_jumps = jumps[steady[1:] & steady[:-1]]
+    separation = separation_series(series.follower_pos_m)
     return Metrics(
         steady_from_s=float(steady_from_s),
         estimator_error_m=worst(errors.estimator_error_m[steady]),
@@ -189,6 +192,9 @@ def reference_metrics(series: RunSeries, errors: ErrorSeries, steady_from_s: flo
         command_jump_m_s=worst(steady_jumps) if steady_jumps.size else 0.0,
         duration_s=float(series.t_s[-1] - series.t_s[0]),
         samples=len(series.t_s),
+        min_separation_m=least(separation),
+        min_separation_transient_m=least(separation[series.t_s < steady_from_s]),
+        min_separation_steady_m=least(separation[series.t_s >= steady_from_s]),
     )
 
 
