@@ -22,6 +22,7 @@ from agents.core.metrics import (
     ErrorSeries,
     Metrics,
     MetricsAccumulator,
+    WindowAccumulator,
     compute_metrics,
     error_series,
     least,
@@ -272,3 +273,40 @@ def test_a_long_links_csv_reads_back_in_bins_that_keep_the_worst(tmp_path: Path)
     assert len(cols["t_s"]) == 100 and cols["t_s"][-1] == 999.0
     assert np.nanmin(cols["delivered"]) == 0.2 and np.nanmax(cols["age_mean_ms"]) == 11.0
     assert np.isnan(cols["age_p50_ms"]).all()
+
+
+def reference_window(series: RunSeries, errors: ErrorSeries, start: float, end: float,
+                     eps_rho_m: float, eps_delta: float) -> dict[str, float | None]:
+    """A network fault's window over the whole series at once."""
+    during = (series.t_s >= start) & (series.t_s < end)
+    after = series.t_s >= end
+    inside = np.all((np.abs(errors.e_rho_m) < eps_rho_m) & (np.abs(errors.e_delta) < eps_delta),
+                    axis=1)
+    back = settle_time(series.t_s[after], inside[after])
+    return {
+        "radius_error_m": worst(np.abs(errors.e_rho_m[during]).ravel()),
+        "angle_error": worst(np.abs(errors.e_delta[during]).ravel()),
+        "estimator_error_m": worst(errors.estimator_error_m[during].ravel()),
+        "min_separation_m": least(separation_series(series.follower_pos_m[during])),
+        "recovery_s": None if back is None else max(0.0, back - end),
+    }
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10**6), k=st.integers(1, 60), cuts=st.lists(st.integers(1, 59)),
+       window=st.sampled_from([(1.0, 2.5), (0.0, 6.0), (5.5, 9.0), (-1.0, 0.05)]))
+def test_fault_windows_fed_in_chunks_are_those_of_the_whole(
+    seed: int, k: int, cuts: list[int], window: tuple[float, float]
+) -> None:
+    series, errors = random_errors(np.random.default_rng(seed), k, 3)
+    acc = WindowAccumulator(window, 0.05, 0.05)
+    bounds = [0, *sorted({c for c in cuts if c < k}), k]
+    for a, b in itertools.pairwise(bounds):
+        rows = np.arange(a, b)
+        acc.add(series.take(rows), ErrorSeries(*(getattr(errors, f.name)[rows]
+                                                 for f in dataclasses.fields(ErrorSeries))))
+    got, expected = acc.result(), reference_window(series, errors, *window, 0.05, 0.05)
+    assert got.keys() == expected.keys()
+    for name, value in expected.items():
+        assert got[name] == value or (value is not None and math.isnan(value)
+                                      and math.isnan(got[name] or 0.0)), name
