@@ -38,23 +38,11 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from deploy.cpu_load import process_cpu_s, process_status_kb
+from deploy.cpu_load import load_1min, process_cpu_s, process_status_kb
+from deploy.pids import read_pids
 
 _OUTPUTS = re.compile(r"run outputs written in ([0-9.]+) s")
 ERROR_COLUMNS = ("e_rho_m", "e_delta", "est_err_m")
-
-
-def read_pids(out: Path) -> dict[str, int]:
-    try:
-        raw = json.loads((out / "logs" / "pids.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    out = {}
-    for name, v in raw.items():  # {name: pid} or {name: {"pid": pid, ...}}
-        pid = v.get("pid") if isinstance(v, dict) else v
-        if isinstance(pid, int):
-            out[name] = pid
-    return out
 
 
 def flying(out: Path) -> bool:
@@ -72,7 +60,9 @@ def flying(out: Path) -> bool:
 def sample(out: Path, launcher_pid: int, t_s: float) -> list[dict[str, Any]]:
     """One reading of every process: name, pid, RSS and HWM (MB), CPU seconds."""
     rows = []
-    for name, pid in {"launcher": launcher_pid, **read_pids(out)}.items():
+    pids = {name: ident.pid for name, ident in read_pids(out / "logs").items()}
+    load = load_1min()
+    for name, pid in {"launcher": launcher_pid, **pids}.items():
         rss, hwm, cpu = (process_status_kb(pid, "VmRSS"), process_status_kb(pid, "VmHWM"),
                          process_cpu_s(pid))
         if rss is None or hwm is None or cpu is None:
@@ -80,7 +70,7 @@ def sample(out: Path, launcher_pid: int, t_s: float) -> list[dict[str, Any]]:
         anon = process_status_kb(pid, "RssAnon")  # the heaps, without mapped files
         rows.append({"t_s": round(t_s, 2), "name": name, "pid": pid, "rss_mb": rss / 1024,
                      "anon_mb": None if anon is None else anon / 1024, "hwm_mb": hwm / 1024,
-                     "cpu_s": cpu})
+                     "cpu_s": cpu, "load_1min": load})
     return rows
 
 
@@ -128,6 +118,35 @@ def memory_table(samples: list[dict[str, Any]], settle_s: float) -> list[dict[st
                               / max(1e-9, last["t_s"] - first["t_s"]), 1))
         out.append(row)
     return out
+
+
+def role_table(memory: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per role (follower, target, sim, ...): how many processes, the range of their RSS
+    after the settling, and the worst growth and slope among them."""
+    roles: dict[str, list[dict[str, Any]]] = {}
+    for r in memory:
+        if "rss_start_mb" in r:
+            roles.setdefault(_order(r["name"])[0], []).append(r)
+    return [{"role": role, "processes": len(rows),
+             "rss_start_mb": [min(r["rss_start_mb"] for r in rows),
+                              max(r["rss_start_mb"] for r in rows)],
+             "rss_end_mb": [min(r["rss_end_mb"] for r in rows),
+                            max(r["rss_end_mb"] for r in rows)],
+             "growth_pct_max": max(r["growth_pct"] for r in rows),
+             "slope_mb_h_max": max((r["slope_mb_h"] for r in rows
+                                    if r["slope_mb_h"] is not None), default=None),
+             "peak_mb_max": max(r["peak_mb"] for r in rows)}
+            for role, rows in roles.items()]
+
+
+def load_range(samples: list[dict[str, Any]], settle_s: float) -> dict[str, float] | None:
+    """The machine's 1-minute load average over the flight after `settle_s`."""
+    loads = {s["t_s"]: s["load_1min"] for s in samples
+             if s["flying"] and s["t_s"] >= settle_s and s.get("load_1min") is not None}
+    if not loads:
+        return None
+    v = list(loads.values())
+    return {"min": min(v), "mean": round(sum(v) / len(v), 2), "max": max(v)}
 
 
 def _order(name: str) -> tuple[str, int]:
@@ -224,6 +243,7 @@ def report(out: Path, args: argparse.Namespace, samples: list[dict[str, Any]]) -
     metrics = json.loads((out / "metrics.json").read_text())
     info = json.loads((out / "run.json").read_text())
     window_s, settle_s = 60 * args.window_min, 60 * args.settle_min
+    memory = memory_table(samples, settle_s)
     late = late_ticks(out, metrics["start_stamp_s"], window_s)
     errors = error_windows(out, window_s)
     first_w = math.ceil(settle_s / window_s)
@@ -232,7 +252,8 @@ def report(out: Path, args: argparse.Namespace, samples: list[dict[str, Any]]) -
               "est_err_m": info["eps_rho_m"]}
     summary: dict[str, Any] = {
         "case": args.case, "minutes": args.minutes, "window_min": args.window_min,
-        "memory": memory_table(samples, settle_s), "late_ticks": late, "errors": errors,
+        "memory": memory, "roles": role_table(memory), "load_1min": load_range(samples, settle_s),
+        "late_ticks": late, "errors": errors,
         "outputs_s": outputs_s(out), "metrics": {k: metrics.get(k) for k in (
             "estimator_error_m", "radius_error_m", "angle_error", "settle_time_s", "samples")},
     }
@@ -256,6 +277,11 @@ def show(summary: dict[str, Any]) -> None:
         print(f"{r['name']:<14}{r['rss_start_mb']:>10.1f}{r['rss_end_mb']:>10.1f}"
               f"{r['growth_pct']:>8.2f}%{_fmt(r['slope_mb_h']):>9}{r['cpu_pct']:>8.1f}"
               f"{r['peak_mb']:>8.1f}")
+    for g in summary["roles"]:
+        print(f"{g['role']} ({g['processes']}): RSS {_span(g['rss_start_mb'])} -> "
+              f"{_span(g['rss_end_mb'])} MB, growth at most {g['growth_pct_max']:+.2f} %, "
+              f"slope at most {_fmt(g['slope_mb_h_max'])} MB/h, peak {g['peak_mb_max']:.1f} MB")
+    print(f"machine load (1-min average) after the settling: {summary['load_1min']}")
     for role, rows in summary["late_ticks"].items():
         cells = " ".join(f"{late}/{ticks}" for late, ticks in rows)
         print(f"late ticks per window, {role}: {cells}")
@@ -268,11 +294,27 @@ def show(summary: dict[str, Any]) -> None:
     print(f"end-of-run outputs written in {summary['outputs_s']} s; metrics {summary['metrics']}")
 
 
+def _span(v: list[float]) -> str:
+    return f"{v[0]:.1f}" if v[0] == v[1] else f"{v[0]:.1f}-{v[1]:.1f}"
+
+
 def _fmt(v: float | None) -> str:
     return "-" if v is None else f"{v:+.2f}"
 
 
 def main() -> None:
+    args = parse_args()
+    out = (args.out or Path(f"runs/soak-{args.case}")).resolve()
+    if args.report_only:  # the figures again from a finished run's soak.json
+        samples = json.loads((out / "soak.json").read_text())["samples"]
+    else:
+        samples = fly(args, out)
+    summary = report(out, args, samples)
+    (out / "soak.json").write_text(json.dumps({"summary": summary, "samples": samples}) + "\n")
+    show(summary)
+
+
+def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--case", default="paper")
@@ -284,11 +326,17 @@ def main() -> None:
     parser.add_argument("--settle-min", type=float, default=5.0)
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--insecure", action="store_true")
+    parser.add_argument("--report-only", action="store_true",
+                        help="no run: the report of the run already in --out (same --case "
+                        "and --minutes)")
     parser.add_argument("run_args", nargs="*", help="more `enclose run` options, after --")
     args = parser.parse_args()
     if args.window_min is None:
         args.window_min = 10.0 if args.minutes >= 40 else args.minutes / 5
-    out = (args.out or Path(f"runs/soak-{args.case}")).resolve()
+    return args
+
+
+def fly(args: argparse.Namespace, out: Path) -> list[dict[str, Any]]:
     argv = [sys.executable, "-m", "deploy.cli", "run", args.case, "--duration",
             str(60 * args.minutes), "--out", str(out), *(["--insecure"] if args.insecure else []),
             *args.run_args]
@@ -296,14 +344,11 @@ def main() -> None:
     with open(out / "launcher.out", "wb") as log:
         proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
         try:
-            samples = watch(proc, out, args.sample_s)
+            return watch(proc, out, args.sample_s)
         finally:
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
-    summary = report(out, args, samples)
-    (out / "soak.json").write_text(json.dumps({"summary": summary, "samples": samples}) + "\n")
-    show(summary)
 
 
 if __name__ == "__main__":
