@@ -2,7 +2,8 @@
 
 Reads what `enclose simulate` and `enclose run` write (deploy.rundir, deploy.launch_end,
 deploy.recording): metrics.json, run.json, launch.json, series.parquet or series.csv,
-links.csv, the figures and the recording. Older run directories lack some of these: what is missing reads empty.
+links.csv, the figures and the recording. Older run directories lack some of these: what is
+missing reads empty.
 """
 
 from __future__ import annotations
