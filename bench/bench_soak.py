@@ -4,21 +4,23 @@ window (issue "Hours, not minutes").
 Runs `enclose run CASE --duration MINUTES*60` and, each `--sample-s` (default 60 s), reads
 every child's VmRSS and CPU time (/proc; the PIDs of logs/pids.json, plus the launcher's
 own).  At the end:
-- per process: RSS at the first sample after `--settle-min` (default 5 min), at the last
-  sample of the flight, the growth between them in %, and the least-squares slope over
-  those samples in MB per hour; mean CPU in % of one core; the recorder's peak (VmHWM),
-  which includes writing the outputs;
+- per process (and per role: followers, targets...): RSS at the first sample after
+  `--settle-min` (default 5 min), at the last sample of the flight, the growth between
+  them in %, and the least-squares slope over those samples in MB per hour; mean CPU in %
+  of one core; the peak (VmHWM; the recorder's includes writing the outputs); the
+  machine's 1-minute load average over the same samples (other work on the machine);
 - per window of `--window-min` of experiment time: the followers' late ticks (their
   `overruns` / `ticks` counters from the statuses in recording.mcap) and the simulator's,
   and the worst errors (|e_rho|, |e_delta|, |r - LAP| from series.parquet);
 - whether the last window is no worse than the first steady one (the first window that
   starts after `--settle-min`): late-tick rate at most its double plus 0.1 % of ticks,
   each error at most 1.25 times its value or inside the paper's bound;
-- how long the recorder took to write the end-of-run outputs (its log says).
-The raw samples go to OUT/soak.json.
+- how long the recorder took to write the end-of-run outputs, and from its stop to its
+  done (its log says).
+The raw samples go to OUT/soak.json; `--report-only` reports a finished run from it again.
 
 Run: python bench/bench_soak.py [--case paper] [--minutes 10] [--window-min 2]
-     [--out runs/soak-paper] [--insecure] [-- MORE ENCLOSE RUN OPTIONS]
+     [--out runs/soak-paper] [--insecure] [--report-only] [-- MORE ENCLOSE RUN OPTIONS]
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +45,8 @@ from deploy.cpu_load import load_1min, process_cpu_s, process_status_kb
 from deploy.pids import read_pids
 
 _OUTPUTS = re.compile(r"run outputs written in ([0-9.]+) s")
+_STATE = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) .*recorder (stopping|done|failed)$",
+                    re.MULTILINE)
 ERROR_COLUMNS = ("e_rho_m", "e_delta", "est_err_m")
 
 
@@ -229,6 +234,19 @@ def outputs_s(out: Path) -> float | None:
     return float(found[-1]) if found else None
 
 
+def stop_to_done_s(out: Path) -> float | None:
+    """From the recorder's "stopping" to its "done" (its log's stamps): the whole end of
+    the run, closing the MCAP and importing the figures' libraries included."""
+    log = out / "logs" / "recorder.log"
+    text = log.read_text(errors="replace") if log.exists() else ""
+    stamps = {state: datetime.strptime(at, "%Y-%m-%d %H:%M:%S,%f")
+              for at, state in _STATE.findall(text)}
+    end = stamps.get("done") or stamps.get("failed")
+    if "stopping" not in stamps or end is None:
+        return None
+    return round((end - stamps["stopping"]).total_seconds(), 2)
+
+
 def verdict(first: dict[str, float], last: dict[str, float], bounds: dict[str, float]) -> bool:
     return all(last.get(k, 0.0) <= max(1.25 * first.get(k, 0.0), bounds[k])
                for k in ERROR_COLUMNS)
@@ -254,8 +272,9 @@ def report(out: Path, args: argparse.Namespace, samples: list[dict[str, Any]]) -
         "case": args.case, "minutes": args.minutes, "window_min": args.window_min,
         "memory": memory, "roles": role_table(memory), "load_1min": load_range(samples, settle_s),
         "late_ticks": late, "errors": errors,
-        "outputs_s": outputs_s(out), "metrics": {k: metrics.get(k) for k in (
-            "estimator_error_m", "radius_error_m", "angle_error", "settle_time_s", "samples")},
+        "outputs_s": outputs_s(out), "stop_to_done_s": stop_to_done_s(out),
+        "metrics": {k: metrics.get(k) for k in ("estimator_error_m", "radius_error_m",
+                                                "angle_error", "settle_time_s", "samples")},
     }
     if 0 <= first_w < last_w < len(errors):
         summary["errors_no_worse"] = verdict(errors[first_w], errors[last_w], bounds)
@@ -291,7 +310,9 @@ def show(summary: dict[str, Any]) -> None:
     first, last = summary["windows_compared"]
     print(f"window {last} against window {first}: errors no worse "
           f"{summary.get('errors_no_worse')}, late ticks no worse {summary.get('late_no_worse')}")
-    print(f"end-of-run outputs written in {summary['outputs_s']} s; metrics {summary['metrics']}")
+    print(f"end-of-run outputs written in {summary['outputs_s']} s "
+          f"({summary['stop_to_done_s']} s from the recorder's stop to done); "
+          f"metrics {summary['metrics']}")
 
 
 def _span(v: list[float]) -> str:
