@@ -3,7 +3,11 @@
 A real recorder on loopback records a synthetic run at 250 Hz (truth and four follower
 states a tick: five times the paper's message rate, so that a minute shows what five would).
 Its resident memory, sampled twice a second from the 30th second to the last, must not
-trend up: keeping every decoded message cost ~0.6 kB each, ~45 MB a minute here.
+trend up: keeping every decoded message cost ~0.6 kB each, ~45 MB a minute here, in every
+part of the run.  A backlog does not: on a loaded machine the recorder falls behind now and
+then and its queues (bounded) grow to the largest backlog seen, a step of a few MB that
+stays; the growth is therefore judged by its median over 10-s stretches, which a ramp
+moves and a few steps do not.
 """
 
 from __future__ import annotations
@@ -33,8 +37,8 @@ pytestmark = pytest.mark.integration
 RATE_HZ = 250.0
 RUN_S = 90.0
 FROM_S = 30.0  # after start-up
-# Zenoh's buffers grow to the largest backlog seen (a few MB over the first minutes on a
-# loaded machine, then flat): a quarter of what keeping the messages cost.
+STRETCH_S = 10.0
+# A quarter of what keeping the messages costs.
 MAX_SLOPE_MB_MIN = 10.0
 
 
@@ -63,6 +67,14 @@ class RssSampler:
                 self.samples.append((time.monotonic() - self._t0, kb / 1024))
 
 
+def median_growth_mb_min(t_s: np.ndarray, mb: np.ndarray, stretch_s: float) -> float:
+    """The median over consecutive `stretch_s` stretches of the RSS growth, MB a minute (RSS
+    at each stretch's end: the last sample at or before it)."""
+    ends = np.arange(t_s[0], t_s[-1] + 1e-9, stretch_s)
+    at = mb[np.searchsorted(t_s, ends, side="right") - 1]
+    return float(np.median(np.diff(at))) * 60.0 / stretch_s
+
+
 @pytest.mark.timeout(240)
 def test_recorder_rss_does_not_grow_with_the_run(tmp_path: Path) -> None:
     swarm, endpoint = f"mem{os.getpid()}", loopback_endpoint(free_port())
@@ -88,9 +100,9 @@ def test_recorder_rss_does_not_grow_with_the_run(tmp_path: Path) -> None:
         stop(proc)
     t, mb = np.array(rss.samples).T
     flying = t >= FROM_S
-    slope = float(np.polyfit(t[flying] / 60.0, mb[flying], 1)[0])
+    slope = median_growth_mb_min(t[flying], mb[flying], STRETCH_S)
     print(f"recorder RSS {mb[flying][0]:.1f} MB at {FROM_S:.0f} s, {mb[flying][-1]:.1f} MB at "
-          f"{t[-1]:.0f} s: {slope:+.2f} MB a minute")
+          f"{t[-1]:.0f} s: {slope:+.2f} MB a minute (median of {STRETCH_S:.0f}-s stretches)")
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["samples"] >= 0.95 * RUN_S * RATE_HZ  # it kept up: all of it was recorded
     assert slope < MAX_SLOPE_MB_MIN
