@@ -280,6 +280,7 @@ class Launch:
         with LiveBoard(self.view, PROGRESS_PERIOD_S) as board:
             while bus.now_s() < start + self.duration_s:
                 self.injector.check()
+                self.cut_check(time.monotonic() - t0)
                 self.watchdog.check()
                 self.board.collect()
                 if bus.now_s() >= next_word:  # same start stamp: a repeat changes nothing
@@ -288,6 +289,9 @@ class Launch:
                     self._sample_cpu()
                 board.tick()
                 time.sleep(0.05)
+
+    def cut_check(self, t_s: float) -> None:
+        """Network faults cut by the OS at experiment time `t_s` (deploy.host_launch)."""
 
     def _sample_cpu(self) -> None:
         self.cpu.sample(time.monotonic(), {c.name: c.pid for c in self.sup.children})
