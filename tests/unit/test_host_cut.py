@@ -87,5 +87,5 @@ def test_hosts_split_along_the_scenarios_partition(k: int, hosts: list[list[str]
         assert [list(h.processes) for h in dep.hosts] == hosts
         assert split_along([[0, 1], [2, 3]], 2) == hosts
     else:
-        assert [list(h.processes) for h in dep.hosts][0] == list(GROUND)
+        assert list(dep.hosts[0].processes) == list(GROUND)
     assert dep.cut_hub == "enclose-1-hub"
