@@ -191,6 +191,7 @@ class FollowerNode:
         if self.start_s is None:
             return
         members = self.hold.members(tokens, now_s)
+        self.status.counters["far_sides_held"] = self.hold.holds
         if members == self.members:
             return
         new = setup_for(self.scenario, self.index, members)
