@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.integration.runs import pid_alive, spawned
+from tests.integration.runs import pid_alive, spawned_run
 
 pytestmark = pytest.mark.integration
 DURATION_S, AT_S, CUT_S = 36.0, 12.0, 8.0
@@ -29,7 +29,7 @@ def test_a_partition_is_seen_by_membership_and_healed(tmp_path: Path) -> None:
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--link-timeout",
             "60", "--duration", str(DURATION_S), "--estimator", "robust",
             "--fault", f"{AT_S:g}:partition:1,2|3,4:{CUT_S:g}"]
-    with spawned(argv, out) as proc:
+    with spawned_run(argv, out) as proc:
         output, _ = proc.communicate(timeout=DURATION_S + 150.0)
     assert proc.returncode == 0, output  # 3: a process died
     launch = json.loads((out / "launch.json").read_text())
