@@ -84,7 +84,8 @@ class Launch:
 
     def journal_argv(self) -> list[str]:
         """A follower's input journal, in the run directory (enclose replay)."""
-        return ["--journal", str(self.out / "journal")] if self.opts.journal else []
+        on = self.scenario.run.journal if self.opts.journal is None else self.opts.journal
+        return ["--journal", str(self.out / "journal")] if on else []
 
     def recorder_sensor_argv(self) -> list[str]:
         """Noiseless target observations are the truth's target positions again: the

@@ -145,7 +145,7 @@ def sim_tick_hz(control_hz: float) -> float:
     control period.  ring64's 20 Hz on 50 Hz ticks got them every 40 or 60 ms (2.5 ticks)
     and 25 observations a second per follower; on 40 Hz ticks, every 50 ms and 20 a second:
     a fifth fewer simulator ticks and sensor messages (simulator late ticks 22-32 % against
-    27-60 % in alternate runs; BENCHMARKS.md, ninth session).  The vehicle model is an
+    27-60 % in alternate runs; BENCHMARKS.md).  The vehicle model is an
     exact discretisation, so a coarser tick does not change its dynamics."""
     if control_hz >= MAX_DEFAULT_TICK_HZ:
         return MAX_DEFAULT_TICK_HZ
