@@ -5,7 +5,7 @@ A follower is a member while its liveliness token is alive.  Zenoh withdraws a t
 (10 s without a word: a frozen, SIGSTOPped process) runs out; a process whose loop is stuck
 while its Zenoh threads still run withdraws its own token (`StallGuard`, after STALL_S) and
 declares it again when the loop runs.  Every observer sees the same set, carried by Zenoh,
-with no traffic of ours.  Until the seventh session a follower was also dropped when its
+with no traffic of ours.  A follower was once also dropped when its
 ~1-Hz status had not been heard for 5 s, so every follower heard every other's status:
 O(n^2) messages, ~4000 a second at n = 64, as many as the ring's data, and on 2 cores the
 share of a core that ring64's simulator and recorder were missing (BENCHMARKS.md).

@@ -11,6 +11,7 @@ from agents.scenario.checks import check_estimator_order
 from agents.scenario.model import ESTIMATORS, Scenario
 from agents.scenario.net_faults import parse_net_fault_flag
 from agents.scenario.network import IMPAIRMENT_KEYS, impairment
+from transport.errors import ScenarioError
 from transport.network_schema import AGENT_SCHEDS, LINK_PROTOCOLS, LOSS_MODELS, ZENOH_RUNTIMES
 
 FLAGS = {key: "--" + key.replace("_", "-") for key in IMPAIRMENT_KEYS}
@@ -43,6 +44,9 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--net-fault", action="append", default=None, metavar="SPEC",
                    help="a network fault on the run's timeline, e.g. 40:partition:1,2|3,4:15 "
                         "(agents.scenario.net_faults; `enclose run --fault` takes it too)")
+    g.add_argument("--os-cut", default=None, metavar="K,K",
+                   help="the network faults (0-based, in time order) cut by the OS between "
+                        "hosts (deploy.netns.cut): not cut again at the receivers")
     g.add_argument("--latency-stamps", action="store_true", default=None,
                    help="stamp every sample's arrival: one-way latency per link in the "
                         "followers' status (lat_p50_us_f<j>; bench/bench_latency.py)")
@@ -61,6 +65,7 @@ class NetworkOptions:
     impair_seed: int | None = None
     latency_stamps: bool = False
     net_faults: tuple[str, ...] = ()  # --net-fault texts
+    os_cut: tuple[int, ...] = ()  # --os-cut: faults the OS cuts (their numbers)
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> NetworkOptions:
@@ -69,7 +74,17 @@ class NetworkOptions:
         return cls(**{k: getattr(args, k, None) for k in _CHOICES}, impairment=given,
                    impair_seed=getattr(args, "impair_seed", None),
                    latency_stamps=bool(getattr(args, "latency_stamps", None)),
-                   net_faults=tuple(getattr(args, "net_fault", None) or ()))
+                   net_faults=tuple(getattr(args, "net_fault", None) or ()),
+                   os_cut=_numbers(getattr(args, "os_cut", None)))
+
+
+def _numbers(text: str | None) -> tuple[int, ...]:
+    if not text:
+        return ()
+    try:
+        return tuple(sorted({int(k) for k in text.split(",")}))
+    except ValueError:
+        raise ScenarioError("--os-cut", f"{text!r} is not a list of fault numbers") from None
 
 
 _CHOICES = ("estimator", "estimator_order", "link", "zenoh_runtime", "agent_sched")
@@ -85,6 +100,8 @@ def network_overrides(opts: NetworkOptions) -> list[str]:
             argv += ["--" + dest.replace("_", "-"), str(value)]
     for text in opts.net_faults:
         argv += ["--net-fault", text]
+    if opts.os_cut:
+        argv += ["--os-cut", ",".join(str(k) for k in opts.os_cut)]
     return argv + (["--latency-stamps"] if opts.latency_stamps else [])
 
 
@@ -107,6 +124,11 @@ def apply_network_arguments(scenario: Scenario, opts: NetworkOptions) -> Scenari
         added = [parse_net_fault_flag(t, scenario.n, "--net-fault") for t in opts.net_faults]
         net = dataclasses.replace(
             net, faults=tuple(sorted((*net.faults, *added), key=lambda f: f.at_s)))
+    if opts.os_cut:
+        if max(opts.os_cut) >= len(net.faults) or min(opts.os_cut) < 0:
+            raise ScenarioError("--os-cut", f"fault numbers must be in 0..{len(net.faults) - 1}"
+                                f", got {list(opts.os_cut)}")
+        net = dataclasses.replace(net, os_cut=opts.os_cut)
     # The velocity stage is the robust estimator's: `--estimator paper` is order 1.
     order = opts.estimator_order
     if order is None:

@@ -12,7 +12,7 @@ first one and gossip into a full mesh (K (K - 1) / 2 links); `--star` makes proc
 router and the rest its clients (one link each).  `--clock per-host` runs enclose's
 clock exchange over hosts (transport.clock_sync: the router probes, every client
 listens; needs --star), `--clock per-process` the same probes between every pair of
-processes, as before the eighth session (needs --insecure: the ACL now gives clock keys
+processes, as enclose once did (needs --insecure: the ACL now gives clock keys
 to routers only).  After a settling time the script reads
 each process's CPU from /proc over a window and prints the mean and the worst, and the
 machine's busy share.  Nothing else should run meanwhile.

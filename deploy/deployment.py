@@ -60,6 +60,9 @@ class Deployment:
     scenario: str
     hosts: tuple[HostSpec, ...]
     inter_host_delay_ms: float = 0.0
+    # Test hosts: the hub namespace whose bridge links them; partitions and isolations
+    # along hosts are cut there by nftables (deploy.netns.cut)
+    cut_hub: str | None = None
 
     def host_of(self, process: str) -> int:
         for k, host in enumerate(self.hosts):
@@ -150,8 +153,11 @@ def parse_deployment(doc: dict[str, Any]) -> Deployment:
     delay = doc.get("inter_host_delay_ms", 0.0)
     if not isinstance(delay, int | float) or not 0.0 <= delay < 10_000:
         raise ConfigError("deployment.inter_host_delay_ms", f"{delay!r} not in [0, 10000)")
+    hub = doc.get("cut_hub")
+    if hub is not None and not isinstance(hub, str):
+        raise ConfigError("deployment.cut_hub", f"{hub!r} is not a namespace name")
     return Deployment(validate_name(str(doc.get("swarm", "enclose")), "deployment.swarm"),
-                      str(doc.get("scenario", "paper")), specs, float(delay))
+                      str(doc.get("scenario", "paper")), specs, float(delay), hub)
 
 
 def load_deployment(path: Path) -> Deployment:
@@ -166,6 +172,8 @@ def dump_deployment(dep: Deployment) -> str:
     """The TOML of `dep` (for --hosts K, which writes one and runs it)."""
     lines = [f"swarm = {_q(dep.swarm)}", f"scenario = {_q(dep.scenario)}",
              f"inter_host_delay_ms = {dep.inter_host_delay_ms!r}"]
+    if dep.cut_hub:
+        lines.append(f"cut_hub = {_q(dep.cut_hub)}")
     for h in dep.hosts:
         lines += ["", "[[hosts]]", f"name = {_q(h.name)}", f"address = {_q(h.address)}",
                   f"router_port = {h.router_port}",
@@ -179,6 +187,14 @@ def dump_deployment(dep: Deployment) -> str:
 
 def _q(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def split_along(groups: list[list[int]], m: int) -> list[list[str]]:
+    """Processes per host, one host per group of followers (0-based), the ground station
+    (launcher, simulator, recorder, targets) with the first: hosts split along a partition."""
+    ground = ["launcher", "sim", "recorder", *(f"target-{j}" for j in range(m))]
+    hosts = [[f"follower-{i}" for i in sorted(g)] for g in groups]
+    return [ground + hosts[0], *hosts[1:]]
 
 
 def split_over_hosts(k: int, n: int, m: int) -> list[list[str]]:

@@ -20,6 +20,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from agents.network_args import apply_network_arguments
 from agents.scenario.file import load_scenario, parse_scenario, shipped_text
 from agents.scenario.law import pinned_law
 from agents.scenario.model import Scenario
@@ -27,6 +28,7 @@ from deploy.deployment import Deployment
 from deploy.host_keys import HostSecrets, write_swarm_keys
 from deploy.launch import Launch
 from deploy.launch_options import LaunchOptions
+from deploy.netns.cut import HostCut, cuttable
 from deploy.run_secrets import RunSecrets
 from transport.clock import clock_env
 from transport.clock_sync import format_clock_hosts, parse_clock_hosts
@@ -60,9 +62,19 @@ class HostLaunch(Launch):
             # The file the processes load, read here from the same text.
             scenario = parse_scenario(text, origin=str(path), base=path.parent)
             opts = replace(opts, scenario=str(path))
+        faults = apply_network_arguments(scenario, opts.network).network.faults
+        os_cut = tuple(k for k, f in enumerate(faults) if cuttable(f, dep)) \
+            if dep.cut_hub and every_host else ()
+        if os_cut:  # the children leave these to the OS (transport.impairment)
+            opts = replace(opts, network=replace(opts.network, os_cut=os_cut))
         super().__init__(scenario, opts, out, dep.swarm, duration_s)
         self.coordinator = dep.host_of("launcher") in local
         self.sim_address = dep.hosts[dep.host_of("sim")].address
+        self.host_cut: HostCut | None = None
+        self.cut_dropped: int | None = None
+        if os_cut and dep.cut_hub:
+            exempt = tuple(range(b, b + 100) for b in (self.vehicle_base, self.adapter_base))
+            self.host_cut = HostCut(dep.cut_hub, dep, tuple(faults[k] for k in os_cut), exempt)
 
     def make_secrets(self) -> RunSecrets:
         """Each local host's folder of `enclose keys` (deploy.host_keys): with --host, the
@@ -157,7 +169,15 @@ class HostLaunch(Launch):
 
     def fly(self, bus: object) -> None:
         if self.coordinator:
-            super().fly(bus)  # type: ignore[arg-type]
+            cut = self.host_cut
+            if cut is not None:
+                cut.open()
+            try:
+                super().fly(bus)  # type: ignore[arg-type]
+            finally:
+                if cut is not None:
+                    self.cut_dropped = cut.dropped()
+                    cut.close()
             return
         # Not the coordinator: supervise until our movers have stopped (stop word).
         movers = [c for c in self.sup.children if c.name.startswith(("follower", "target"))]
@@ -170,7 +190,14 @@ class HostLaunch(Launch):
                                  "clock_offset_s": h.clock_offset_s, "netns": h.netns}
                         for h in self.dep.hosts}
         out["inter_host_delay_ms"] = self.dep.inter_host_delay_ms
+        if self.host_cut is not None:
+            out["os_cut"] = {"hub": self.host_cut.hub, "changes": self.host_cut.changes,
+                             "frames_dropped": self.cut_dropped}
         return out
+
+    def cut_check(self, t_s: float) -> None:
+        if self.host_cut is not None:
+            self.host_cut.check(t_s)
 
 
 def _sender(name: str) -> str:

@@ -84,7 +84,8 @@ class Launch:
 
     def journal_argv(self) -> list[str]:
         """A follower's input journal, in the run directory (enclose replay)."""
-        return ["--journal", str(self.out / "journal")] if self.opts.journal else []
+        on = self.scenario.run.journal if self.opts.journal is None else self.opts.journal
+        return ["--journal", str(self.out / "journal")] if on else []
 
     def recorder_sensor_argv(self) -> list[str]:
         """Noiseless target observations are the truth's target positions again: the
@@ -282,6 +283,7 @@ class Launch:
         with LiveBoard(self.view, PROGRESS_PERIOD_S) as board:
             while bus.now_s() < start + self.duration_s:
                 self.injector.check()
+                self.cut_check(time.monotonic() - t0)
                 self.watchdog.check()
                 self.board.collect()
                 if bus.now_s() >= next_word:  # same start stamp: a repeat changes nothing
@@ -290,6 +292,9 @@ class Launch:
                     self._sample_cpu()
                 board.tick()
                 time.sleep(0.05)
+
+    def cut_check(self, t_s: float) -> None:
+        """Network faults cut by the OS at experiment time `t_s` (deploy.host_launch)."""
 
     def _sample_cpu(self) -> None:
         self.cpu.sample(time.monotonic(), {c.name: c.pid for c in self.sup.children})

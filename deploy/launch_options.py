@@ -33,7 +33,8 @@ class LaunchOptions:
     port_range: str | None = None  # LO-HI
     credentials_dir: str | None = None  # a host's copy of `enclose keys` (enclose host)
     verbose: int = 0
-    journal: bool = True  # every follower journals its law's inputs (enclose replay)
+    # Every follower journals its law's inputs (enclose replay); None: as the scenario says.
+    journal: bool | None = None
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace, scenario: str | None,
@@ -52,7 +53,7 @@ class LaunchOptions:
             network=network, law=LawOptions.from_namespace(args), live=live,
             port_range=port_range,
             credentials_dir=credentials_dir, verbose=int(getattr(args, "verbose", 0)),
-            journal=bool(getattr(args, "journal", True)),
+            journal=getattr(args, "journal", None),
         )
 
     def scenario_ref(self) -> str:
@@ -69,4 +70,14 @@ class LaunchOptions:
                 "--max-restarts", str(self.max_restarts)]
         for fault in self.faults:
             argv += ["--fault", fault]
+        if self.journal is not None:
+            argv.append("--journal" if self.journal else "--no-journal")
         return argv + (["--insecure"] if self.insecure else [])
+
+
+def add_journal_argument(p: argparse.ArgumentParser) -> None:
+    """--journal / --no-journal, for every command that launches followers."""
+    p.add_argument(
+        "--journal", action=argparse.BooleanOptionalAction, default=None,
+        help="every follower journals its law's inputs into RUN/journal (enclose replay; "
+        "default: the scenario's [run] journal, on unless it says false)")

@@ -21,6 +21,7 @@ import numpy as np
 from agents.frames import ned_to_enu
 from agents.liveness import MembershipWatch
 from agents.mavlink.signing import load_key
+from agents.member_hold import MemberHold
 from agents.membership import membership
 from agents.phases import log_phases, mark
 from agents.process import (
@@ -64,6 +65,7 @@ class SensorPublisher:
         # seen by the follower agents.membership re-assigns it to, as the followers expect.
         self.liveness = MembershipWatch(bus, keys, self.n)
         self.members: frozenset[int] = frozenset(range(self.n))
+        self.hold = MemberHold(decided=self.members)  # as the followers hold a far side
         self.noise_std_m = noise_std_m
         self.rng = np.random.default_rng(seed)
         self.truth_stamper = Stamper("sim-0", bus.now_s)
@@ -105,7 +107,7 @@ class SensorPublisher:
                 self.sensor_out[i].put(encode(msg))
 
     def _follow_membership(self, now_s: float) -> None:
-        members = self.liveness.members(now_s)
+        members = self.hold.members(self.liveness.members(now_s), now_s)
         if members and members != self.members:
             self.members = members
             self.observers = list(membership(self.scenario, members).observers)
@@ -145,7 +147,7 @@ def sim_tick_hz(control_hz: float) -> float:
     control period.  ring64's 20 Hz on 50 Hz ticks got them every 40 or 60 ms (2.5 ticks)
     and 25 observations a second per follower; on 40 Hz ticks, every 50 ms and 20 a second:
     a fifth fewer simulator ticks and sensor messages (simulator late ticks 22-32 % against
-    27-60 % in alternate runs; BENCHMARKS.md, ninth session).  The vehicle model is an
+    27-60 % in alternate runs; BENCHMARKS.md).  The vehicle model is an
     exact discretisation, so a coarser tick does not change its dynamics."""
     if control_hz >= MAX_DEFAULT_TICK_HZ:
         return MAX_DEFAULT_TICK_HZ

@@ -252,8 +252,9 @@ class ImpairedBus(ClosingContext):
         self._links: dict[str, Link | None] = {}
         self._impairers: dict[str, LinkImpairer] = {}
         specs = [network.default] + [s for _, dst, s in network.links if dst == receiver]
-        self.timeline = NetTimeline(network.faults, receiver)
-        self.faults = bool(network.faults)
+        faults = tuple(f for k, f in enumerate(network.faults) if k not in network.os_cut)
+        self.timeline = NetTimeline(faults, receiver)
+        self.faults = bool(faults)
         self._degraders: dict[tuple[str, int], LinkImpairer] = {}
         # Every link into this receiver left alone: drains pass samples through, counted.
         self.identity = all(s.is_identity for s in specs) and not self.faults

@@ -16,7 +16,6 @@ within its bound.  Pure and law-agnostic: transport knows nothing of any law.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -75,44 +74,51 @@ def check_specs(specs: Iterable[FieldSpec]) -> dict[str, FieldSpec]:
     return out
 
 
-def _magnitude2(kind: str, value: Any) -> float:
-    """The largest squared magnitude in `value` if it is of `kind` and finite, else NaN."""
-    if kind == "scalar":
-        ok = type(value) is float and value - value == 0.0
-        return float(value * value) if ok else math.nan
-    if type(value) is not tuple:
-        return math.nan
-    if kind == "vec2":
-        if len(value) != 2:
-            return math.nan
-        x, y = value
-        if type(x) is not float or type(y) is not float or x - x + y - y != 0.0:
-            return math.nan
-        return x * x + y * y
+def _link_reason(value: tuple[Any, ...], bound2: float) -> str | None:
+    """`reason` for a per_link value: entries (j >= 0, x, y), finite, |(x, y)|^2 <= bound2."""
     if len(value) > MAX_LINKS:
-        return math.nan
-    top, finite = 0.0, 0.0
+        return "law_kind"
     for link in value:
         if type(link) is not tuple or len(link) != 3:
-            return math.nan
+            return "law_kind"
         j, x, y = link
-        if type(j) is not int or j < 0 or type(x) is not float or type(y) is not float:
-            return math.nan
-        finite += x - x + y - y
-        top = max(top, x * x + y * y)
-    return top if finite == 0.0 else math.nan
+        if type(j) is not int or j < 0 or type(x) is not float or type(y) is not float \
+                or x - x + y - y != 0.0:
+            return "law_kind"
+        if not x * x + y * y <= bound2:
+            return "law_bound"
+    return None
 
 
 def reason(fields: LawFields, specs: Mapping[str, FieldSpec]) -> str | None:
     """None if `fields` hold only declared names, each of its kind, finite and in bounds;
-    else why not: "law_undeclared", "law_kind" (wrong shape or not finite), "law_bound"."""
+    else why not: "law_undeclared", "law_kind" (wrong shape or not finite), "law_bound".
+
+    Every received state of a law with fields comes through here: one pass, no call per
+    field but the per-link one (a bound is compared squared, so overflow is "beyond")."""
     for name, value in fields.items():
         spec = specs.get(name)
         if spec is None:
             return "law_undeclared"
-        mag2 = _magnitude2(spec.kind, value)
-        if mag2 != mag2:  # wrong shape, or not finite
+        kind, bound2 = spec.kind, spec.bound * spec.bound
+        if kind == "scalar":
+            if type(value) is not float or value - value != 0.0:
+                return "law_kind"
+            if not value * value <= bound2:
+                return "law_bound"
+            continue
+        if type(value) is not tuple:
             return "law_kind"
-        if not mag2 <= spec.bound * spec.bound:  # beyond (or, overflowed, far beyond)
-            return "law_bound"
+        if kind == "vec2":
+            if len(value) != 2:
+                return "law_kind"
+            x, y = value
+            if type(x) is not float or type(y) is not float or x - x + y - y != 0.0:
+                return "law_kind"
+            if not x * x + y * y <= bound2:
+                return "law_bound"
+            continue
+        why = _link_reason(value, bound2)
+        if why is not None:
+            return why
     return None

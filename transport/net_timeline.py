@@ -59,16 +59,18 @@ def separates(fault: NetFault, a: int, b: int) -> bool:
     """True when `fault` (a partition or isolation) puts followers a and b apart."""
     if a == b or fault.action == "degrade":
         return False
+    return side(fault, a) != side(fault, b)
+
+
+def side(fault: NetFault, k: int) -> int:
+    """Follower k's side of a partition (its group's number; -1: the followers named in
+    no group, one more group) or an isolation (0: the isolated one, 1: the others)."""
     if fault.action == "isolate":
-        return bool(fault.groups) and (a in fault.groups[0]) != (b in fault.groups[0])
-    return _group(fault, a) != _group(fault, b)
-
-
-def _group(fault: NetFault, k: int) -> int:
+        return 0 if fault.groups and k in fault.groups[0] else 1
     for g, members in enumerate(fault.groups):
         if k in members:
             return g
-    return -1  # the followers named in no group: one more group
+    return -1
 
 
 class CutAliveWatch:

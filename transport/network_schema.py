@@ -85,6 +85,9 @@ class NetworkConfig:
     # the physical world, on a machine they oversubscribe (ring64 on 2 cores).
     agent_sched: str = "normal"
     faults: tuple[NetFault, ...] = ()  # partitions, isolations, degradations on a timeline
+    # Numbers of the faults the OS cuts between hosts (`--os-cut`, deploy.netns.cut): the
+    # receivers leave them alone.
+    os_cut: tuple[int, ...] = ()
 
     def impairment(self, sender: int, receiver: int) -> LinkImpairment:
         for src, dst, spec in self.links:

@@ -52,6 +52,19 @@ ENDPOINT_PROTOCOLS = (*LINK_PROTOCOLS, "tls")
 # fragmented, not lost.  Both sides of a link agree on the smaller batch size.
 LINK_BUFFER_BYTES = 8192
 SHM_KEY = "transport/shared_memory/enabled"
+# A router closes a link whose send queue stayed full this long (Zenoh: 5 s).  Samples go
+# with BLOCK congestion control, so a link that carries nothing (a partition between
+# hosts) would hold the router's forwarding, and behind it every publisher on its host,
+# until then: the simulator's sensing and the near side's own states stalled for seconds
+# (deploy.netns.cut, BENCHMARKS.md).  1 s: far past any queue on a link that still moves.
+ROUTER_BLOCK_CLOSE_KEY = "transport/link/tx/queue/congestion_control/block/wait_before_close"
+ROUTER_BLOCK_CLOSE_US = 1_000_000
+# How long a router's attempt to open a link may take (Zenoh: 10 s).  An attempt begun
+# during a partition waits on SYNs the kernel resends ever more rarely, so the routers
+# found each other up to ~15 s after the heal; a fresh attempt every 2 s finds the
+# healed link within ~2 s, and 2 s is far past an mTLS handshake between hosts.
+ROUTER_OPEN_TIMEOUT_KEY = "transport/unicast/open_timeout"
+ROUTER_OPEN_TIMEOUT_MS = 2000
 _MODES = ("peer", "client", "router")
 
 
@@ -135,6 +148,11 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
                                        "period_increase_factor": 2})
     if cfg.mode == "client":
         _put(config, "connect/timeout_ms", -1)
+    if cfg.mode == "router":
+        for key, value in ((ROUTER_BLOCK_CLOSE_KEY, ROUTER_BLOCK_CLOSE_US),
+                           (ROUTER_OPEN_TIMEOUT_KEY, ROUTER_OPEN_TIMEOUT_MS)):
+            if not (user and _is_set(config, default, key)):
+                _put(config, key, value)
     if not (user and _is_set(config, default, "scouting/multicast/enabled")):
         _put(config, "scouting/multicast/enabled", False)
     for key in ("transport/link/tx/batch_size", "transport/link/rx/buffer_size"):

@@ -26,7 +26,7 @@ from agents.follower.journal_file import FrameWriter
 from agents.law.interface import Output, Peer, Sample
 from transport.law_fields import FieldSpec, LawFields
 
-STEP, REGROUP, JOIN, WINDOW = "s", "g", "j", "w"
+STEP, REGROUP, JOIN, WINDOW, REBASE = "s", "g", "j", "w", "r"
 _new = tuple.__new__
 
 
@@ -152,6 +152,9 @@ class JournalWriter:
 
     def join(self, peers: Mapping[int, Peer], now_s: float) -> None:
         self.file.add([JOIN, now_s, self._peers_join.delta(peers)])
+
+    def rebase(self) -> None:
+        self.file.add([REBASE])
 
     def window(self, start_s: float, stop_s: float) -> None:
         """The experiment's start and stop as this follower was told them (its clock)."""

@@ -22,6 +22,7 @@ from agents.law.interface import Law, Output, Sample
 from agents.law.loader import make_law
 from agents.liveness import MembershipWatch
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
+from agents.member_hold import MemberHold
 from agents.process import StatusReporter
 from agents.scenario.model import Scenario
 from transport.access import sender_ids
@@ -66,6 +67,8 @@ class FollowerNode:
         self.altitude_m = scenario.vehicle.altitude_m
         self.keys = SwarmKeys(swarm)
         self.liveness = MembershipWatch(bus, self.keys, scenario.n)
+        self.hold = MemberHold(decided=self.members)  # a partition's far side is held
+        self.silent: frozenset[int] = frozenset()  # neighbours not heard for a hold
         self.subs = [
             bus.subscribe(self.keys.sensor_targets(index)),
             bus.subscribe(self.keys.control()),
@@ -155,6 +158,7 @@ class FollowerNode:
         """One step of the law on the newest inputs; None if it failed (LawRunner)."""
         runner, latest = self.runner, self.latest
         setup = runner.setup
+        self._heard_again(now_s)
         peers = stand_ins(latest.peers, setup, runner.last_r, now_s)
         stepped = runner.step(now_s, command, own, latest.targets, peers)
         if command and stepped is not None:
@@ -164,6 +168,18 @@ class FollowerNode:
                     self.nbr_ages.add(now_s - latest.peers[j].r.stamp_s)
         return stepped
 
+    def _heard_again(self, now_s: float) -> None:
+        """A neighbour heard again after a silence longer than a hold (a healed cut, a
+        held member back) may publish link sums that moved meanwhile (its end re-formed
+        without us): the estimate is continued across it as across a change of members."""
+        setup, peers = self.runner.setup, self.latest.peers
+        silent = frozenset(j for j in setup.neighbours
+                           if j in peers and now_s - peers[j].r.stamp_s > setup.hold_s)
+        if (self.silent - silent) & set(setup.neighbours) and self.runner.last_r is not None:
+            self.runner.continue_estimate()
+            self.status.counters["heard_again"] += 1
+        self.silent = silent
+
     def regroup(self, now_s: float) -> None:
         """Re-form around the followers alive now (agents.liveness, agents.membership).
 
@@ -171,8 +187,12 @@ class FollowerNode:
         linked, so until then the planned ring is the member set.  The tokens seen before
         (followers finish take-off one after another) are partial sets whose links would
         only show up as spurious links in the run's report."""
-        members = self.liveness.members(now_s) | {self.index}
-        if self.start_s is None or members == self.members:
+        tokens = self.liveness.members(now_s) | {self.index}
+        if self.start_s is None:
+            return
+        members = self.hold.members(tokens, now_s)
+        self.status.counters["far_sides_held"] = self.hold.holds
+        if members == self.members:
             return
         new = setup_for(self.scenario, self.index, members)
         self.runner.regroup(new)

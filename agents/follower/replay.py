@@ -17,6 +17,7 @@ from typing import Any
 
 from agents.follower.journal import (
     JOIN,
+    REBASE,
     REGROUP,
     STEP,
     WINDOW,
@@ -117,6 +118,8 @@ def replay(path: Path, scenario: Scenario, law: Law[Any], check: bool = True) ->
             found.series.regroups_s.append(found.series.t_s[-1] if found.series.t_s else 0.0)
         elif kind == JOIN:
             runner.join(joins.apply(rec[2]), rec[1])
+        elif kind == REBASE:
+            runner.continue_estimate()
         elif kind == WINDOW:
             found.start_s, found.stop_s = rec[1], rec[2]
         elif kind == STEP:

@@ -161,6 +161,16 @@ class LawRunner:
         if self.journal is not None:
             self._journal(self.journal.window, start_s, stop_s)
 
+    def continue_estimate(self) -> None:
+        """A neighbour heard again after a silence (a healed cut) may publish link sums that
+        moved meanwhile: the next step continues the estimate from the last one, as across
+        a change of members.  Journaled: the replay must do the same at the same step."""
+        if self.last_r is None:
+            return
+        self.rebase = True
+        if self.journal is not None:
+            self._journal(self.journal.rebase)
+
     def join(self, peers: Mapping[int, Peer], now_s: float) -> None:
         """Joining a running swarm: continue from the neighbours' mean estimate."""
         if self.last_r is not None:

@@ -43,6 +43,14 @@ def positive(table: Table, key: str, path: str, default: float | None = None) ->
     return value
 
 
+def boolean(table: Table, key: str, path: str, default: bool) -> bool:
+    """true or false (TOML's), nothing else."""
+    raw = table.get(key, default)
+    if not isinstance(raw, bool):
+        raise ScenarioError(f"{path}.{key}".lstrip("."), f"must be true or false, got {raw!r}")
+    return raw
+
+
 def vec2(raw: Any, where: str) -> tuple[float, float]:
     if not isinstance(raw, list) or len(raw) != 2:
         raise ScenarioError(where, f"must be a pair [x, y] in metres, got {raw!r}")

@@ -110,6 +110,9 @@ class RunConfig:
     target_start_s: float = 0.0
     # Two vehicles closer than this are a near collision: the verdict and live view say so.
     safety_distance_m: float = 1.0
+    # Every follower journals its law's inputs (enclose replay) unless the command line
+    # says otherwise: a swarm at the machine's edge may need the share of a core it costs.
+    journal: bool = True
 
     @property
     def estimator_hz(self) -> float:

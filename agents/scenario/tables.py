@@ -11,7 +11,15 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from agents.scenario.fields import Table, follower_numbers, known_keys, number, positive, vec2
+from agents.scenario.fields import (
+    Table,
+    boolean,
+    follower_numbers,
+    known_keys,
+    number,
+    positive,
+    vec2,
+)
 from agents.scenario.model import (
     PROFILE_KINDS,
     REBALANCE,
@@ -176,6 +184,7 @@ def parse_run(t: Table) -> RunConfig:
         eps_delta=positive(t, "eps_delta", "run", d.eps_delta),
         target_start_s=number(t, "target_start_s", "run", d.target_start_s),
         safety_distance_m=positive(t, "safety_distance_m", "run", d.safety_distance_m),
+        journal=boolean(t, "journal", "run", d.journal),
     )
 
 

@@ -15,7 +15,7 @@ from agents.network_args import NetworkOptions, add_network_arguments, apply_net
 from agents.scenario.file import load_scenario
 from agents.scenario.net_faults import check_window
 from deploy.launch import Launch
-from deploy.launch_options import LaunchOptions
+from deploy.launch_options import LaunchOptions, add_journal_argument
 from deploy.live_args import LiveOptions, add_live_arguments
 from deploy.netns.hosts import HostsOptions, add_hosts_arguments, run_on_hosts
 from deploy.netns.run import NetnsOptions, add_netns_arguments, run_in_namespace
@@ -54,11 +54,7 @@ def register(sub: Any) -> None:
         action="store_true",
         help="no Zenoh authentication/access control and no MAVLink signing (not recommended)",
     )
-    p.add_argument(
-        "--journal", action=argparse.BooleanOptionalAction, default=True,
-        help="every follower journals its law's inputs into RUN/journal (enclose replay; "
-        "default: on)",
-    )
+    add_journal_argument(p)
     add_live_arguments(p)
     add_json_argument(p)
     add_supervision_arguments(p)

@@ -7,7 +7,9 @@ with `enclose host RUN_DIR/deployment.toml --all` inside host 0: one router per 
 processes as clients of their host's router, each host's processes on their own clock
 (`--host-offsets`), MAVLink from the other hosts to the simulator over the links.
 `--host-delay-ms` delays every follower link across hosts at its receiving end (the
-impairment layer: this kernel has no netem).  Every namespace is removed afterwards,
+impairment layer: this kernel has no netem).  A partition into K groups places one
+group per host (the ground with the first), and its cut is made for real between the
+hosts by nftables in the hub (deploy.netns.cut).  Every namespace is removed afterwards,
 whatever happens (deploy.netns.namespace.destroy; stale ones of dead launchers at the next start).
 """
 
@@ -23,7 +25,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agents.scenario.model import Scenario
-from deploy.deployment import Deployment, HostSpec, dump_deployment, split_over_hosts
+from deploy.deployment import (
+    Deployment,
+    HostSpec,
+    dump_deployment,
+    split_along,
+    split_over_hosts,
+)
 from deploy.launch_options import LaunchOptions
 from deploy.netns.namespace import _tool, clean_stale, destroy, install_tools
 from deploy.netns.namespace import unavailable as netns_unavailable
@@ -73,15 +81,34 @@ def _offsets(text: str | None, k: int) -> list[float]:
     return values
 
 
+def partition_groups(scenario: Scenario, k: int) -> list[list[int]] | None:
+    """The followers' groups (0-based) of the scenario's first partition into `k` groups
+    (the followers it names in no group are one more), if it has one."""
+    for f in scenario.network.faults:
+        if f.action != "partition":
+            continue
+        groups = [sorted(g) for g in f.groups]
+        rest = sorted(set(range(scenario.n)).difference(*f.groups))
+        groups += [rest] if rest else []
+        if len(groups) == k:
+            return groups
+    return None
+
+
 def hosts_deployment(hosts: HostsOptions, scenario: Scenario, source: str, swarm: str,
                      prefix: str) -> Deployment:
-    """`scenario` (loaded from `source`: a shipped name or an absolute path) over the hosts."""
+    """`scenario` (loaded from `source`: a shipped name or an absolute path) over the hosts:
+    along its partition into K groups if it has one (the ground with the first group),
+    else the ground on host 0 and the followers over the others."""
     k = hosts.count
     offsets = _offsets(hosts.offsets, k)
+    groups = partition_groups(scenario, k)
+    placed = split_along(groups, scenario.m) if groups else split_over_hosts(
+        k, scenario.n, scenario.m)
     specs = tuple(HostSpec(f"h{i}", f"{SUBNET}.{i + 1}", tuple(procs), netns=f"{prefix}-h{i}",
                            clock_offset_s=offsets[i])
-                  for i, procs in enumerate(split_over_hosts(k, scenario.n, scenario.m)))
-    return Deployment(swarm, source, specs, hosts.delay_ms)
+                  for i, procs in enumerate(placed))
+    return Deployment(swarm, source, specs, hosts.delay_ms, cut_hub=f"{prefix}-hub")
 
 
 @contextlib.contextmanager
@@ -116,8 +143,9 @@ def linked_namespaces(dep: Deployment, hub: str) -> Iterator[None]:
 
 
 def inner_argv(opts: LaunchOptions, out: Path, duration_s: float) -> list[str]:
-    # `enclose host` takes no network flags: the network faults go as --fault, and are cut
-    # where messages are received, as on one machine.
+    # `enclose host` takes no network flags: the network faults go as --fault; the
+    # partitions and isolations along hosts are cut by nftables in the hub (cut_hub of the
+    # deployment, deploy.netns.cut), the others where messages are received.
     net_faults = [arg for text in opts.network.net_faults for arg in ("--fault", text)]
     return ["host", str(out / "deployment.toml"), "--all", "--out", str(out),
             "--duration", repr(duration_s), *opts.supervision_argv(), *net_faults]

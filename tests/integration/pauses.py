@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from deploy.pids import read_pids
-from tests.integration.runs import spawned, wait_for
+from tests.integration.runs import spawned_run, wait_for
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,7 @@ def run_with_pauses(out: Path, duration_s: float, plan: list[Pause], *extra: str
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--duration",
             str(duration_s), "--link-timeout", "60", *extra]
     walls: list[tuple[float, float]] = []
-    with spawned(argv, out) as proc:
+    with spawned_run(argv, out) as proc:
         for pause in sorted(plan, key=lambda p: p.at_s):
             wait_for(lambda p=pause: experiment_time_s(out) >= p.at_s or proc.poll() is not None,
                      start_timeout_s + pause.at_s * 3.0, f"the run to reach {pause.at_s} s")

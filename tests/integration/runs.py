@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 from deploy.pids import ProcessId, read_pids, signal_same
+from deploy.port_slots import port_slot
 
 
 def pid_alive(pid: int) -> bool:
@@ -47,6 +48,16 @@ def spawned(argv: Sequence[str], root: Path) -> Iterator[subprocess.Popen[str]]:
             proc.kill()
             proc.wait(10)
         kill_leftovers(root)
+
+
+@contextlib.contextmanager
+def spawned_run(argv: Sequence[str], root: Path) -> Iterator[subprocess.Popen[str]]:
+    """An `enclose run` command as `spawned`, on ports no other run on this machine takes:
+    a port slot (deploy.port_slots) held while it runs, given as `--port-range`.  Without
+    one, runs started at the same moment (tests side by side, `pytest -n`) can find the
+    same ports free."""
+    with port_slot() as slot, spawned([*argv, "--port-range", slot.flag], root) as proc:
+        yield proc
 
 
 def wait_for(condition: Callable[[], bool], timeout_s: float, what: str,

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.integration.runs import spawned
+from tests.integration.runs import spawned_run
 
 pytestmark = pytest.mark.integration
 DURATION_S = 24.0
@@ -43,7 +43,7 @@ def test_attack_changes_nothing_and_every_hostile_input_is_counted(tmp_path: Pat
     out = tmp_path / "run"
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--link-timeout",
             "60", "--duration", str(DURATION_S)]
-    with spawned(argv, out) as launcher:
+    with spawned_run(argv, out) as launcher:
         assert launcher.stdout is not None
         lines = []
         for line in launcher.stdout:

@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from tests.integration.runs import spawned
+from tests.integration.runs import spawned, spawned_run
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]
 
@@ -77,7 +77,9 @@ def test_the_example_law_networked(tmp_path: Path) -> None:
     out = tmp_path / "run"
     argv = [*command("run", "examples/simple_law/simple.toml"), "--duration", "20",
             "--out", str(out), "--no-live", "--json", "--link-timeout", "60"]
-    done = finished(argv, out, 300)
+    with spawned_run(argv, out) as proc:
+        stdout, _ = proc.communicate(timeout=300)
+    done = subprocess.CompletedProcess(argv, proc.returncode, stdout, "")
     assert done.returncode == 0, done.stdout[-3000:]
     metrics = json.loads((out / "metrics.json").read_text())
     within_bounds(metrics, "networked")

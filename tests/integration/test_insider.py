@@ -37,7 +37,7 @@ import pytest
 from deploy.host_keys import CA_KEY, needed_files
 from deploy.run_secrets import MAVLINK_SECRET_FILE, signing_key_file
 from tests.integration.rogue import BAD_TOKENS
-from tests.integration.runs import spawned, wait_for
+from tests.integration.runs import spawned_run, wait_for
 from tests.integration.test_attack import STARTED
 from transport.access import sender_ids
 from transport.credentials import identity_file
@@ -130,7 +130,7 @@ def worst_per_follower(series: Path, steady_from_s: float) -> dict[int, dict[str
 @pytest.mark.timeout(300)
 def test_a_compromised_host_cannot_fly_blind_or_fake_the_others(tmp_path: Path) -> None:
     out = tmp_path / "run"
-    with spawned(launch_run(out, DURATION_S), out) as launcher:
+    with spawned_run(launch_run(out, DURATION_S), out) as launcher:
         ports = started(launcher)
         folder = host_folder(out / "credentials", tmp_path / "host-of-follower-2")
         finish(attackers(out, folder, tmp_path, ports), ATTACK_S + 120.0)
@@ -206,7 +206,7 @@ def test_a_compromised_host_cannot_fly_blind_or_fake_the_others(tmp_path: Path) 
 def test_tokens_the_acl_would_refuse_are_ignored_when_nothing_refuses_them(
         tmp_path: Path) -> None:
     out = tmp_path / "run"
-    with spawned(launch_run(out, 20.0, "--insecure"), out) as launcher:
+    with spawned_run(launch_run(out, 20.0, "--insecure"), out) as launcher:
         ports = started(launcher)
         rogue = subprocess.Popen(
             [sys.executable, "-m", "tests.integration.rogue", "--seconds", "12",

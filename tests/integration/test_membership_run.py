@@ -17,7 +17,7 @@ from agents.membership_metrics import PhaseErrors, phase_errors
 from agents.scenario.file import load_scenario
 from deploy.pids import read_pids, signal_same
 from deploy.rundir import read_series
-from tests.integration.runs import pid_alive, spawned, wait_for
+from tests.integration.runs import pid_alive, spawned_run, wait_for
 
 pytestmark = pytest.mark.integration
 DURATION_S, KILL_AT_S, LAST_S = 100.0, 30.0, 20.0
@@ -33,7 +33,7 @@ def progress_t_s(out: Path) -> float:
 def run_with_kill(out: Path, *extra: str) -> tuple[int, str, dict[str, Any]]:
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--link-timeout", "60",
             "--duration", str(DURATION_S), "--estimator", "robust", *extra]
-    with spawned(argv, out) as proc:
+    with spawned_run(argv, out) as proc:
         wait_for(lambda: progress_t_s(out) >= KILL_AT_S, 150.0, f"the run to be {KILL_AT_S} s in")
         assert signal_same(read_pids(out / "logs")["follower-0"], signal.SIGKILL)
         output, _ = proc.communicate(timeout=DURATION_S + 120.0)

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from deploy.pids import ProcessId, is_alive, read_pids
-from tests.integration.runs import spawned, wait_for
+from tests.integration.runs import spawned_run, wait_for
 
 pytestmark = pytest.mark.integration
 RUN = ("sim", "recorder", "target-0", "target-1",
@@ -31,7 +31,7 @@ def test_no_process_of_the_run_outlives_a_sigkilled_launcher(tmp_path: Path) -> 
     out = tmp_path / "run"
     argv = [sys.executable, "-m", "deploy.cli", "run", "paper", "--out", str(out),
             "--duration", "60", "--link-timeout", "90", "--no-live"]
-    with spawned(argv, out) as launcher:  # kills any survivor by PID and start time
+    with spawned_run(argv, out) as launcher:  # kills any survivor by PID and start time
         # Every process started, not yet linked (the followers' vehicles take seconds to
         # take off): the moment the issue found the simulator and followers left running.
         wait_for(lambda: _all_up(out) or launcher.poll() is not None, 120.0,

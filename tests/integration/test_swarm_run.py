@@ -18,7 +18,7 @@ from mcap.reader import make_reader
 
 from deploy.pids import read_pids, signal_same
 from tests.foxglove_client import Received, foxglove_client
-from tests.integration.runs import pid_alive, spawned, wait_for
+from tests.integration.runs import pid_alive, spawned_run, wait_for
 
 pytestmark = pytest.mark.integration
 
@@ -28,7 +28,7 @@ def launched(out: Path, *extra: str) -> Iterator[subprocess.Popen[str]]:
     """The launcher as a subprocess; whatever happens, it and every child are gone after."""
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--link-timeout", "60",
             *extra]
-    with spawned(argv, out) as proc:
+    with spawned_run(argv, out) as proc:
         yield proc
 
 
@@ -132,6 +132,7 @@ def check_live_view(watcher: LiveWatcher, out: Path) -> None:
 
 
 @pytest.mark.timeout(240)
+@pytest.mark.serial  # late ticks, the command jump and the settle time: alone on the machine
 def test_paper_case_forms_the_formation_and_every_process_exits_cleanly(tmp_path: Path) -> None:
     out = tmp_path / "run"
     watcher = LiveWatcher(out)  # the live view, watched by a real Foxglove client meanwhile

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from deploy.port_slots import port_slot
 from tests.integration.runs import kill_leftovers, wait_for
 
 pytestmark = pytest.mark.integration
@@ -44,9 +45,10 @@ def pane(tmux: list[str], history: bool = False) -> str:
 @pytest.mark.timeout(200)
 def test_run_on_a_terminal_draws_the_board_and_ends_with_the_verdict(tmp_path: Path) -> None:
     out, rc_file = tmp_path / "run", tmp_path / "rc"
-    cmd = (f"{shlex.quote(sys.executable)} -m deploy.cli run --out {shlex.quote(str(out))} "
-           f"--duration 10 --link-timeout 60; echo $? > {shlex.quote(str(rc_file))}")
-    with tmux_server(tmp_path) as tmux:
+    with port_slot() as slot, tmux_server(tmp_path) as tmux:  # ports of its own: runs.spawned_run
+        cmd = (f"{shlex.quote(sys.executable)} -m deploy.cli run --out {shlex.quote(str(out))} "
+               f"--duration 10 --link-timeout 60 --port-range {slot.flag}; "
+               f"echo $? > {shlex.quote(str(rc_file))}")
         try:
             subprocess.run([*tmux, "new-session", "-d", "-s", "run", "-x", "160", "-y", "50",
                             cmd], check=True, cwd=REPO, timeout=10)

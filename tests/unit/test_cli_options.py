@@ -24,7 +24,7 @@ RUN_FLAGS = ["--duration", "12.5", "--swarm", "sw", "--port-range", "20000-20999
              "--noise-std-m", "0.2", "--link-timeout", "30", "--insecure", "--json",
              "--restart", "never", "--max-restarts", "2", "--fault", "3:kill:follower-1",
              "--fault", "5:pause:target-0:1", "--estimator", "paper", "--loss", "0.05",
-             "--live-port", "9000"]
+             "--live-port", "9000", "--no-journal"]
 
 
 def run_options(*argv: str) -> RunOptions:
@@ -41,8 +41,9 @@ def test_enclose_run_reads_every_flag_into_its_options(tmp_path: Path) -> None:
         insecure=True, json=True, restart="never", max_restarts=2,
         faults=("3:kill:follower-1", "5:pause:target-0:1"),
         network=NetworkOptions(estimator="paper", impairment=(("loss", 0.05),)),
-        live=LiveOptions(port=9000), port_range="20000-20999")
+        live=LiveOptions(port=9000), port_range="20000-20999", journal=False)
     assert run_options("--no-live").launch.live is None
+    assert run_options().launch.journal is None  # the scenario's [run] journal decides
     hosts = run_options("--hosts", "3", "--host-offsets", "0,1,2", "--host-delay-ms", "4").hosts
     assert hosts == netns_hosts.HostsOptions(3, "0,1,2", 4.0)
 
@@ -64,7 +65,8 @@ def test_hosts_get_the_launchers_supervision_flags(tmp_path: Path) -> None:
     argv = netns_hosts.inner_argv(first, tmp_path, 12.5)
     host = HostOptions.from_namespace(build_parser(argv).parse_args(argv))
     assert host.host is None and host.deployment == tmp_path / "deployment.toml"
-    shared = ("noise_std_m", "link_timeout_s", "insecure", "restart", "max_restarts", "faults")
+    shared = ("noise_std_m", "link_timeout_s", "insecure", "restart", "max_restarts", "faults",
+              "journal")
     assert {k: getattr(host.launch, k) for k in shared} == {k: getattr(first, k) for k in shared}
     assert host.launch.live is None and host.launch.network == NetworkOptions()
 

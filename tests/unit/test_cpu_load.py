@@ -18,7 +18,7 @@ from deploy.cpu_load import (
     process_status_kb,
 )
 
-pytestmark = [pytest.mark.timeout(30),
+pytestmark = [pytest.mark.timeout(30), pytest.mark.serial,  # it measures CPU: alone
               pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="Linux /proc")]
 
 

@@ -25,8 +25,9 @@ pytestmark = pytest.mark.timeout(60)
 HEADER = {"index": 0, "scenario": "paper", "law": None, "law_params": [], "network": []}
 
 
-def _fly(path: Path, steps: int) -> LawRunner:
-    """Follower 0 of the paper case on made-up inputs, journaled at `path`."""
+def _fly(path: Path, steps: int, heard_again: bool = True) -> LawRunner:
+    """Follower 0 of the paper case on made-up inputs, journaled at `path`; a change of
+    members half way, and (`heard_again`) a neighbour heard again after a silence at 3/4."""
     scenario = load_scenario("paper", whole_run=False)
     runner = LawRunner(make_law(scenario), setup_for(scenario, 0))
     runner.journal = JournalWriter(path, HEADER, runner.declared)
@@ -44,6 +45,8 @@ def _fly(path: Path, steps: int) -> LawRunner:
             runner.regroup(setup_for(scenario, 0, [0, 1, 2]))
             setup = runner.setup
             peers = {j: p for j, p in peers.items() if j in setup.peers}
+        if heard_again and k == 3 * steps // 4:
+            runner.continue_estimate()
         runner.step(now, k % 2 == 0, Sample(complex(0.1 * k, 2.0), 0.3j, now), targets,
                     dict(peers))
     runner.journal.close()
@@ -58,6 +61,16 @@ def test_a_replay_reproduces_every_step(tmp_path: Path) -> None:
     assert found.steps == 200
     assert found.difference is None and found.stopped is None and found.reproduced
     assert len(found.series.t_s) == 100 and found.series.regroups_s
+
+
+def test_an_estimate_continued_after_a_silence_is_journaled_and_replayed(
+        tmp_path: Path) -> None:
+    flown = _fly(tmp_path / "a.journal", 200)
+    plain = _fly(tmp_path / "b.journal", 200, heard_again=False)
+    assert flown.last_r != plain.last_r  # the continuation changed the flight
+    scenario = load_scenario("paper", whole_run=False)
+    found = replay(tmp_path / "a.journal", scenario, make_law(scenario))
+    assert found.reproduced and found.steps == 200
 
 
 def test_another_gain_differs_and_is_named(tmp_path: Path) -> None:

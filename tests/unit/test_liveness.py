@@ -13,6 +13,7 @@ import pytest
 from agents.follower.node import FollowerNode
 from agents.liveness import REFRESH_MAX_S, REFRESH_S, MembershipWatch, StallGuard, TokenSet
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
+from agents.member_hold import HOLD_S, SETTLE_S
 from agents.scenario.file import load_scenario
 from transport.codec import encode
 from transport.keys import SwarmKeys
@@ -66,14 +67,17 @@ def test_watch_and_follower_node_reform_when_a_follower_leaves_and_returns() -> 
     node.tick(bus.now_s())
     assert node.members == {0, 1, 2, 3} and node.runner.setup.neighbours == (1, 3)
     tokens[3].close()  # index 3 is killed: 0's ring neighbours are now 1 and 2
-    node.tick(bus.now_s())
+    killed_s = bus.now_s()
+    node.tick(killed_s)
+    assert node.members == {0, 1, 2, 3}  # a vanishing settles first (agents.member_hold)
+    node.tick(killed_s + SETTLE_S)
     assert node.members == {0, 1, 2}
     assert node.runner.setup.neighbours == (1, 2) and node.runner.setup.successor == 1
     assert set(node.peer_subs) == {1, 2}
     tokens[3] = others[3].declare_token(KEYS.alive("follower", 3))
     for i in (1, 2, 3):
         status(others[i], i)
-    node.tick(bus.now_s())
+    node.tick(killed_s + SETTLE_S)
     assert node.members == {0, 1, 2, 3} and node.runner.setup.neighbours == (1, 3)
     assert node.status.counters["membership_changes"] == 2
     watch = MembershipWatch(MemoryBus(hub, "sim"), KEYS, n_followers=4)
@@ -163,12 +167,16 @@ def test_before_the_start_word_the_planned_ring_stands_and_alone_means_no_self_l
     node.tick(bus.now_s())  # only its own token so far
     assert node.members == {0, 1, 2, 3} and set(node.peer_subs) == {1, 3}
     node.start_s = bus.now_s() + 1e6  # the start word was heard (membership applies)
-    node.tick(bus.now_s())
+    alone_s = bus.now_s()
+    for t in (alone_s, alone_s + SETTLE_S):  # the others vanished: the far side of a cut?
+        node.tick(t)
+        assert node.members == {0, 1, 2, 3}
+    node.tick(alone_s + HOLD_S)  # not back within the hold: they left
     assert node.members == {0} and node.runner.setup.successor == 0
     assert 0 not in node.peer_subs
     others = {i: MemoryBus(hub, f"f{i}") for i in (1, 2, 3)}
     for i, b in others.items():
         b.declare_token(KEYS.alive("follower", i))
-    node.tick(bus.now_s())
+    node.tick(alone_s + HOLD_S)
     assert node.members == {0, 1, 2, 3} and set(node.peer_subs) == {1, 3}
     node.close()

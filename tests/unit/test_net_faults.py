@@ -161,3 +161,19 @@ def test_a_window_past_a_shorter_run_is_refused_before_anything_starts(tmp_path:
         run(RunOptions(launch, duration_s=25.0, out=tmp_path / "run"))
     assert err.value.field == "--duration"
     assert not (tmp_path / "run").exists()
+
+
+def test_a_fault_the_os_cuts_is_left_alone_at_the_receivers() -> None:
+    scen = paper_with({"at_s": 5, "action": "degrade", "duration_s": 1, "loss": 0.1})
+    scen = apply_network_arguments(scen, NetworkOptions(
+        net_faults=("40:partition:1,2|3,4:15",), os_cut=(1,)))
+    assert scen.network.os_cut == (1,)
+    clock, hub = Clock(), MemoryHub()
+    bus = ImpairedBus(MemoryBus(hub, "rx", clock), scen.network, receiver=0)
+    bus.set_origin(0.0)
+    assert not bus.timeline.cut(2, 45.0)  # the partition: the OS's
+    assert bus.timeline.degradation(2, 5.5) is not None  # the degradation: still ours
+    with pytest.raises(ScenarioError) as err:
+        apply_network_arguments(scen, NetworkOptions(os_cut=(2,)))
+    assert err.value.field == "--os-cut"
+    bus.close()

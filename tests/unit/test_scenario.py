@@ -248,3 +248,18 @@ def test_network_choices_default_accept_the_other_and_name_a_bad_value(
     for value in (bad, "1", "true"):
         with pytest.raises(ScenarioError, match=rf"network\.{key}"):
             parse_scenario(base + f"\n[network]\n{key} = {value}\n")
+
+
+def test_journal_is_on_by_default_a_boolean_and_ring64_turns_it_off() -> None:
+    base = load_scenario_text()
+    assert "[run]\n" in base
+
+    def with_journal(value: str) -> str:
+        return base.replace("[run]\n", f"[run]\njournal = {value}\n", 1)
+
+    assert parse_scenario(base).run.journal is True
+    assert parse_scenario(with_journal("false")).run.journal is False
+    for bad in ("0", '"no"', "1.0"):
+        with pytest.raises(ScenarioError, match=r"run\.journal"):
+            parse_scenario(with_journal(bad))
+    assert load_scenario("ring64").run.journal is False

@@ -156,6 +156,7 @@ def test_alive_sets_and_link_tallies_stay_bounded() -> None:
 
 
 def test_the_simulators_sensor_model_ignores_out_of_range_tokens() -> None:
+    from agents.member_hold import SETTLE_S
     from deploy.swarm_sim import SensorPublisher
 
     hub = MemoryHub()
@@ -167,6 +168,7 @@ def test_the_simulators_sensor_model_ignores_out_of_range_tokens() -> None:
     for tail in ("4", "77", "²"):
         rogue.declare_token(f"{KEYS.prefix}/alive/follower/{tail}")
     sensor._follow_membership(0.0)  # raised on index 4 (agents.membership)
+    sensor._follow_membership(SETTLE_S)  # follower 2 vanished: a minority, settled
     assert sensor.members == {0, 1, 3}
     assert sensor.liveness.counters() == {"tokens_rejected": 3, "tokens_held": 0}
     sensor.close()

@@ -15,6 +15,10 @@ from transport.errors import ConfigError
 from transport.network_schema import ZENOH_RUNTIMES
 from transport.zenoh_config import (
     LINK_BUFFER_BYTES,
+    ROUTER_BLOCK_CLOSE_KEY,
+    ROUTER_BLOCK_CLOSE_US,
+    ROUTER_OPEN_TIMEOUT_KEY,
+    ROUTER_OPEN_TIMEOUT_MS,
     RUNTIME_SETTINGS,
     ZenohConfig,
     build_zenoh_config,
@@ -37,6 +41,15 @@ def test_defaults_are_safe_peer_on_loopback() -> None:
     assert get(cfg, "transport/link/tx/batch_size") == LINK_BUFFER_BYTES
     assert get(cfg, "transport/link/rx/buffer_size") == LINK_BUFFER_BYTES
     assert get(cfg, "transport/shared_memory/enabled") is False  # no watchdog threads
+
+
+def test_routers_close_a_stuck_link_and_reopen_a_healed_one_sooner_than_zenohs_defaults(
+) -> None:
+    router = ZenohConfig(mode="router", listen=(loopback_endpoint(17003),))
+    assert get(router, ROUTER_BLOCK_CLOSE_KEY) == ROUTER_BLOCK_CLOSE_US < 5_000_000
+    assert get(router, ROUTER_OPEN_TIMEOUT_KEY) == ROUTER_OPEN_TIMEOUT_MS < 10_000
+    assert get(ZenohConfig(), ROUTER_BLOCK_CLOSE_KEY) == 5_000_000  # peers: Zenoh's own
+    assert get(ZenohConfig(), ROUTER_OPEN_TIMEOUT_KEY) == 10_000
 
 
 def test_explicit_endpoints_and_lowlatency() -> None:

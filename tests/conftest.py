@@ -1,0 +1,41 @@
+"""What every test shares: the order tests are handed out in, and a clean sys.path after each.
+
+deploy/test.sh runs the suite side by side (pytest-xdist, `--dist loadgroup`): a worker is
+handed the next test in collection order as it finishes one, so the real swarms, whose
+length is real time, go first, longest first, and the short unit tests fill in behind them.
+A test's timeout says how long it may take, and stands in for its length.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterator
+
+import pytest
+
+DEFAULT_TIMEOUT_S = 120.0  # pyproject.toml's [tool.pytest.ini_options] timeout
+
+
+def _timeout_s(item: pytest.Item) -> float:
+    marker = item.get_closest_marker("timeout")
+    if marker is None or not marker.args:
+        return DEFAULT_TIMEOUT_S
+    return float(marker.args[0])
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    def key(item: pytest.Item) -> tuple[int, float]:
+        if item.get_closest_marker("integration") is None:
+            return (1, 0.0)  # unit tests after, in their own order
+        return (0, -_timeout_s(item))
+
+    items.sort(key=key)  # stable: equal keys keep the order they were collected in
+
+
+@pytest.fixture(autouse=True)
+def _restore_sys_path(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """A law's folder put first on sys.path (agents.law.loader) ends with its test: a later
+    test of the same worker would otherwise hand it to the processes it starts, where a law
+    file named as a module (a test's `json.py`) shadows the standard library's."""
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    yield

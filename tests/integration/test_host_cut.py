@@ -1,0 +1,106 @@
+"""The nftables cut between two namespaced hosts (deploy.netns.cut), on real namespaces:
+TCP between the hosts stops at the cut and passes again at the heal, MAVLink's UDP
+passes throughout, and neither the table nor a namespace is left behind."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from agents.scenario.net_faults import parse_net_fault_flag
+from deploy.deployment import Deployment, HostSpec
+from deploy.netns.cut import CUT_TABLE, HostCut
+from deploy.netns.hosts import linked_namespaces, unavailable
+
+pytestmark = pytest.mark.integration
+REASON = unavailable()
+TCP_PORT, MAV_PORT = 7447, 14560
+# A TCP acceptor and a UDP echo on host 1, by PID; each line a client's try.
+SERVER = f"""
+import socket, threading
+t = socket.socket(); t.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+t.bind(("0.0.0.0", {TCP_PORT})); t.listen(16)
+u = socket.socket(socket.AF_INET, socket.SOCK_DGRAM); u.bind(("0.0.0.0", {MAV_PORT}))
+def echo():
+    while True:
+        data, peer = u.recvfrom(64); u.sendto(data, peer)
+threading.Thread(target=echo, daemon=True).start()
+print("ready", flush=True)
+while True:
+    c, _ = t.accept(); c.close()
+"""
+CLIENT = """
+import socket, sys
+kind, port = sys.argv[1], int(sys.argv[2])
+try:
+    if kind == "tcp":
+        socket.create_connection(("10.77.0.2", port), timeout=1.0).close()
+    else:
+        u = socket.socket(socket.AF_INET, socket.SOCK_DGRAM); u.settimeout(1.0)
+        u.sendto(b"x", ("10.77.0.2", port)); u.recvfrom(64)
+except OSError:
+    sys.exit(1)
+"""
+
+
+def reaches(ns: str, kind: str, port: int) -> bool:
+    done = subprocess.run(["ip", "netns", "exec", ns, sys.executable, "-c", CLIENT, kind,
+                           str(port)], capture_output=True, timeout=20, check=False)
+    return done.returncode == 0
+
+
+@contextlib.contextmanager
+def server(ns: str) -> Iterator[None]:
+    proc = subprocess.Popen(["ip", "netns", "exec", ns, sys.executable, "-c", SERVER],
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        yield
+    finally:
+        proc.kill()
+        proc.wait(10)
+
+
+def namespaces() -> str:
+    return subprocess.run(["ip", "netns", "list"], capture_output=True, text=True,
+                          check=False).stdout
+
+
+@pytest.mark.skipif(REASON is not None, reason=f"nftables cut between hosts: {REASON}")
+@pytest.mark.timeout(120)
+def test_a_partition_along_hosts_is_cut_by_nftables_and_healed() -> None:
+    prefix = f"enclose-{os.getpid()}-cut"
+    dep = Deployment("t", "paper", (
+        HostSpec("h0", "10.77.0.1", ("launcher", "sim", "follower-0", "follower-1"),
+                 netns=f"{prefix}-h0"),
+        HostSpec("h1", "10.77.0.2", ("follower-2", "follower-3"), netns=f"{prefix}-h1")),
+        cut_hub=f"{prefix}-hub")
+    fault = parse_net_fault_flag("1:partition:1,2|3,4:2", 4)
+    h0 = f"{prefix}-h0"
+    with linked_namespaces(dep, f"{prefix}-hub"), server(f"{prefix}-h1"):
+        cut = HostCut(f"{prefix}-hub", dep, (fault,), (range(14540, 14640),))
+        cut.open()
+        try:
+            assert reaches(h0, "tcp", TCP_PORT)
+            cut.check(1.5)  # inside the window
+            assert cut.applied == {(0, 1), (1, 0)}
+            assert not reaches(h0, "tcp", TCP_PORT)
+            assert reaches(h0, "udp", MAV_PORT)  # the autopilot link is exempt
+            assert (cut.dropped() or 0) > 0
+            cut.check(3.0)  # healed
+            assert cut.applied == frozenset()
+            deadline = time.monotonic() + 10.0
+            while not reaches(h0, "tcp", TCP_PORT):
+                assert time.monotonic() < deadline, "not reachable after the heal"
+        finally:
+            cut.close()
+        tables = subprocess.run(["ip", "netns", "exec", f"{prefix}-hub", "nft", "list",
+                                 "tables"], capture_output=True, text=True, check=True).stdout
+        assert CUT_TABLE not in tables
+    assert prefix not in namespaces()
