@@ -76,6 +76,7 @@ def median_growth_mb_min(t_s: np.ndarray, mb: np.ndarray, stretch_s: float) -> f
 
 
 @pytest.mark.timeout(240)
+@pytest.mark.serial  # five times the paper's message rate, and a backlog moves the RSS: alone
 def test_recorder_rss_does_not_grow_with_the_run(tmp_path: Path) -> None:
     swarm, endpoint = f"mem{os.getpid()}", loopback_endpoint(free_port())
     keys, out = SwarmKeys(swarm), tmp_path / "run"
