@@ -10,15 +10,14 @@ file from here (namespaced test hosts: what `enclose run --hosts K` does).
 from __future__ import annotations
 
 import argparse
-import signal
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from agents.network_args import NetworkOptions
-from deploy.commands.run import _interrupt
 from deploy.deployment import load_deployment
 from deploy.host_launch import HostLaunch
+from deploy.interrupts import interrupts
 from deploy.launch_options import LaunchOptions, add_journal_argument
 from deploy.restarts import add_supervision_arguments
 from deploy.verdict import add_json_argument
@@ -85,8 +84,5 @@ def run(opts: HostOptions) -> int:
                          else opts.duration_s)
     if launch.duration_s <= 0:
         raise DeployError("--duration must be > 0")
-    previous = signal.signal(signal.SIGTERM, _interrupt)
-    try:
+    with interrupts():
         return launch.execute()
-    finally:
-        signal.signal(signal.SIGTERM, previous)

@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 from agents.law_args import add_law_arguments, apply_law_arguments
 from agents.network_args import NetworkOptions, add_network_arguments, apply_network_arguments
 from agents.scenario.file import load_scenario
 from agents.scenario.net_faults import check_window
+from deploy.interrupts import interrupts
 from deploy.launch import Launch
 from deploy.launch_options import LaunchOptions, add_journal_argument
 from deploy.live_args import LiveOptions, add_live_arguments
@@ -106,16 +105,9 @@ def run(opts: RunOptions) -> int:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = (opts.out or Path("runs") / f"run-{scenario.name}-{stamp}").resolve()
     swarm = opts.swarm or f"{scenario.name}-{stamp}".replace("_", "-")
-    previous = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as cleanly as Ctrl-C
-    try:
+    with interrupts():  # SIGTERM stops as cleanly as Ctrl-C
         if opts.hosts is not None:  # K namespaced hosts: deploy.netns.hosts
             return run_on_hosts(opts.hosts, scenario, launch, out, swarm, duration)
         if opts.netns is not None:  # the same run, launched again inside a lossy namespace
             return run_in_namespace(opts.netns, launch, out, swarm, duration)
         return Launch(scenario, launch, out, swarm, duration).execute()
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt

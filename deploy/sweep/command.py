@@ -16,16 +16,15 @@ import json
 import logging
 import os
 import shutil
-import signal
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 from rich.console import Console
 
+from deploy.interrupts import interrupts
 from deploy.json_files import read_json
 from deploy.sweep.figure_by_law import law_figures
 from deploy.sweep.figures import write_figures
@@ -111,13 +110,10 @@ def sweep(opts: SweepOptions) -> int:
     if opts.report_only:
         report(spec)
         return 0
-    previous = signal.signal(signal.SIGTERM, _interrupt)  # stop as cleanly as on Ctrl-C
-    try:
+    with interrupts():  # SIGTERM stops as cleanly as Ctrl-C
         if opts.cluster:
             return _on_cluster(spec, opts.cluster, opts)
         return run_sweep(spec, timeout_s=opts.cell_timeout_s, jobs=opts.jobs or 1)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def _on_cluster(spec: SweepSpec, address: str, opts: SweepOptions) -> int:
@@ -130,10 +126,6 @@ def _on_cluster(spec: SweepSpec, address: str, opts: SweepOptions) -> int:
         return run_sweep(
             spec, runner, opts.cell_timeout_s, jobs=jobs, signals=signals, where=address
         )
-
-
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt
 
 
 def run_sweep(
