@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from deploy.interrupts import interrupts
 from deploy.pids import is_alive
 from deploy.sweep.command import run_sweep
 from deploy.sweep.parallel import StopSignals
@@ -168,7 +169,10 @@ def test_ctrl_c_stops_every_running_cell_of_a_parallel_sweep_once(tmp_path: Path
         _thread.interrupt_main()  # what a terminal's Ctrl-C does to the sweep
 
     threading.Thread(target=interrupt_when_both_run, daemon=True).start()
-    code = run_sweep(spec, runner, tty=False, figures=False, jobs=2, signals=signals)
+    # As `enclose sweep` does: Ctrl-C raises even where SIGINT was inherited ignored (a
+    # test runner's worker), which interrupt_main would otherwise leave unnoticed.
+    with interrupts():
+        code = run_sweep(spec, runner, tty=False, figures=False, jobs=2, signals=signals)
     assert code == 130
     assert [r["status"] for r in results(spec.out)] == ["interrupted", "interrupted", "pending"]
     assert [(c / "sigints").read_text() for c in cells[:2]] == ["1", "1"]
