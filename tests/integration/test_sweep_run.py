@@ -44,7 +44,8 @@ out = pathlib.Path(args[args.index("--out") + 1] if "--out" in args else args[0]
 got = []
 signal.signal(signal.SIGINT, lambda *a: got.append(1))
 (out / "ready").write_text("")
-while not got:
+give_up = time.monotonic() + 90.0  # a failed test must not leave it waiting for ever
+while not got and time.monotonic() < give_up:
     time.sleep(0.02)
 time.sleep(0.5)
 (out / "sigints").write_text(str(len(got)))
