@@ -200,6 +200,17 @@ def reference_metrics(series: RunSeries, errors: ErrorSeries, steady_from_s: flo
 
 
 @settings(max_examples=80, deadline=None)
+
+def feed_in_chunks(acc: MetricsAccumulator | WindowAccumulator, series: RunSeries,
+                   errors: ErrorSeries, cuts: list[int],
+                   k: int) -> None:
+    """`acc.add` the k rows of `series` and `errors` cut at `cuts` (those below k)."""
+    bounds = [0, *sorted({c for c in cuts if c < k}), k]
+    for a, b in itertools.pairwise(bounds):
+        rows = np.arange(a, b)
+        acc.add(series.take(rows), ErrorSeries(*(getattr(errors, f.name)[rows]
+                                                 for f in dataclasses.fields(ErrorSeries))))
+
 @given(seed=st.integers(0, 10**6), k=st.integers(1, 60), cuts=st.lists(st.integers(1, 59)),
        steady_from=st.sampled_from([0.0, 2.5, 5.9, 99.0]))
 def test_metrics_fed_in_chunks_are_those_of_the_whole(
@@ -209,11 +220,7 @@ def test_metrics_fed_in_chunks_are_those_of_the_whole(
     whole = reference_metrics(series, errors, steady_from, 0.05, 0.05)
     assert same(compute_metrics(series, errors, steady_from, 0.05, 0.05), whole)
     acc = MetricsAccumulator(steady_from, 0.05, 0.05)
-    bounds = [0, *sorted({c for c in cuts if c < k}), k]
-    for a, b in itertools.pairwise(bounds):
-        rows = np.arange(a, b)
-        acc.add(series.take(rows), ErrorSeries(*(getattr(errors, f.name)[rows]
-                                                 for f in dataclasses.fields(ErrorSeries))))
+    feed_in_chunks(acc, series, errors, cuts, k)
     assert same(acc.result(), whole)
 
 
@@ -300,11 +307,7 @@ def test_fault_windows_fed_in_chunks_are_those_of_the_whole(
 ) -> None:
     series, errors = random_errors(np.random.default_rng(seed), k, 3)
     acc = WindowAccumulator(window, 0.05, 0.05)
-    bounds = [0, *sorted({c for c in cuts if c < k}), k]
-    for a, b in itertools.pairwise(bounds):
-        rows = np.arange(a, b)
-        acc.add(series.take(rows), ErrorSeries(*(getattr(errors, f.name)[rows]
-                                                 for f in dataclasses.fields(ErrorSeries))))
+    feed_in_chunks(acc, series, errors, cuts, k)
     got, expected = acc.result(), reference_window(series, errors, *window, 0.05, 0.05)
     assert got.keys() == expected.keys()
     for name, value in expected.items():
