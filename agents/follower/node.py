@@ -175,8 +175,7 @@ class FollowerNode:
         setup, peers = self.runner.setup, self.latest.peers
         silent = frozenset(j for j in setup.neighbours
                            if j in peers and now_s - peers[j].r.stamp_s > setup.hold_s)
-        if (self.silent - silent) & set(setup.neighbours) and self.runner.last_r is not None:
-            self.runner.continue_estimate()
+        if (self.silent - silent) & set(setup.neighbours) and self.runner.continue_estimate():
             self.status.counters["heard_again"] += 1
         self.silent = silent
 

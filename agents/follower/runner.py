@@ -161,15 +161,17 @@ class LawRunner:
         if self.journal is not None:
             self._journal(self.journal.window, start_s, stop_s)
 
-    def continue_estimate(self) -> None:
+    def continue_estimate(self) -> bool:
         """A neighbour heard again after a silence (a healed cut) may publish link sums that
         moved meanwhile: the next step continues the estimate from the last one, as across
-        a change of members.  Journaled: the replay must do the same at the same step."""
+        a change of members.  Journaled: the replay must do the same at the same step.
+        False before the first step (nothing to continue from)."""
         if self.last_r is None:
-            return
+            return False
         self.rebase = True
         if self.journal is not None:
             self._journal(self.journal.rebase)
+        return True
 
     def join(self, peers: Mapping[int, Peer], now_s: float) -> None:
         """Joining a running swarm: continue from the neighbours' mean estimate."""
