@@ -14,9 +14,10 @@ bin="$repo/.venv/bin"
 "$bin/ruff" check . || exit 1
 # The first pass is two at once.  The real swarms (integration, not serial) side by side on
 # `workers` (pytest-xdist), at the shell's priority: they wait on real time and leave most
-# of a core idle.  Beside them, on that idle core, mypy and then the unit tests in one
-# process at the lowest priority (nice 19): CPU-bound, not timed, so they take what the
-# swarms leave and never slow a swarm's tick.  Their output follows the swarms'.
+# of a core idle.  Beside them mypy, then the unit tests on one worker per core at the
+# lowest priority (nice 19): CPU-bound and not timed, they take what the swarms leave and
+# do not delay a swarm's tick, as unit tests on the swarms' workers did.  Their output
+# follows the swarms'.
 pytest=("$bin/python" -m pytest -q -p no:cacheprovider)
 workers="${ENCLOSE_TEST_WORKERS:-$(((3 * $(nproc) + 1) / 2))}"
 beside="$(mktemp -d)"
@@ -24,7 +25,8 @@ trap 'rm -rf "$beside"' EXIT
 (
   "$bin/mypy" >"$beside/mypy.log" 2>&1
   echo $? >"$beside/mypy.rc"
-  nice -n 19 "${pytest[@]}" -m "not integration and not serial" "$@" >"$beside/unit.log" 2>&1
+  nice -n 19 "${pytest[@]}" -n "$(nproc)" -m "not integration and not serial" "$@" \
+    >"$beside/unit.log" 2>&1
   echo $? >"$beside/unit.rc"
 ) &
 beside_pid=$!
