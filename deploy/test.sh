@@ -14,18 +14,19 @@ bin="$repo/.venv/bin"
 "$bin/ruff" check . || exit 1
 # The first pass is two at once.  The real swarms (integration, not serial) side by side on
 # `workers` (pytest-xdist), at the shell's priority: they wait on real time and leave most
-# of a core idle.  Beside them mypy, then the unit tests on one worker per core at the
-# lowest priority (nice 19): CPU-bound and not timed, they take what the swarms leave and
-# do not delay a swarm's tick, as unit tests on the swarms' workers did.  Their output
-# follows the swarms'.
+# of a core idle.  Beside them mypy, then the unit tests on one worker per core, at a lower
+# priority (nice 10): CPU-bound and not timed, they take what the swarms leave and do not
+# delay a swarm's tick, as unit tests on the swarms' workers did; not the lowest, so that
+# other work of the machine's own priority does not starve them past their timeouts.
+# Their output follows the swarms'.
 pytest=("$bin/python" -m pytest -q -p no:cacheprovider)
 workers="${ENCLOSE_TEST_WORKERS:-$(((3 * $(nproc) + 1) / 2))}"
 beside="$(mktemp -d)"
 trap 'rm -rf "$beside"' EXIT
 (
-  "$bin/mypy" >"$beside/mypy.log" 2>&1
+  nice -n 10 "$bin/mypy" >"$beside/mypy.log" 2>&1
   echo $? >"$beside/mypy.rc"
-  nice -n 19 "${pytest[@]}" -n "$(nproc)" -m "not integration and not serial" "$@" \
+  nice -n 10 "${pytest[@]}" -n "$(nproc)" -m "not integration and not serial" "$@" \
     >"$beside/unit.log" 2>&1
   echo $? >"$beside/unit.rc"
 ) &
