@@ -41,6 +41,13 @@ from transport.errors import DeployError
 
 log = logging.getLogger("enclose.hosts")
 SUBNET = "10.77.0"
+# A router's attempt to reach another host's is a TCP connect Zenoh awaits without a
+# timeout; begun during a partition, it waits on the kernel's SYN retries (1, 2, 4, 8,
+# 16 s apart: Linux's 6), so the routers found each other up to ~16 s after the heal (the
+# next SYN).  With 1 retry an attempt fails 3 s after it began and the router's next one
+# follows within its 1-s retry period: SYNs never more than 3 s apart.  Per namespace:
+# the host's kernel setting, as a swarm host would set it (docs/multihost.md).
+SYN_RETRIES = 1
 
 
 def add_hosts_arguments(parser: argparse.ArgumentParser) -> None:
@@ -133,6 +140,8 @@ def linked_namespaces(dep: Deployment, hub: str) -> Iterator[None]:
                    "peer", "name", f"h{i}", "netns", hub])
             _tool(["ip", "-n", h.netns, "addr", "add", f"{h.address}/24", "dev", "eth0"])
             _tool(["ip", "-n", h.netns, "link", "set", "eth0", "up"])
+            _tool(["ip", "netns", "exec", h.netns, "sysctl", "-q", "-w",
+                   f"net.ipv4.tcp_syn_retries={SYN_RETRIES}"])
             _tool(["ip", "-n", hub, "link", "set", f"h{i}", "master", "br0", "up"])
         log.info("hosts %s linked through %s", ", ".join(h.netns or "" for h in dep.hosts), hub)
         yield
