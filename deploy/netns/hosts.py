@@ -48,6 +48,14 @@ SUBNET = "10.77.0"
 # follows within its 1-s retry period: SYNs never more than 3 s apart.  Per namespace:
 # the host's kernel setting, as a swarm host would set it (docs/multihost.md).
 SYN_RETRIES = 1
+# A TCP connection whose data go unacknowledged is given up after this many retransmits
+# (~3 s; Linux's 15 take ~15 min).  A router closing a TLS link lost in a partition
+# writes TLS's close_notify into a socket nobody acknowledges, and Zenoh 1.10 kept the
+# link's session open until that write failed: the new link made at the heal joined the
+# old session, and died with it when the old socket's retransmits met the healed network
+# (a reset, ~12 s after the heal), and the routers' tables did not recover within the
+# run.  Given up during the cut, the old session is gone before the heal.
+TCP_RETRIES = 3
 
 
 def add_hosts_arguments(parser: argparse.ArgumentParser) -> None:
@@ -141,7 +149,8 @@ def linked_namespaces(dep: Deployment, hub: str) -> Iterator[None]:
             _tool(["ip", "-n", h.netns, "addr", "add", f"{h.address}/24", "dev", "eth0"])
             _tool(["ip", "-n", h.netns, "link", "set", "eth0", "up"])
             _tool(["ip", "netns", "exec", h.netns, "sysctl", "-q", "-w",
-                   f"net.ipv4.tcp_syn_retries={SYN_RETRIES}"])
+                   f"net.ipv4.tcp_syn_retries={SYN_RETRIES}",
+                   f"net.ipv4.tcp_retries2={TCP_RETRIES}"])
             _tool(["ip", "-n", hub, "link", "set", f"h{i}", "master", "br0", "up"])
         log.info("hosts %s linked through %s", ", ".join(h.netns or "" for h in dep.hosts), hub)
         yield

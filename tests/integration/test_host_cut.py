@@ -1,8 +1,8 @@
 """The nftables cut between two namespaced hosts (deploy.netns.cut), on real namespaces:
 TCP between the hosts stops at the cut and passes again at the heal, MAVLink's UDP and
 the simulator's sensing link (TCP to the sensing port) pass throughout, the hosts' kernels
-give up a connect after one SYN retry, and neither the table nor a namespace is left
-behind."""
+give up a connect after one SYN retry and a connection after 3 retransmits, and neither
+the table nor a namespace is left behind."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import pytest
 from agents.scenario.net_faults import parse_net_fault_flag
 from deploy.deployment import Deployment, HostSpec
 from deploy.netns.cut import CUT_TABLE, HostCut
-from deploy.netns.hosts import SYN_RETRIES, linked_namespaces, unavailable
+from deploy.netns.hosts import SYN_RETRIES, TCP_RETRIES, linked_namespaces, unavailable
 
 pytestmark = pytest.mark.integration
 REASON = unavailable()
@@ -72,10 +72,9 @@ def server(ns: str) -> Iterator[None]:
         proc.wait(10)
 
 
-def syn_retries(ns: str) -> int:
-    done = subprocess.run(["ip", "netns", "exec", ns, "sysctl", "-n",
-                           "net.ipv4.tcp_syn_retries"], capture_output=True, text=True,
-                          check=True)
+def kernel(ns: str, setting: str) -> int:
+    done = subprocess.run(["ip", "netns", "exec", ns, "sysctl", "-n", f"net.ipv4.{setting}"],
+                          capture_output=True, text=True, check=True)
     return int(done.stdout)
 
 
@@ -96,7 +95,8 @@ def test_a_partition_along_hosts_is_cut_by_nftables_and_healed() -> None:
     fault = parse_net_fault_flag("1:partition:1,2|3,4:2", 4)
     h0 = f"{prefix}-h0"
     with linked_namespaces(dep, f"{prefix}-hub"), server(f"{prefix}-h1"):
-        assert syn_retries(h0) == SYN_RETRIES
+        assert kernel(h0, "tcp_syn_retries") == SYN_RETRIES
+        assert kernel(h0, "tcp_retries2") == TCP_RETRIES
         cut = HostCut(f"{prefix}-hub", dep, (fault,), (range(14540, 14640),),
                       exempt_tcp=(SENSE_PORT,))
         cut.open()
