@@ -9,7 +9,9 @@ processes as clients of their host's router, each host's processes on their own 
 `--host-delay-ms` delays every follower link across hosts at its receiving end (the
 impairment layer: this kernel has no netem).  A partition into K groups places one
 group per host (the ground with the first), and its cut is made for real between the
-hosts by nftables in the hub (deploy.netns.cut).  Every namespace is removed afterwards,
+hosts by nftables in the hub (deploy.netns.cut); each host's kernel gives up a TCP
+connect or a silent connection within seconds (SYN_RETRIES, TCP_RETRIES), so the routers
+find each other again soon after the heal.  Every namespace is removed afterwards,
 whatever happens (deploy.netns.namespace.destroy; stale ones of dead launchers at the next start).
 """
 

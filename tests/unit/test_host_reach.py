@@ -16,6 +16,8 @@ from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import ClockProbe, Header
 from transport.net_timeline import HidingAliveWatch
 from transport.peer_clock import ClockBook
+from transport.zenoh_bus import ZenohBus
+from transport.zenoh_config import ZenohConfig
 
 pytestmark = pytest.mark.timeout(30)
 KEYS = SwarmKeys("s")
@@ -68,3 +70,20 @@ def test_followers_of_a_silent_host_are_hidden_and_come_back_with_its_probes() -
             wait_until(lambda: watch.poll() == {near, far})
         finally:
             sync.close()
+
+
+def test_a_bus_that_syncs_clocks_across_hosts_watches_tokens_through_the_reach() -> None:
+    hosts = parse_clock_hosts("follower-0;follower-1")
+    with ZenohBus(ZenohConfig()) as bus:
+        plain = bus.watch_alive(KEYS.all_alive())
+        assert not isinstance(plain, HidingAliveWatch)  # one host: Zenoh's tokens as they are
+        # As start_clock_sync, with a book of the test's own (not the process's).
+        bus.clock_sync = ClockSync(bus, KEYS, "router-0", False, 2, hosts, book=ClockBook())
+        watch = bus.watch_alive(KEYS.all_alive())
+        assert isinstance(watch, HidingAliveWatch)
+        bus.declare_token(KEYS.alive("follower", 1))
+        bus.declare_token(KEYS.alive("follower", 0))
+        # Follower 1's host (router-1) is never heard: its token stays hidden.
+        wait_until(lambda: KEYS.alive("follower", 0) in watch.poll())
+        assert KEYS.alive("follower", 1) not in watch.poll()
+        assert KEYS.alive("follower", 1) in plain.poll()
