@@ -25,10 +25,10 @@ The probes also say which hosts are in reach (`follower_out_of_reach`): a host w
 router has not been heard for REACH_S is cut off from us, and the bus hides its
 followers' liveliness tokens (transport.zenoh_bus), as a cut at the receivers does
 (transport.net_timeline).  Zenoh's own tokens cannot be trusted to show it: its 1.10.2
-routers do not withdraw the tokens that came over a router link they lost (zenoh issue
-2602, fixed upstream after 1.10.2): in `--hosts 2` partitions the far side's tokens
-stayed alive for the whole cut (or vanished only at the heal), and once the near side's
-own were withdrawn for 10 s instead (docs/faults.md).
+routers do not withdraw the tokens that came over a router link they lost (as in zenoh
+issue 2602): in `--hosts 2` partitions the far side's tokens stayed alive for the whole
+cut (or vanished only at the heal), and once the near side's own were withdrawn for 10 s
+instead (docs/faults.md).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ one that started last holds.
 while its link into this receiver is cut (it vanishes, then appears again at the heal
 if it is still alive), so membership (agents.liveness) drops and takes back the other
 side exactly as Zenoh would after a lost session.  Only follower tokens are filtered
-(`HidingAliveWatch`; a cut between hosts hides them the same way: transport.host_reach).
+(`HidingAliveWatch`; a cut between hosts hides them the same way: transport.clock_sync).
 """
 
 from __future__ import annotations

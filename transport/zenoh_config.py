@@ -66,13 +66,13 @@ ROUTER_BLOCK_CLOSE_US = 1_000_000
 # (deploy.netns.hosts: `net.ipv4.tcp_syn_retries`; docs/multihost.md for real hosts).
 ROUTER_OPEN_TIMEOUT_KEY = "transport/unicast/open_timeout"
 ROUTER_OPEN_TIMEOUT_MS = 2000
-# A router's lease (Zenoh: 10 s): a peer that heard nothing from it this long closes the
-# link, and the far side's liveliness tokens vanish with it.  Zenoh's 10 s outlasted the
-# first 10 s of every partition between hosts, so membership saw a 15-s cut late or
-# (under load, with the heal close behind) not at all, and a router began to look for
-# the lost link only then.  2 s (keep-alives every 0.5 s) shows a cut 2-3 s after it
-# starts.  Each end expires a link by the lease the other announced, so a router's
-# clients keep their own 10 s: a 2-s pause of a client is still ridden through.
+# A router's lease (Zenoh: 10 s): a peer that heard nothing from it this long gives the
+# link up.  Zenoh's 10 s outlasted the first 10 s of every 15-s partition between hosts,
+# and a router began to look for the lost link only then; 2 s (keep-alives every 0.5 s)
+# gives it up 2-3 s into a cut (membership sees the cut by the routers' probes, not by
+# Zenoh's tokens: transport.clock_sync).  Each end expires a link by the lease the other
+# announced, so a router's clients keep their own 10 s: a paused client is still ridden
+# through (one paused over 2 s re-links to its router when it runs again).
 ROUTER_LEASE_KEY = "transport/link/tx/lease"
 ROUTER_LEASE_MS = 2000
 _MODES = ("peer", "client", "router")
