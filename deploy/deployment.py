@@ -22,7 +22,10 @@ the file); the host's processes are its clients.  The routers form a star around
 first host's (`router_links`): in a mesh of three, Zenoh 1.10's link-state routing
 lost a restarted router's routes to one of the others almost every time.  Vehicles are
 the simulator's: the agents of other hosts reach them over MAVLink/UDP at the simulator
-host's address, as a companion computer reaches its autopilot.
+host's address, as a companion computer reaches its autopilot, and the simulator's
+target sensing reaches each other host holding followers over a link of its own, to that
+host's router at `router_port + 1` (`sensing_endpoint`): a vehicle's sensing is on board,
+not on the swarm's network between hosts, so it never goes through another host.
 """
 
 from __future__ import annotations
@@ -39,6 +42,8 @@ from transport.errors import ConfigError
 from transport.keys import validate_name
 
 DEFAULT_ROUTER_PORT = 7447
+# A host's router also listens on its port + 1 for the simulator's sensing (module doc).
+SENSING_PORT_OFFSET = 1
 _HOST_KEYS = {"name", "address", "router_port", "processes", "netns", "clock_offset_s",
               "clock_drift_ppm"}
 
@@ -85,9 +90,29 @@ class Deployment:
         """
         return () if k == 0 else (0,)
 
+    def sensing_hosts(self) -> tuple[int, ...]:
+        """The hosts the simulator's sensing reaches over a link of its own: those holding
+        followers, but the simulator's."""
+        sim = [k for k, h in enumerate(self.hosts) if "sim" in h.processes]
+        return tuple(k for k, h in enumerate(self.hosts) if k not in sim
+                     and any(p.startswith("follower-") for p in h.processes))
+
+    def sensing_endpoint(self, k: int, secure: bool) -> str:
+        host = self.hosts[k]
+        return f"{'tls' if secure else 'tcp'}/{host.address}:" \
+               f"{host.router_port + SENSING_PORT_OFFSET}"
+
+    def sensing_ports(self) -> tuple[int, ...]:
+        """The TCP ports of the sensing links (exempt from a cut between hosts)."""
+        return tuple(sorted({self.hosts[k].router_port + SENSING_PORT_OFFSET
+                             for k in self.sensing_hosts()}))
+
     def router_argv(self, k: int, secure: bool) -> list[str]:
-        """`deploy.router`'s endpoint arguments for router k: where it listens, whom it links."""
+        """`deploy.router`'s endpoint arguments for router k: where it listens (and, on a
+        host the simulator's sensing reaches, for it), whom it links."""
         argv = ["--listen", self.router_endpoint(k, secure)]
+        if k in self.sensing_hosts():
+            argv += ["--listen", self.sensing_endpoint(k, secure)]
         for j in self.router_links(k):
             argv += ["--connect", self.router_endpoint(j, secure)]
         return argv
@@ -127,8 +152,9 @@ def _host(raw: Any, k: int) -> HostSpec:
         raise ConfigError(f"{where}.address", f"{raw.get('address')!r} is not an IP "
                           "address") from None
     port = raw.get("router_port", DEFAULT_ROUTER_PORT)
-    if not isinstance(port, int) or not 1 <= port <= 65535:
-        raise ConfigError(f"{where}.router_port", f"{port!r} is not a port")
+    if not isinstance(port, int) or not 1 <= port <= 65535 - SENSING_PORT_OFFSET:
+        raise ConfigError(f"{where}.router_port", f"{port!r} is not a port (with the "
+                          "next one free: the sensing port)")
     procs = raw.get("processes", [])
     if not isinstance(procs, list) or not all(isinstance(p, str) for p in procs):
         raise ConfigError(f"{where}.processes", "must be a list of process names")

@@ -30,6 +30,7 @@ from deploy.launch import Launch
 from deploy.launch_options import LaunchOptions
 from deploy.netns.cut import HostCut, cuttable
 from deploy.run_secrets import RunSecrets
+from deploy.sensor_links import SensorLink
 from transport.clock import clock_env
 from transport.clock_sync import format_clock_hosts, parse_clock_hosts
 from transport.zenoh_bus import ZenohBus
@@ -74,7 +75,8 @@ class HostLaunch(Launch):
         self.cut_dropped: int | None = None
         if os_cut and dep.cut_hub:
             exempt = tuple(range(b, b + 100) for b in (self.vehicle_base, self.adapter_base))
-            self.host_cut = HostCut(dep.cut_hub, dep, tuple(faults[k] for k in os_cut), exempt)
+            self.host_cut = HostCut(dep.cut_hub, dep, tuple(faults[k] for k in os_cut), exempt,
+                                    exempt_tcp=dep.sensing_ports())
 
     def make_secrets(self) -> RunSecrets:
         """Each local host's folder of `enclose keys` (deploy.host_keys): with --host, the
@@ -137,7 +139,8 @@ class HostLaunch(Launch):
             self.sup.start(name, "deploy.swarm_sim", [
                 *argv, "--mav-host", "0.0.0.0", "--base-port", str(self.vehicle_base),
                 "--send-base-port", str(self.adapter_base),
-                "--noise-std-m", str(self.opts.noise_std_m)], prefix=pre)
+                "--noise-std-m", str(self.opts.noise_std_m), *self.sensor_link_argv()],
+                prefix=pre)
         elif name == "recorder":
             self.sup.start(name, "deploy.recorder",
                            [*argv, "--out", str(self.out), *self.recorder_sensor_argv()],
@@ -148,6 +151,17 @@ class HostLaunch(Launch):
             extra += self.journal_argv() if role == "follower" else []
             self.sup.start(name, AGENT_MODULES[role], [*argv, *mav, *extra, "--index", idx],
                            prefix=pre)
+
+    def sensor_link_argv(self) -> list[str]:
+        """The simulator's sensing of each other host's followers, over a link to that
+        host (deploy.sensor_links)."""
+        argv: list[str] = []
+        for k in self.dep.sensing_hosts():
+            followers = tuple(int(p.removeprefix("follower-"))
+                              for p in self.dep.hosts[k].processes if p.startswith("follower-"))
+            endpoint = self.dep.sensing_endpoint(k, secure=not self.opts.insecure)
+            argv += SensorLink(endpoint, followers).argv()
+        return argv
 
     def open_bus(self) -> ZenohBus:
         k = self.dep.host_of("launcher")

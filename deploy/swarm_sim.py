@@ -4,7 +4,8 @@
 
 Vehicles 0..n-1 are the followers, n..n+m-1 the targets.  Acting as each
 follower's sensor, it publishes the targets that follower observes in the
-scenario, stamped with the time they were true (optionally with noise).
+scenario, stamped with the time they were true (optionally with noise); a follower on
+another host is given them over a link to that host (`--sensor-link`, deploy.sensor_links).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from agents.process import (
 from agents.process_options import BusOptions, add_bus_arguments
 from agents.scenario.model import Scenario
 from deploy.run_secrets import agent_of_vehicle
+from deploy.sensor_links import parse_sensor_link, sensor_buses
 from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from transport.bus import Bus
@@ -56,6 +58,7 @@ class SensorPublisher:
         noise_std_m: float = 0.0,
         seed: int = 0,
         late_s: Callable[[float], float] = lambda _t: 0.0,
+        sensor_buses: Mapping[int, Bus] | None = None,
     ) -> None:
         self.n, self.m = scenario.n, scenario.m
         self.bus, self.keys, self.every = bus, keys, max(1, every_ticks)
@@ -71,7 +74,9 @@ class SensorPublisher:
         self.truth_stamper = Stamper("sim-0", bus.now_s)
         self.sensor_stampers = [Stamper("sim-0", bus.now_s) for _ in range(self.n)]
         self.truth_out = bus.declare_publisher(keys.truth())
-        self.sensor_out = [bus.declare_publisher(keys.sensor_targets(i)) for i in range(self.n)]
+        links = sensor_buses or {}  # follower -> the bus of its host's sensor link
+        self.sensor_out = [links.get(i, bus).declare_publisher(keys.sensor_targets(i))
+                           for i in range(self.n)]
         self.ticks = 0
         # How far the real clock is past the state's boot time when the hook runs: the
         # state is stamped with the time it is true, not with when it was published, so a
@@ -168,12 +173,13 @@ class SwarmSimOptions:
     mav_host: str = "127.0.0.1"
     send_base_port: int = 14540
     signing_secret: str | None = None  # the run's MAVLink secret: a key per vehicle
+    sensor_links: tuple[str, ...] = ()  # --sensor-link ENDPOINT=I,J (deploy.sensor_links)
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SwarmSimOptions:
         return cls(BusOptions.from_namespace(args), args.rate_hz, args.telemetry_hz,
                    args.sensor_hz, args.noise_std_m, args.seed, args.base_port, args.mav_host,
-                   args.send_base_port, args.signing_secret)
+                   args.send_base_port, args.signing_secret, tuple(args.sensor_link))
 
 
 def run(opts: SwarmSimOptions) -> int:
@@ -189,7 +195,9 @@ def run(opts: SwarmSimOptions) -> int:
         signing_secret=None if opts.signing_secret is None else load_key(opts.signing_secret),
     )
     keys = SwarmKeys(opts.bus.swarm)
-    with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus:
+    links = [parse_sensor_link(text, scenario.n) for text in opts.sensor_links]
+    with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus, \
+            sensor_buses(links, opts.bus, scenario.network) as linked:
         sim = Simulator(spawn_points_ned(scenario), scenario.vehicle, scenario.home, cfg)
         sensor = SensorPublisher(
             scenario,
@@ -199,6 +207,7 @@ def run(opts: SwarmSimOptions) -> int:
             opts.noise_std_m,
             opts.seed,
             late_s=lambda t: sim.boot_time_s() - t,
+            sensor_buses=linked,
         )
         status = StatusReporter(bus, keys, "sim", 0)
         sim.on_tick.append(sensor)
@@ -261,6 +270,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="std of Gaussian noise added to target observations",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of the observation noise")
+    parser.add_argument("--sensor-link", action="append", default=[], metavar="ENDPOINT=I,J",
+                        help="publish the observations of followers I,J (0-based) through a "
+                        "session to this endpoint: another host's sensing endpoint")
     parser.add_argument("--base-port", type=int, default=14580)
     parser.add_argument("--mav-host", default="127.0.0.1", metavar="ADDR",
                         help="address the vehicles listen on (another host's agents: its "

@@ -20,6 +20,15 @@ where polling every 10 ms for a prompt stamp cost each process 100 (6 900 a seco
 n = 69).  Only the bus interface is
 used: publisher `put` and subscription `drain` are safe from another thread in Zenoh;
 nothing else is shared but the book.
+
+The probes also say which hosts are in reach (`follower_out_of_reach`): a host whose
+router has not been heard for REACH_S is cut off from us, and the bus hides its
+followers' liveliness tokens (transport.zenoh_bus), as a cut at the receivers does
+(transport.net_timeline).  Zenoh's own tokens cannot be trusted to show it: its 1.10.2
+routers do not withdraw the tokens that came over a router link they lost (as in zenoh
+issue 2602): in `--hosts 2` partitions the far side's tokens stayed alive for the whole
+cut (or vanished only at the heal), and once the near side's own were withdrawn for 10 s
+instead (docs/faults.md).
 """
 
 from __future__ import annotations
@@ -38,6 +47,9 @@ from transport.peer_clock import PROCESS_BOOK, ClockBook, exchange_sample
 log = logging.getLogger(__name__)
 PERIOD_S = 0.25
 QUEUE = 256
+# A host is out of reach after this long without its router's probe (8 probes): the
+# routers' lease (transport.zenoh_config), after which Zenoh itself gives up the link.
+REACH_S = 2.0
 
 
 def format_clock_hosts(hosts: list[list[str]]) -> str:
@@ -133,6 +145,8 @@ class ClockSync:
             raise ConfigError("clock_id", f"{clock_id!r} is not router-<k>, k < {n_routers}")
         if clock_of is not None:
             book.set_hosts(clock_of)
+        self.clock_id, self.clock_of = clock_id, dict(clock_of or {})
+        self.heard_s: dict[str, float] = {}  # router -> when its last probe was read
         routers = [f"router-{k}" for k in range(n_routers)]
         self.exchange = ClockExchange(clock_id, bus.now_s, book, routers) if probe else None
         self.listener = (self.exchange.listener if self.exchange
@@ -170,6 +184,16 @@ class ClockSync:
             self.listener.book.drop("sender", owner)
             return
         (self.listener if self.exchange is None else self.exchange).receive(msg, t4_s)
+        self.heard_s[owner] = self._bus.now_s()
+
+    def follower_out_of_reach(self, index: int, now_s: float) -> bool:
+        """True when follower `index` is on another host whose router has not been heard
+        for REACH_S (or not yet at all): a cut between the hosts."""
+        router = self.clock_of.get(f"follower-{index}")
+        if router is None or router == self.clock_id:
+            return False
+        heard = self.heard_s.get(router)
+        return heard is None or now_s - heard > REACH_S
 
     def close(self) -> None:
         self._stop.set()

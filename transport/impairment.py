@@ -54,7 +54,7 @@ from transport.bus import (
     Token,
 )
 from transport.link_stats import Link, link_of
-from transport.net_timeline import CutAliveWatch, NetTimeline
+from transport.net_timeline import NetTimeline, cut_alive_watch
 from transport.network_schema import LinkImpairment, NetworkConfig
 
 MAX_WAITING = 16  # held-back messages per link; beyond, a message goes normally
@@ -338,7 +338,7 @@ class ImpairedBus(ClosingContext):
 
     def watch_alive(self, key_expr: str) -> AliveWatch:
         inner = self.inner.watch_alive(key_expr)
-        return CutAliveWatch(inner, self.timeline, self.now_s) if self.faults else inner
+        return cut_alive_watch(inner, self.timeline, self.now_s) if self.faults else inner
 
     def close(self) -> None:
         self.inner.close()

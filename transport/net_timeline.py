@@ -7,10 +7,11 @@ the bus clock (the start word), set once known; before it no fault holds.  A win
 [origin + at_s, origin + at_s + duration_s).  When two degradations overlap on a link the
 one that started last holds.
 
-`CutAliveWatch` is the liveliness a real cut would show: a follower's token is hidden
+`cut_alive_watch` is the liveliness a real cut would show: a follower's token is hidden
 while its link into this receiver is cut (it vanishes, then appears again at the heal
 if it is still alive), so membership (agents.liveness) drops and takes back the other
-side exactly as Zenoh would after a lost session.  Only follower tokens are filtered.
+side exactly as Zenoh would after a lost session.  Only follower tokens are filtered
+(`HidingAliveWatch`; a cut between hosts hides them the same way: transport.clock_sync).
 """
 
 from __future__ import annotations
@@ -73,13 +74,15 @@ def side(fault: NetFault, k: int) -> int:
     return -1
 
 
-class CutAliveWatch:
-    """An AliveWatch that hides the follower tokens whose link into us is cut now."""
+class HidingAliveWatch:
+    """An AliveWatch that hides the follower tokens `hidden(index, now_s)` says are out of
+    reach now: each vanishes when it goes out of reach and appears again when back in reach
+    (if still alive), as Zenoh would show them across a lost session."""
 
-    def __init__(self, inner: AliveWatch, timeline: NetTimeline,
+    def __init__(self, inner: AliveWatch, hidden: Callable[[int, float], bool],
                  clock: Callable[[], float]) -> None:
         self.key_expr = inner.key_expr
-        self._inner, self._timeline, self._clock = inner, timeline, clock
+        self._inner, self._hidden_index, self._clock = inner, hidden, clock
         self._real: set[str] = set()
         self._shown: set[str] = set()
 
@@ -87,7 +90,7 @@ class CutAliveWatch:
         info = parse_key(key)
         if info is None or info.role != "follower" or info.index is None:
             return False
-        return self._timeline.cut(info.index, now_s)
+        return self._hidden_index(info.index, now_s)
 
     def drain_events(self) -> list[AliveEvent]:
         for ev in self._inner.drain_events():
@@ -105,3 +108,9 @@ class CutAliveWatch:
 
     def close(self) -> None:
         self._inner.close()
+
+
+def cut_alive_watch(inner: AliveWatch, timeline: NetTimeline,
+                    clock: Callable[[], float]) -> HidingAliveWatch:
+    """The tokens of the followers whose link into us is cut now, hidden."""
+    return HidingAliveWatch(inner, timeline.cut, clock)

@@ -18,6 +18,7 @@ import zenoh
 from transport.bus import (
     DEFAULT_CAPACITY,
     AliveEvent,
+    AliveWatch,
     BusBase,
     Clock,
     Congestion,
@@ -29,11 +30,13 @@ from transport.clock_sync import ClockSync
 from transport.errors import TransportError
 from transport.fastbuild import build
 from transport.keys import SwarmKeys, validate_concrete
+from transport.net_timeline import HidingAliveWatch
 from transport.zenoh_config import RUNTIME_SETTINGS, ZenohConfig, build_zenoh_config
 
 log = logging.getLogger(__name__)
 
-_Owned = Union["ZenohSubscription", "ZenohPublisher", "ZenohToken", "ZenohAliveWatch"]
+_Owned = Union["ZenohSubscription", "ZenohPublisher", "ZenohToken", "ZenohAliveWatch",
+               HidingAliveWatch]
 _T = TypeVar("_T", bound=_Owned)
 
 _CONGESTION = {
@@ -227,9 +230,15 @@ class ZenohBus(BusBase):
         self._check_open()
         return self._own(ZenohToken(self, key))
 
-    def watch_alive(self, key_expr: str) -> ZenohAliveWatch:
+    def watch_alive(self, key_expr: str) -> AliveWatch:
+        """The tokens alive; across hosts, less those of followers on a host out of reach
+        (transport.clock_sync.ClockSync.follower_out_of_reach)."""
         self._check_open()
-        return self._own(ZenohAliveWatch(self, key_expr))
+        watch = ZenohAliveWatch(self, key_expr)
+        if self.clock_sync is None:
+            return self._own(watch)
+        return self._own(HidingAliveWatch(watch, self.clock_sync.follower_out_of_reach,
+                                          self.now_s))
 
     def peers(self) -> list[str]:
         """Zenoh ids of the peers this session is linked to right now."""

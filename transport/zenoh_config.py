@@ -59,12 +59,22 @@ SHM_KEY = "transport/shared_memory/enabled"
 # (deploy.netns.cut, BENCHMARKS.md).  1 s: far past any queue on a link that still moves.
 ROUTER_BLOCK_CLOSE_KEY = "transport/link/tx/queue/congestion_control/block/wait_before_close"
 ROUTER_BLOCK_CLOSE_US = 1_000_000
-# How long a router's attempt to open a link may take (Zenoh: 10 s).  An attempt begun
-# during a partition waits on SYNs the kernel resends ever more rarely, so the routers
-# found each other up to ~15 s after the heal; a fresh attempt every 2 s finds the
-# healed link within ~2 s, and 2 s is far past an mTLS handshake between hosts.
+# How long a router's attempt to open a link may take once its TCP connection is up
+# (Zenoh: 10 s): the handshake, far past an mTLS exchange between hosts.  It does not bound
+# the TCP connect itself (Zenoh 1.10 awaits it without a timeout): an attempt begun during
+# a partition waits on the kernel's SYN retries, which the hosts bound instead
+# (deploy.netns.hosts: `net.ipv4.tcp_syn_retries`; docs/multihost.md for real hosts).
 ROUTER_OPEN_TIMEOUT_KEY = "transport/unicast/open_timeout"
 ROUTER_OPEN_TIMEOUT_MS = 2000
+# A router's lease (Zenoh: 10 s): a peer that heard nothing from it this long gives the
+# link up.  Zenoh's 10 s outlasted the first 10 s of every 15-s partition between hosts,
+# and a router began to look for the lost link only then; 2 s (keep-alives every 0.5 s)
+# gives it up 2-3 s into a cut (membership sees the cut by the routers' probes, not by
+# Zenoh's tokens: transport.clock_sync).  Each end expires a link by the lease the other
+# announced, so a router's clients keep their own 10 s: a paused client is still ridden
+# through (one paused over 2 s re-links to its router when it runs again).
+ROUTER_LEASE_KEY = "transport/link/tx/lease"
+ROUTER_LEASE_MS = 2000
 _MODES = ("peer", "client", "router")
 
 
@@ -150,7 +160,8 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
         _put(config, "connect/timeout_ms", -1)
     if cfg.mode == "router":
         for key, value in ((ROUTER_BLOCK_CLOSE_KEY, ROUTER_BLOCK_CLOSE_US),
-                           (ROUTER_OPEN_TIMEOUT_KEY, ROUTER_OPEN_TIMEOUT_MS)):
+                           (ROUTER_OPEN_TIMEOUT_KEY, ROUTER_OPEN_TIMEOUT_MS),
+                           (ROUTER_LEASE_KEY, ROUTER_LEASE_MS)):
             if not (user and _is_set(config, default, key)):
                 _put(config, key, value)
     if not (user and _is_set(config, default, "scouting/multicast/enabled")):

@@ -6,8 +6,10 @@ the hub, `enclose_cut`, drops every frame between the host pairs in its set `pai
 launcher fills the set when a partition or isolation starts and empties it at the heal
 (`HostCut.check`, from the launcher's loop).  So Zenoh sees the cut itself: the routers'
 session between the two sides times out (its lease), the far side's liveliness tokens
-vanish, its clock probes stop.  Exempt: ARP, and MAVLink/UDP between the followers and
-their simulated autopilots (on a drone that link is on board, not the swarm's network).
+vanish, its clock probes stop.  Exempt: ARP, MAVLink/UDP between the followers and
+their simulated autopilots, and the simulator's sensing links to the hosts' sensing
+ports (TCP; deploy.sensor_links): on a drone the autopilot link and the sensing are on
+board, not on the swarm's network.
 The table is deleted when the launcher ends; it goes with the hub namespace in any case
 (deploy.netns.namespace.destroy), so nothing is left behind even after a SIGKILL.
 
@@ -64,13 +66,15 @@ def separated(fault: NetFault, dep: Deployment) -> frozenset[tuple[int, int]]:
                      if sides[a] != sides[b])
 
 
-def cut_ruleset(exempt_udp: Sequence[range]) -> str:
-    """The hub's table: ARP and UDP to or from `exempt_udp` pass, frames between the
-    bridge ports of a pair in `pairs` are dropped (and counted)."""
+def cut_ruleset(exempt_udp: Sequence[range], exempt_tcp: Sequence[int] = ()) -> str:
+    """The hub's table: ARP, UDP to or from `exempt_udp` and TCP to or from `exempt_tcp`
+    pass, frames between the bridge ports of a pair in `pairs` are dropped (and counted)."""
     rules = ["ether type arp accept"]
     for ports in exempt_udp:
         span = f"{ports.start}-{ports.stop - 1}"
         rules += [f"udp dport {span} accept", f"udp sport {span} accept"]
+    for port in exempt_tcp:
+        rules += [f"tcp dport {port} accept", f"tcp sport {port} accept"]
     rules.append("iifname . oifname @pairs counter drop")
     body = "".join(f"    {r}\n" for r in rules)
     return (f"table bridge {CUT_TABLE} {{\n  set pairs {{ type ifname . ifname; }}\n"
@@ -95,6 +99,7 @@ class HostCut:
     dep: Deployment
     faults: tuple[NetFault, ...]  # those `cuttable`
     exempt_udp: tuple[range, ...]
+    exempt_tcp: tuple[int, ...] = ()  # the sensing ports (deploy.deployment)
     applied: frozenset[tuple[int, int]] = frozenset()
     changes: list[tuple[float, int]] = field(default_factory=list)  # (t_s, pairs cut)
 
@@ -103,7 +108,7 @@ class HostCut:
 
     def open(self) -> None:
         """Make the (empty) table; DeployError if nftables refuses it."""
-        self._nft(cut_ruleset(self.exempt_udp))
+        self._nft(cut_ruleset(self.exempt_udp, self.exempt_tcp))
         log.info("partitions cut by nftables in %s between hosts", self.hub)
 
     def wanted(self, t_s: float) -> frozenset[tuple[int, int]]:

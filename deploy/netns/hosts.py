@@ -9,7 +9,9 @@ processes as clients of their host's router, each host's processes on their own 
 `--host-delay-ms` delays every follower link across hosts at its receiving end (the
 impairment layer: this kernel has no netem).  A partition into K groups places one
 group per host (the ground with the first), and its cut is made for real between the
-hosts by nftables in the hub (deploy.netns.cut).  Every namespace is removed afterwards,
+hosts by nftables in the hub (deploy.netns.cut); each host's kernel gives up a TCP
+connect or a silent connection within seconds (SYN_RETRIES, TCP_RETRIES), so the routers
+find each other again soon after the heal.  Every namespace is removed afterwards,
 whatever happens (deploy.netns.namespace.destroy; stale ones of dead launchers at the next start).
 """
 
@@ -41,6 +43,21 @@ from transport.errors import DeployError
 
 log = logging.getLogger("enclose.hosts")
 SUBNET = "10.77.0"
+# A router's attempt to reach another host's is a TCP connect Zenoh awaits without a
+# timeout; begun during a partition, it waits on the kernel's SYN retries (1, 2, 4, 8,
+# 16 s apart: Linux's 6), so the routers found each other up to ~16 s after the heal (the
+# next SYN).  With 1 retry an attempt fails 3 s after it began and the router's next one
+# follows within its 1-s retry period: SYNs never more than 3 s apart.  Per namespace:
+# the host's kernel setting, as a swarm host would set it (docs/multihost.md).
+SYN_RETRIES = 1
+# A TCP connection whose data go unacknowledged is given up after this many retransmits
+# (~3 s; Linux's 15 take ~15 min).  A router closing a TLS link lost in a partition
+# writes TLS's close_notify into a socket nobody acknowledges, and Zenoh 1.10 kept the
+# link's session open until that write failed: the new link made at the heal joined the
+# old session, and died with it when the old socket's retransmits met the healed network
+# (a reset, ~12 s after the heal), and the routers' tables did not recover within the
+# run.  Given up during the cut, the old session is gone before the heal.
+TCP_RETRIES = 3
 
 
 def add_hosts_arguments(parser: argparse.ArgumentParser) -> None:
@@ -133,6 +150,9 @@ def linked_namespaces(dep: Deployment, hub: str) -> Iterator[None]:
                    "peer", "name", f"h{i}", "netns", hub])
             _tool(["ip", "-n", h.netns, "addr", "add", f"{h.address}/24", "dev", "eth0"])
             _tool(["ip", "-n", h.netns, "link", "set", "eth0", "up"])
+            _tool(["ip", "netns", "exec", h.netns, "sysctl", "-q", "-w",
+                   f"net.ipv4.tcp_syn_retries={SYN_RETRIES}",
+                   f"net.ipv4.tcp_retries2={TCP_RETRIES}"])
             _tool(["ip", "-n", hub, "link", "set", f"h{i}", "master", "br0", "up"])
         log.info("hosts %s linked through %s", ", ".join(h.netns or "" for h in dep.hosts), hub)
         yield

@@ -1,6 +1,8 @@
 """The nftables cut between two namespaced hosts (deploy.netns.cut), on real namespaces:
-TCP between the hosts stops at the cut and passes again at the heal, MAVLink's UDP
-passes throughout, and neither the table nor a namespace is left behind."""
+TCP between the hosts stops at the cut and passes again at the heal, MAVLink's UDP and
+the simulator's sensing link (TCP to the sensing port) pass throughout, the hosts' kernels
+give up a connect after one SYN retry and a connection after 3 retransmits, and neither
+the table nor a namespace is left behind."""
 
 from __future__ import annotations
 
@@ -16,24 +18,27 @@ import pytest
 from agents.scenario.net_faults import parse_net_fault_flag
 from deploy.deployment import Deployment, HostSpec
 from deploy.netns.cut import CUT_TABLE, HostCut
-from deploy.netns.hosts import linked_namespaces, unavailable
+from deploy.netns.hosts import SYN_RETRIES, TCP_RETRIES, linked_namespaces, unavailable
 
 pytestmark = pytest.mark.integration
 REASON = unavailable()
-TCP_PORT, MAV_PORT = 7447, 14560
-# A TCP acceptor and a UDP echo on host 1, by PID; each line a client's try.
+TCP_PORT, SENSE_PORT, MAV_PORT = 7447, 7448, 14560
+# TCP acceptors (the router's port, the sensing port) and a UDP echo on host 1, by PID.
 SERVER = f"""
 import socket, threading
-t = socket.socket(); t.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-t.bind(("0.0.0.0", {TCP_PORT})); t.listen(16)
+def acceptor(port):
+    t = socket.socket(); t.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    t.bind(("0.0.0.0", port)); t.listen(16)
+    while True:
+        c, _ = t.accept(); c.close()
 u = socket.socket(socket.AF_INET, socket.SOCK_DGRAM); u.bind(("0.0.0.0", {MAV_PORT}))
 def echo():
     while True:
         data, peer = u.recvfrom(64); u.sendto(data, peer)
 threading.Thread(target=echo, daemon=True).start()
+threading.Thread(target=acceptor, args=({SENSE_PORT},), daemon=True).start()
 print("ready", flush=True)
-while True:
-    c, _ = t.accept(); c.close()
+acceptor({TCP_PORT})
 """
 CLIENT = """
 import socket, sys
@@ -67,6 +72,12 @@ def server(ns: str) -> Iterator[None]:
         proc.wait(10)
 
 
+def kernel(ns: str, setting: str) -> int:
+    done = subprocess.run(["ip", "netns", "exec", ns, "sysctl", "-n", f"net.ipv4.{setting}"],
+                          capture_output=True, text=True, check=True)
+    return int(done.stdout)
+
+
 def namespaces() -> str:
     return subprocess.run(["ip", "netns", "list"], capture_output=True, text=True,
                           check=False).stdout
@@ -84,7 +95,10 @@ def test_a_partition_along_hosts_is_cut_by_nftables_and_healed() -> None:
     fault = parse_net_fault_flag("1:partition:1,2|3,4:2", 4)
     h0 = f"{prefix}-h0"
     with linked_namespaces(dep, f"{prefix}-hub"), server(f"{prefix}-h1"):
-        cut = HostCut(f"{prefix}-hub", dep, (fault,), (range(14540, 14640),))
+        assert kernel(h0, "tcp_syn_retries") == SYN_RETRIES
+        assert kernel(h0, "tcp_retries2") == TCP_RETRIES
+        cut = HostCut(f"{prefix}-hub", dep, (fault,), (range(14540, 14640),),
+                      exempt_tcp=(SENSE_PORT,))
         cut.open()
         try:
             assert reaches(h0, "tcp", TCP_PORT)
@@ -92,6 +106,7 @@ def test_a_partition_along_hosts_is_cut_by_nftables_and_healed() -> None:
             assert cut.applied == {(0, 1), (1, 0)}
             assert not reaches(h0, "tcp", TCP_PORT)
             assert reaches(h0, "udp", MAV_PORT)  # the autopilot link is exempt
+            assert reaches(h0, "tcp", SENSE_PORT)  # and so is the sensing link
             assert (cut.dropped() or 0) > 0
             cut.check(3.0)  # healed
             assert cut.applied == frozenset()

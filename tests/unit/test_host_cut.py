@@ -44,12 +44,13 @@ def test_an_isolated_follower_alone_on_its_host_is_cut_from_every_other_host() -
     assert not cuttable(parse_net_fault_flag("80:degrade:all:10:loss=0.3", 4), ALONG)
 
 
-def test_the_hub_table_passes_arp_and_mavlink_before_it_drops_the_pairs() -> None:
-    text = cut_ruleset((range(14540, 14640), range(24540, 24640)))
+def test_the_hub_table_passes_arp_mavlink_and_sensing_before_it_drops_the_pairs() -> None:
+    text = cut_ruleset((range(14540, 14640), range(24540, 24640)), (7448,))
     lines = [line.strip() for line in text.splitlines()]
     drop = lines.index("iifname . oifname @pairs counter drop")
     for rule in ("ether type arp accept", "udp dport 14540-14639 accept",
-                 "udp sport 24540-24639 accept"):
+                 "udp sport 24540-24639 accept", "tcp dport 7448 accept",
+                 "tcp sport 7448 accept"):
         assert lines.index(rule) < drop, rule
     assert "table bridge enclose_cut {" in lines
     assert pairs_script(frozenset()) == "flush set bridge enclose_cut pairs\n"

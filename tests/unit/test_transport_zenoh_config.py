@@ -17,6 +17,8 @@ from transport.zenoh_config import (
     LINK_BUFFER_BYTES,
     ROUTER_BLOCK_CLOSE_KEY,
     ROUTER_BLOCK_CLOSE_US,
+    ROUTER_LEASE_KEY,
+    ROUTER_LEASE_MS,
     ROUTER_OPEN_TIMEOUT_KEY,
     ROUTER_OPEN_TIMEOUT_MS,
     RUNTIME_SETTINGS,
@@ -50,6 +52,14 @@ def test_routers_close_a_stuck_link_and_reopen_a_healed_one_sooner_than_zenohs_d
     assert get(router, ROUTER_OPEN_TIMEOUT_KEY) == ROUTER_OPEN_TIMEOUT_MS < 10_000
     assert get(ZenohConfig(), ROUTER_BLOCK_CLOSE_KEY) == 5_000_000  # peers: Zenoh's own
     assert get(ZenohConfig(), ROUTER_OPEN_TIMEOUT_KEY) == 10_000
+
+
+def test_routers_show_a_lost_link_within_their_lease_clients_keep_zenohs() -> None:
+    router = ZenohConfig(mode="router", listen=(loopback_endpoint(17004),))
+    assert get(router, ROUTER_LEASE_KEY) == ROUTER_LEASE_MS <= 3_000
+    client = ZenohConfig(mode="client", connect=(loopback_endpoint(17004),))
+    assert get(client, ROUTER_LEASE_KEY) == 10_000  # a paused client rides 10 s through
+    assert get(ZenohConfig(), ROUTER_LEASE_KEY) == 10_000
 
 
 def test_explicit_endpoints_and_lowlatency() -> None:
