@@ -24,7 +24,6 @@ from deploy.json_files import write_json_atomic
 from deploy.launch_end import exit_code, launch_report, stop_in_order
 from deploy.launch_options import LaunchOptions
 from deploy.live_args import announce_live_url, pin_live_port, recorder_live_argv
-from deploy.native_memory import PeriodicTrim
 from deploy.ports import run_ports
 from deploy.restarts import RestartPolicy, Watchdog
 from deploy.run_board import BoardView, LiveBoard
@@ -279,7 +278,7 @@ class Launch:
             self.sup, self.faults, t0, self.watchdog.events, self.watchdog.pending,
             self._before_restart,
         )
-        next_word, trim = start, PeriodicTrim()  # freed memory back, as the recorder does
+        next_word = start
         bus.publish(self.keys.control(), word())
         with LiveBoard(self.view, PROGRESS_PERIOD_S) as board:
             while bus.now_s() < start + self.duration_s:
@@ -291,7 +290,6 @@ class Launch:
                     next_word += START_REPEAT_S
                     bus.publish(self.keys.control(), word())
                     self._sample_cpu()
-                    trim.maybe(time.monotonic())
                 board.tick()
                 time.sleep(0.05)
 
