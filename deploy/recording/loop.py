@@ -19,7 +19,6 @@ from agents.law.loader import make_law
 from agents.liveness import MembershipWatch
 from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
-from deploy.native_memory import PeriodicTrim
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.link_history import LinkHistory
 from deploy.recording.links import FINAL_STATES, link_report, unreadable_links
@@ -101,7 +100,6 @@ class Recorder:
         self.membership: list[tuple[float, frozenset[int]]] = []
         self._started_wall_s = bus.now_s()
         self._next_tick_s = 0.0
-        self._trim = PeriodicTrim()
         self._set_state("linked")
 
     # ---- one iteration -------------------------------------------------------------------
@@ -147,8 +145,7 @@ class Recorder:
         log.info("carried on from %s: %s", part.name, dict(self.carried))
 
     def tick(self) -> None:
-        """Once a period: flush the MCAP, publish status, write progress.json; now and then
-        hand freed memory back (deploy.native_memory)."""
+        """Once a period: flush the MCAP, publish status, write progress.json."""
         now = self.bus.now_s()
         if now < self._next_tick_s:
             return
@@ -157,7 +154,6 @@ class Recorder:
         self.mcap.flush()
         self._publish_status()
         write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
-        self._trim.maybe(now)
 
     def overdue(self) -> bool:
         start = self.asm.start
