@@ -1,9 +1,11 @@
-"""Network faults of the paper's case on real processes (loopback, cut at the receivers).
+"""Network faults of the paper's case on real processes.
 
-A partition {1, 2} | {3, 4} for 15 s at 40 s: every follower holds the far side (half of
-the ring: agents.member_hold) instead of re-forming, nothing dies, no two vehicles come
-within 1 m, and the errors are back inside the paper's bounds within 10 s of the heal.
-An isolated follower (15 s) is dropped by the others and taken back, without a collision.
+A partition {1, 2} | {3, 4} for 15 s at 40 s, cut at the receivers (loopback) and for real
+between two hosts (`--hosts 2`, nftables; skipped where network namespaces are not to be
+had): every follower holds the far side (half of the ring: agents.member_hold) instead of
+re-forming, nothing dies, no two vehicles come within 1 m, and the errors are back inside
+the paper's bounds within 10 s of the heal.  An isolated follower (15 s) is dropped by the
+others and taken back, without a collision.
 """
 
 from __future__ import annotations
@@ -16,11 +18,17 @@ from typing import Any
 
 import pytest
 
+from deploy.netns.hosts import unavailable
 from tests.integration.runs import pid_alive, spawned_run
 
 pytestmark = pytest.mark.integration
 RATE_HZ = 50.0  # the paper's control rate: one state a tick
 SAFETY_M = 1.0
+HOSTS_UNAVAILABLE = unavailable()
+# The cut at the receivers, and the cut between hosts split along the partition.
+CUTS = [pytest.param((), id="receivers"),
+        pytest.param(("--hosts", "2"), id="hosts", marks=pytest.mark.skipif(
+            HOSTS_UNAVAILABLE is not None, reason=f"--hosts {HOSTS_UNAVAILABLE}"))]
 
 
 def member_sets(log: str) -> list[str]:
@@ -28,11 +36,12 @@ def member_sets(log: str) -> list[str]:
     return re.findall(r"members \[[0-9, ]*\] -> (\[[0-9, ]*\])", log)
 
 
-def fly(out: Path, duration_s: float, fault: str) -> tuple[dict[str, Any], dict[str, Any]]:
-    """A run of the paper's case with `fault`: its launch.json and metrics.json, after
-    checking that nothing died and nothing is left running."""
+def fly(out: Path, duration_s: float, fault: str,
+        more: tuple[str, ...] = ()) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A run of the paper's case with `fault` (and `more` options): its launch.json and
+    metrics.json, after checking that nothing died and nothing is left running."""
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--link-timeout",
-            "60", "--duration", str(duration_s), "--fault", fault, "--no-live"]
+            "60", "--duration", str(duration_s), "--fault", fault, "--no-live", *more]
     with spawned_run(argv, out) as proc:
         output, _ = proc.communicate(timeout=duration_s + 150.0)
     assert proc.returncode == 0, output  # 3: a process died
@@ -45,10 +54,12 @@ def fly(out: Path, duration_s: float, fault: str) -> tuple[dict[str, Any], dict[
 
 @pytest.mark.serial  # back inside the bounds within 10 s of the heal: alone on the machine
 @pytest.mark.timeout(300)
+@pytest.mark.parametrize("cut", CUTS)
 def test_a_15s_partition_is_held_through_without_a_close_pass_and_recovers_in_10s(
-        tmp_path: Path) -> None:
+        tmp_path: Path, cut: tuple[str, ...]) -> None:
     at_s, cut_s = 40.0, 15.0
-    launch, metrics = fly(tmp_path / "run", 70.0, f"{at_s:g}:partition:1,2|3,4:{cut_s:g}")
+    launch, metrics = fly(tmp_path / "run", 70.0, f"{at_s:g}:partition:1,2|3,4:{cut_s:g}",
+                          cut)
     for i in range(4):
         counters = launch["status_at_stop"][f"follower-{i}"]
         assert counters["far_sides_held"] == 1, (i, counters)
