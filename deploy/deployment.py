@@ -58,6 +58,12 @@ class HostSpec:
     clock_offset_s: float = 0.0  # test hosts: injected clock offset of its processes
     clock_drift_ppm: float = 0.0
 
+    @property
+    def followers(self) -> tuple[int, ...]:
+        """The indexes of the followers this host runs."""
+        return tuple(int(p.removeprefix("follower-")) for p in self.processes
+                     if p.startswith("follower-"))
+
 
 @dataclass(frozen=True)
 class Deployment:
@@ -94,8 +100,7 @@ class Deployment:
         """The hosts the simulator's sensing reaches over a link of its own: those holding
         followers, but the simulator's."""
         sim = [k for k, h in enumerate(self.hosts) if "sim" in h.processes]
-        return tuple(k for k, h in enumerate(self.hosts) if k not in sim
-                     and any(p.startswith("follower-") for p in h.processes))
+        return tuple(k for k, h in enumerate(self.hosts) if k not in sim and h.followers)
 
     def sensing_endpoint(self, k: int, secure: bool) -> str:
         host = self.hosts[k]

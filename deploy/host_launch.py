@@ -157,10 +157,8 @@ class HostLaunch(Launch):
         host (deploy.sensor_links)."""
         argv: list[str] = []
         for k in self.dep.sensing_hosts():
-            followers = tuple(int(p.removeprefix("follower-"))
-                              for p in self.dep.hosts[k].processes if p.startswith("follower-"))
             endpoint = self.dep.sensing_endpoint(k, secure=not self.opts.insecure)
-            argv += SensorLink(endpoint, followers).argv()
+            argv += SensorLink(endpoint, self.dep.hosts[k].followers).argv()
         return argv
 
     def open_bus(self) -> ZenohBus:

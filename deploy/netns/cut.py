@@ -43,8 +43,7 @@ def host_sides(fault: NetFault, dep: Deployment) -> list[int] | None:
     followers of two sides."""
     sides: list[int | None] = []
     for host in dep.hosts:
-        found = {side(fault, int(p.removeprefix("follower-"))) for p in host.processes
-                 if p.startswith("follower-")}
+        found = {side(fault, i) for i in host.followers}
         if len(found) > 1:
             return None
         sides.append(found.pop() if found else None)
