@@ -23,7 +23,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.integration.runs import spawned_run
+from deploy.run_secrets import MAVLINK_SECRET_FILE
+from tests.integration.runs import spawned_run, wait_for
 
 pytestmark = pytest.mark.integration
 DURATION_S = 24.0
@@ -56,6 +57,10 @@ def test_attack_changes_nothing_and_every_hostile_input_is_counted(tmp_path: Pat
         swarm, endpoint, vehicle_port = m.group(1), m.group(2), int(m.group(3))
         agent_port = int(m.group(4))
         ident = out / "credentials" / "follower-0.json"
+        # The launcher names its ports before it makes the run's credentials: the rogue
+        # reads an identity, so wait for the set (the MAVLink secret comes after every
+        # identity is written).
+        wait_for((out / "credentials" / MAVLINK_SECRET_FILE).exists, 60, "the credentials")
         report_path = tmp_path / "rogue.json"
         rogue = subprocess.run(
             [sys.executable, "-m", "tests.integration.rogue", "--vehicle-port",
