@@ -115,8 +115,7 @@ class SwarmKeys:
     def recorded(self, sensor: bool = True) -> tuple[str, ...]:
         """What a recorder subscribes to: everything but the estimator-rate states, and but
         the target observations when `sensor` is false."""
-        p = self.prefix
-        observed = (f"{p}/sensor/**",) if sensor else ()
+        observed = (self.all_sensor_targets(),) if sensor else ()
         return (self.all_follower_states(), *observed, self.truth(), self.control(),
                 self.all_status(), self.all_alive())
 

@@ -42,9 +42,29 @@ log = logging.getLogger(__name__)
 
 ROLE = "recorder"
 MCAP_FILE = "recording.mcap"
-QUEUE_CAPACITY = 16384  # ~10 s of a 16-follower swarm: survives the pauses of chunk writes
+QUEUE_HOLD_S = 20.0  # each queue holds this long of its key's traffic: chunk writes, stalls
+QUEUE_MIN, QUEUE_MAX = 256, 16384
 OVERDUE_GRACE_S = 30.0  # stop on our own this long after the planned end if no "stop" came
 FINAL_STATUS_WAIT_S = 2.0  # after the stop, for the followers' "done" counters (links)
+
+
+def queue_capacities(keys: SwarmKeys, scenario: Scenario, sensor: bool) -> dict[str, int]:
+    """Each recorded key's queue, sized to QUEUE_HOLD_S of its traffic (a power of two).
+
+    Not one size for all: Zenoh allocates a ring's whole capacity up front and the kernel
+    maps its pages as the write position first passes them, so a ring far larger than its
+    key's traffic reads as memory creeping up for as long as one lap takes: the statuses'
+    16384 slots at ~9 a second took 30 minutes of the paper's case, +4 MB."""
+    n, hz = scenario.n, scenario.run.rate_hz
+    # Truth and observations go out every simulator tick that gives at least the control
+    # rate (deploy.swarm_sim): under twice that.  Every process's status once a second.
+    per_s = {keys.all_follower_states(): n * hz, keys.all_sensor_targets(): 2.0 * n * hz,
+             keys.truth(): 2.0 * hz, keys.all_status(): n + scenario.m + 4.0}
+    return {k: _ring_size(per_s.get(k, 1.0) * QUEUE_HOLD_S) for k in keys.recorded(sensor)}
+
+
+def _ring_size(items: float) -> int:
+    return min(QUEUE_MAX, max(QUEUE_MIN, 1 << math.ceil(math.log2(max(items, 1.0)))))
 
 
 class Recorder:
@@ -86,8 +106,8 @@ class Recorder:
         # Without `record_sensor`, not the target observations either: noiseless, they are
         # the truth's target positions again, and in ring64 they were half of what the
         # recorder decoded (1 280 a second), where it fell seconds behind.
-        self._subs = [bus.subscribe(k, QUEUE_CAPACITY)
-                      for k in self.keys.recorded(sensor=record_sensor)]
+        self._subs = [bus.subscribe(k, capacity) for k, capacity in
+                      queue_capacities(self.keys, scenario, record_sensor).items()]
         # After the subscription: what arrives while we read back waits in its queue.
         self.carried: Counter[str] = Counter()
         self._carry_on()

@@ -11,7 +11,7 @@ from mcap.reader import make_reader
 
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
-from deploy.recording.loop import MCAP_FILE, Recorder
+from deploy.recording.loop import MCAP_FILE, QUEUE_HOLD_S, QUEUE_MAX, Recorder, queue_capacities
 from deploy.report import regenerate_figures
 from tests.recorder_synth import SynthRun
 from transport.codec import decode, encode
@@ -231,3 +231,23 @@ def test_the_launcher_records_observations_only_when_they_are_noisy(
 
     launch = SimpleNamespace(opts=LaunchOptions(noise_std_m=noise_std_m))
     assert Launch.recorder_sensor_argv(launch) == argv  # type: ignore[arg-type]
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize("name", ["paper", "ring16", "ring64"])
+@pytest.mark.parametrize("sensor", [True, False])
+def test_each_queue_holds_its_keys_traffic_and_no_more(name: str, sensor: bool) -> None:
+    # A ring's pages are mapped as its writer first passes them: one far larger than its
+    # key's traffic is memory creeping up for as long as a lap takes.
+    scenario, keys = load_scenario(name), SwarmKeys("q")
+    sizes = queue_capacities(keys, scenario, sensor)
+    assert list(sizes) == list(keys.recorded(sensor))
+    states_per_s = scenario.n * scenario.run.rate_hz
+    states = sizes[keys.all_follower_states()]
+    assert states >= min(QUEUE_MAX, states_per_s * QUEUE_HOLD_S)
+    assert states < max(QUEUE_MAX, 2 * states_per_s * QUEUE_HOLD_S)
+    statuses_per_s = scenario.n + scenario.m + 3  # with the simulator, recorder, launcher
+    statuses = sizes[keys.all_status()]
+    assert statuses_per_s * QUEUE_HOLD_S <= statuses <= 2 * (statuses_per_s + 1) * QUEUE_HOLD_S
+    assert sizes[keys.control()] <= 256 and sizes[keys.all_alive()] <= 256
+    assert (keys.all_sensor_targets() in sizes) is sensor
