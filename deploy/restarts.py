@@ -154,8 +154,10 @@ class Watchdog:
         self._event(now, child, "restarted", pid=child.pid, restarts=child.restarts)
 
     def _can_go_on(self) -> None:
+        # A follower that exited 0 has flown to the end of the run by its own clock, which
+        # may be a moment ahead of ours: done, not lost.
         followers = [c for c in self.sup.children if c.name.startswith("follower-")]
-        live = [c for c in followers if c.poll() is None or c.name in self.pending]
+        live = [c for c in followers if c.poll() in (None, 0) or c.name in self.pending]
         if len(followers) >= 2 and len(live) < 2:
             raise DeployError(
                 f"only {len(live)} follower(s) left alive or restarting: the run cannot go on"
