@@ -39,7 +39,8 @@ def drops(counters: dict[str, int]) -> int:
     return sum(v for k, v in counters.items() if k.startswith("drop_"))
 
 
-@pytest.mark.serial  # the rogue floods the machine beside a swarm held to the bounds: alone
+@pytest.mark.serial  # the rogue floods the machine beside a swarm held to the bounds
+@pytest.mark.xdist_group("timed-a")
 @pytest.mark.timeout(240)
 def test_attack_changes_nothing_and_every_hostile_input_is_counted(tmp_path: Path) -> None:
     out = tmp_path / "run"

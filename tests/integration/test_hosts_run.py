@@ -24,6 +24,8 @@ def _namespaces() -> str:
 
 @pytest.mark.skipif(REASON is not None, reason=f"--hosts {REASON}")
 @pytest.mark.timeout(240)
+@pytest.mark.serial  # the single observer of a target swings out of the bounds under load
+@pytest.mark.xdist_group("timed-b")
 def test_paper_case_over_three_hosts_with_clock_offsets_and_a_router_restart(
         tmp_path: Path) -> None:
     out = tmp_path / "run"

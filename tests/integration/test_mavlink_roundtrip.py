@@ -22,7 +22,8 @@ def fly(ad: MavlinkAdapter, vel_enu: tuple[float, float, float], seconds: float)
 
 
 @pytest.mark.parametrize("flavour", ["px4", "ardupilot"])
-@pytest.mark.serial  # the link loss is timed to within a second: alone on the machine
+@pytest.mark.serial  # the link loss is timed to within a second: among the timed tests
+@pytest.mark.xdist_group("timed-a")
 def test_adapter_starts_flies_east_and_detects_link_loss(flavour: str) -> None:
     sim = start_sim("--flavour", flavour, vehicles=2)
     cfg = AdapterConfig.px4_sitl(1, local_base=sim.send_base, vehicle_base=sim.listen_base)

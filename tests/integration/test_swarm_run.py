@@ -132,7 +132,8 @@ def check_live_view(watcher: LiveWatcher, out: Path) -> None:
 
 
 @pytest.mark.timeout(240)
-@pytest.mark.serial  # late ticks, the command jump and the settle time: alone on the machine
+@pytest.mark.serial  # late ticks, the command jump and the settle time: among the timed tests
+@pytest.mark.xdist_group("timed-b")
 def test_paper_case_forms_the_formation_and_every_process_exits_cleanly(tmp_path: Path) -> None:
     out = tmp_path / "run"
     watcher = LiveWatcher(out)  # the live view, watched by a real Foxglove client meanwhile
