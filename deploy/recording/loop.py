@@ -44,6 +44,10 @@ ROLE = "recorder"
 MCAP_FILE = "recording.mcap"
 QUEUE_HOLD_S = 20.0  # each queue holds this long of its key's traffic: chunk writes, stalls
 QUEUE_MIN, QUEUE_MAX = 256, 16384
+# Samples taken from each queue per step: a backlog is worked off in steps of this many,
+# not decoded whole at once (20 s of ring64 would be ~50 000 objects alive together, a
+# high-water mark the heap keeps).
+STEP_BATCH = 256
 OVERDUE_GRACE_S = 30.0  # stop on our own this long after the planned end if no "stop" came
 FINAL_STATUS_WAIT_S = 2.0  # after the stop, for the followers' "done" counters (links)
 
@@ -124,12 +128,12 @@ class Recorder:
 
     # ---- one iteration -------------------------------------------------------------------
     def step(self) -> int:
-        """Drain and handle every queued sample; the number decoded."""
+        """Drain and handle up to STEP_BATCH queued samples of each key; the number decoded."""
         # Membership first: its events must not wait behind a backlog of samples.
         members = self.liveness.members(self.bus.now_s())
         if members and (not self.membership or members != self.membership[-1][1]):
             self.membership.append((self.bus.now_s(), members))
-        inbound = [item for sub in self._subs for item in self.decoder.drain(sub)]
+        inbound = [item for sub in self._subs for item in self.decoder.drain(sub, STEP_BATCH)]
         for item in inbound:
             self._record(item.received.key, item.message, item.received.recv_stamp_s)
             self.feed.add(item.message, item.received.recv_stamp_s)
@@ -184,7 +188,7 @@ class Recorder:
     def run(self, stop_requested: Callable[[], bool], poll_s: float = 0.005) -> str:
         """Loop until RunControl "stop", a signal (`stop_requested`) or overdue; the reason."""
         while True:
-            self.step()
+            behind = self.step() >= STEP_BATCH  # then straight on, without the poll's nap
             self.tick()
             if self.asm.stopped:
                 self.stop_reason = "control_stop"
@@ -194,8 +198,10 @@ class Recorder:
                 self.stop_reason = "overdue"
             if self.stop_reason:
                 break
-            time.sleep(poll_s)
-        self.step()  # whatever arrived with the stop word
+            if not behind:
+                time.sleep(poll_s)
+        while self.step() >= STEP_BATCH:  # whatever arrived with the stop word
+            pass
         log.info("recording stops: %s", self.stop_reason)
         self.await_final_statuses(poll_s)
         return self.stop_reason

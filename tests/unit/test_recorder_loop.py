@@ -11,7 +11,14 @@ from mcap.reader import make_reader
 
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
-from deploy.recording.loop import MCAP_FILE, QUEUE_HOLD_S, QUEUE_MAX, Recorder, queue_capacities
+from deploy.recording.loop import (
+    MCAP_FILE,
+    QUEUE_HOLD_S,
+    QUEUE_MAX,
+    STEP_BATCH,
+    Recorder,
+    queue_capacities,
+)
 from deploy.report import regenerate_figures
 from tests.recorder_synth import SynthRun
 from transport.codec import decode, encode
@@ -219,6 +226,24 @@ def test_a_recorder_behind_the_bus_says_by_how_much_and_calls_no_link_silent(
         recorder.mcap.close()
     assert progress["links"]["count"] == 4 and progress["links"]["silent"] == []
     assert progress["recorder_behind_s"] == pytest.approx(5.0)
+
+
+@pytest.mark.timeout(30)
+def test_a_backlog_is_worked_off_a_batch_a_step(tmp_path: Path) -> None:
+    ring64 = load_scenario("ring64")  # its statuses' queue holds the whole backlog
+    hub, keys, clock = MemoryHub(), SwarmKeys("batch"), [START_S]
+    with MemoryBus(hub, "recorder", clock=lambda: clock[0]) as rbus, \
+            MemoryBus(hub, "swarm", clock=lambda: clock[0]) as sbus:
+        recorder = Recorder(rbus, "batch", ring64, tmp_path, scene_hz=None)
+        backlog = 2 * STEP_BATCH + 7
+        for k in range(backlog):
+            status = ProcessStatus(Header("target-0", k, START_S), "target", 0, "running", {})
+            sbus.publish(keys.status("target", 0), encode(status))
+        steps = [recorder.step() for _ in range(4)]
+        recorder.mcap.close()
+    assert steps[:2] == [STEP_BATCH, STEP_BATCH] and steps[3] == 0
+    assert sum(steps) - backlog in (0, 1)  # and perhaps the recorder's own first status
+    assert topics(tmp_path / MCAP_FILE)[keys.status("target", 0)] == backlog
 
 
 @pytest.mark.parametrize(("noise_std_m", "argv"), [(0.0, ["--no-sensor"]), (0.2, [])])
