@@ -1,22 +1,27 @@
 #!/usr/bin/env bash
-# The project's test command (README, .ci/run): bootstrap, lint, type-check, then the whole suite
-# in two stages.  First the tests marked `serial` (they measure time or load, or load the
-# machine themselves), two at a time in fixed lanes (their `xdist_group`), with mypy and the
-# unit tests beside them at a lower priority; then the other real swarms side by side
-# (pytest-xdist; each run takes a port slot of its own), alone.  Arguments go to every pass,
-# e.g. `bash deploy/test.sh tests/unit`.  Swarm workers: two per core by default
-# (ENCLOSE_TEST_WORKERS sets the number): a real swarm waits on real time at ~0.4 of a core.
+# The project's test command (README, .ci/run): bootstrap, lint, then the whole suite in two
+# stages.  First the tests marked `serial` (they measure time or load, or load the machine
+# themselves), two at a time in fixed lanes (their `xdist_group`) and nothing else: three
+# side by side, or two with the unit tests beside them, missed the paper's bounds and the
+# attack's counts.  Then the other real swarms side by side (pytest-xdist; each run takes a
+# port slot of its own), with mypy and the unit tests beside them at a lower priority.
+# Arguments go to every pass, e.g. `bash deploy/test.sh tests/unit`.  Three swarm workers
+# per two cores by default (ENCLOSE_TEST_WORKERS sets the number): a real swarm waits on
+# real time at ~0.4 of a core, but four side by side on 2 cores starve each other.
 set -uo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$repo"
 bash deploy/bootstrap.sh --dev || exit 1
 bin="$repo/.venv/bin"
 "$bin/ruff" check . || exit 1
-# The unit tests, CPU-bound and not timed, at nice 10: they take what the timed tests leave
-# and do not delay a tick of theirs; not the lowest, so that other work of the machine's own
-# priority does not starve them past their timeouts.  Their output follows the timed tests'.
 pytest=("$bin/python" -m pytest -q -p no:cacheprovider)
-workers="${ENCLOSE_TEST_WORKERS:-$((2 * $(nproc)))}"
+"${pytest[@]}" -n 2 --dist loadgroup -m serial "$@"
+alone=$?
+# Beside the swarms: mypy, then the unit tests on one worker per core, at nice 10.  CPU-bound
+# and not timed, they take what the swarms leave and do not delay a swarm's tick; not the
+# lowest, so that other work of the machine's own priority does not starve them past their
+# timeouts.  Their output follows the swarms'.
+workers="${ENCLOSE_TEST_WORKERS:-$(((3 * $(nproc) + 1) / 2))}"
 beside="$(mktemp -d)"
 trap 'rm -rf "$beside"' EXIT
 (
@@ -27,19 +32,15 @@ trap 'rm -rf "$beside"' EXIT
   echo $? >"$beside/unit.rc"
 ) &
 beside_pid=$!
-# Two lanes: a timed swarm beside at most one other (measured: three side by side, with the
-# unit tests, miss the paper's bounds and the partitions' message counts).
-"${pytest[@]}" -n 2 --dist loadgroup -m serial "$@"
-alone=$?
+# --dist loadgroup hands each worker one test at a time (and one queued), in collection
+# order: longest first (tests/conftest.py).
+"${pytest[@]}" -n "$workers" --dist loadgroup -m "integration and not serial" "$@"
+swarms=$?
 wait "$beside_pid"
 cat "$beside/mypy.log" "$beside/unit.log"
 types="$(cat "$beside/mypy.rc")"
 units="$(cat "$beside/unit.rc")"
 [ "$types" -eq 0 ] || exit "$types"
-# --dist loadgroup hands each worker one test at a time (and one queued), in collection
-# order: longest first (tests/conftest.py).
-"${pytest[@]}" -n "$workers" --dist loadgroup -m "integration and not serial" "$@"
-swarms=$?
 # pytest exits 5 when it collected (or kept) no test: a pass may have nothing to run for
 # the arguments given, but all empty is a broken suite here, not a pass.
 if [ "$swarms" -eq 5 ] && [ "$units" -eq 5 ] && [ "$alone" -eq 5 ]; then
