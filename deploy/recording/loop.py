@@ -42,7 +42,9 @@ log = logging.getLogger(__name__)
 
 ROLE = "recorder"
 MCAP_FILE = "recording.mcap"
-QUEUE_HOLD_S = 20.0  # each queue holds this long of its key's traffic: chunk writes, stalls
+# Each queue holds this long of its key's traffic (a stall, an insider's flood), and fills
+# its ring's pages within twice that.
+QUEUE_HOLD_S = 60.0
 QUEUE_MIN, QUEUE_MAX = 256, 16384
 # Samples taken from each queue per step: a backlog is worked off in steps of this many,
 # not decoded whole at once (20 s of ring64 would be ~50 000 objects alive together, a
@@ -53,7 +55,7 @@ FINAL_STATUS_WAIT_S = 2.0  # after the stop, for the followers' "done" counters 
 
 
 def queue_capacities(keys: SwarmKeys, scenario: Scenario, sensor: bool) -> dict[str, int]:
-    """Each recorded key's queue, sized to QUEUE_HOLD_S of its traffic (a power of two).
+    """Each recorded key's queue, sized to QUEUE_HOLD_S of its traffic.
 
     Not one size for all: Zenoh allocates a ring's whole capacity up front and the kernel
     maps its pages as the write position first passes them, so a ring far larger than its
@@ -68,7 +70,7 @@ def queue_capacities(keys: SwarmKeys, scenario: Scenario, sensor: bool) -> dict[
 
 
 def _ring_size(items: float) -> int:
-    return min(QUEUE_MAX, max(QUEUE_MIN, 1 << math.ceil(math.log2(max(items, 1.0)))))
+    return min(QUEUE_MAX, max(QUEUE_MIN, math.ceil(items)))
 
 
 class Recorder:
