@@ -2,14 +2,13 @@
 
 A real recorder on loopback records a synthetic run at 250 Hz (truth and four follower
 states a tick: five times the paper's message rate, so that a minute shows what five would).
-Its resident memory, sampled twice a second from the 20th second to the last, must not
+Its resident memory, sampled twice a second from the 15th second to the last, must not
 trend up: keeping every decoded message cost ~0.6 kB each, ~45 MB a minute here, in every
 part of the run.  A backlog does not: on a loaded machine the recorder falls behind now and
 then and its queues (bounded) grow to the largest backlog seen, a step of a few MB that
 stays; the growth is therefore judged by its median over 5-s stretches, which a ramp
-moves and a few steps do not.  Without a leak the RSS rises ~3.7 MB a minute over the
-first minute (then flat): a 60-s run judges that as a 90-s one does (its median is the
-first minute's either way), and keeping the messages would be twelve times as steep.
+moves and a few steps do not.  The queues' rings are mapped as they first fill, within
+their first lap (deploy.recording.loop.queue_capacities): at this rate, the first 25 s.
 """
 
 from __future__ import annotations
