@@ -42,9 +42,9 @@ log = logging.getLogger(__name__)
 
 ROLE = "recorder"
 MCAP_FILE = "recording.mcap"
-# Each queue holds this long of its key's traffic (a stall, an insider's flood), and fills
-# its ring's pages within twice that.
-QUEUE_HOLD_S = 60.0
+# Each queue as long as its key's traffic fills in this time (at most QUEUE_MAX): all the
+# backlog a stall or an insider's flood may need, and its ring's pages mapped early on.
+QUEUE_HOLD_S = 120.0
 QUEUE_MIN, QUEUE_MAX = 256, 16384
 # Samples taken from each queue per step: a backlog is worked off in steps of this many,
 # not decoded whole at once (20 s of ring64 would be ~50 000 objects alive together, a
@@ -63,9 +63,10 @@ def queue_capacities(keys: SwarmKeys, scenario: Scenario, sensor: bool) -> dict[
     16384 slots at ~9 a second took 30 minutes of the paper's case, +4 MB."""
     n, hz = scenario.n, scenario.run.rate_hz
     # Truth and observations go out every simulator tick that gives at least the control
-    # rate (deploy.swarm_sim): under twice that.  Every process's status once a second.
-    per_s = {keys.all_follower_states(): n * hz, keys.all_sensor_targets(): 2.0 * n * hz,
-             keys.truth(): 2.0 * hz, keys.all_status(): n + scenario.m + 4.0}
+    # rate (deploy.swarm_sim), under twice it: their rings fill in at most QUEUE_HOLD_S.
+    # Every process's status once a second.
+    per_s = {keys.all_follower_states(): n * hz, keys.all_sensor_targets(): n * hz,
+             keys.truth(): hz, keys.all_status(): n + scenario.m + 4.0}
     return {k: _ring_size(per_s.get(k, 1.0) * QUEUE_HOLD_S) for k in keys.recorded(sensor)}
 
 
