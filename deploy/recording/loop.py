@@ -18,6 +18,7 @@ from typing import Any
 from agents.law.loader import make_law
 from agents.liveness import MembershipWatch
 from agents.scenario.model import Scenario
+from deploy.forked import trim_heap
 from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.link_history import LinkHistory
@@ -50,6 +51,9 @@ QUEUE_MIN, QUEUE_MAX = 256, 16384
 # not decoded whole at once (20 s of ring64 would be ~50 000 objects alive together, a
 # high-water mark the heap keeps).
 STEP_BATCH = 256
+# After a backlog is worked off, its memory (decoded samples, Zenoh's buffers) is free but
+# still resident: hand it back, at most this often.
+TRIM_EVERY_S = 10.0
 OVERDUE_GRACE_S = 30.0  # stop on our own this long after the planned end if no "stop" came
 FINAL_STATUS_WAIT_S = 2.0  # after the stop, for the followers' "done" counters (links)
 
@@ -190,8 +194,13 @@ class Recorder:
 
     def run(self, stop_requested: Callable[[], bool], poll_s: float = 0.005) -> str:
         """Loop until RunControl "stop", a signal (`stop_requested`) or overdue; the reason."""
+        was_behind, trimmed_at = False, -math.inf
         while True:
             behind = self.step() >= STEP_BATCH  # then straight on, without the poll's nap
+            if was_behind and not behind and time.monotonic() - trimmed_at >= TRIM_EVERY_S:
+                trim_heap()
+                trimmed_at = time.monotonic()
+            was_behind = behind
             self.tick()
             if self.asm.stopped:
                 self.stop_reason = "control_stop"

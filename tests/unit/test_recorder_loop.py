@@ -246,6 +246,25 @@ def test_a_backlog_is_worked_off_a_batch_a_step(tmp_path: Path) -> None:
     assert topics(tmp_path / MCAP_FILE)[keys.status("target", 0)] == backlog
 
 
+@pytest.mark.timeout(30)
+def test_a_worked_off_backlog_is_handed_back_once(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    trims: list[int] = []
+    monkeypatch.setattr("deploy.recording.loop.trim_heap", lambda: trims.append(1))
+    ring64, hub, keys = load_scenario("ring64"), MemoryHub(), SwarmKeys("trim")
+    with MemoryBus(hub, "recorder", clock=lambda: START_S) as rbus, \
+            MemoryBus(hub, "swarm", clock=lambda: START_S) as sbus:
+        recorder = Recorder(rbus, "trim", ring64, tmp_path, scene_hz=None)
+        for k in range(2 * STEP_BATCH + 7):
+            status = ProcessStatus(Header("target-0", k, START_S), "target", 0, "running", {})
+            sbus.publish(keys.status("target", 0), encode(status))
+        loops = iter(range(6))
+        recorder.final_status_wait_s = 0.0
+        assert recorder.run(lambda: next(loops, 5) >= 5, poll_s=0.0) == "signal"
+        recorder.mcap.close()
+    assert trims == [1]  # after the backlog, not on every step
+
+
 @pytest.mark.parametrize(("noise_std_m", "argv"), [(0.0, ["--no-sensor"]), (0.2, [])])
 def test_the_launcher_records_observations_only_when_they_are_noisy(
         noise_std_m: float, argv: list[str]) -> None:
