@@ -228,6 +228,15 @@ def test_a_recorder_behind_the_bus_says_by_how_much_and_calls_no_link_silent(
     assert progress["recorder_behind_s"] == pytest.approx(5.0)
 
 
+def publish_backlog(bus: MemoryBus, keys: SwarmKeys) -> int:
+    """More statuses than two steps take, queued at once; how many."""
+    count = 2 * STEP_BATCH + 7
+    for k in range(count):
+        status = ProcessStatus(Header("target-0", k, START_S), "target", 0, "running", {})
+        bus.publish(keys.status("target", 0), encode(status))
+    return count
+
+
 @pytest.mark.timeout(30)
 def test_a_backlog_is_worked_off_a_batch_a_step(tmp_path: Path) -> None:
     ring64 = load_scenario("ring64")  # its statuses' queue holds the whole backlog
@@ -235,10 +244,7 @@ def test_a_backlog_is_worked_off_a_batch_a_step(tmp_path: Path) -> None:
     with MemoryBus(hub, "recorder", clock=lambda: clock[0]) as rbus, \
             MemoryBus(hub, "swarm", clock=lambda: clock[0]) as sbus:
         recorder = Recorder(rbus, "batch", ring64, tmp_path, scene_hz=None)
-        backlog = 2 * STEP_BATCH + 7
-        for k in range(backlog):
-            status = ProcessStatus(Header("target-0", k, START_S), "target", 0, "running", {})
-            sbus.publish(keys.status("target", 0), encode(status))
+        backlog = publish_backlog(sbus, keys)
         steps = [recorder.step() for _ in range(4)]
         recorder.mcap.close()
     assert steps[:2] == [STEP_BATCH, STEP_BATCH] and steps[3] == 0
@@ -255,9 +261,7 @@ def test_a_worked_off_backlog_is_handed_back_once(
     with MemoryBus(hub, "recorder", clock=lambda: START_S) as rbus, \
             MemoryBus(hub, "swarm", clock=lambda: START_S) as sbus:
         recorder = Recorder(rbus, "trim", ring64, tmp_path, scene_hz=None)
-        for k in range(2 * STEP_BATCH + 7):
-            status = ProcessStatus(Header("target-0", k, START_S), "target", 0, "running", {})
-            sbus.publish(keys.status("target", 0), encode(status))
+        publish_backlog(sbus, keys)
         loops = iter(range(6))
         recorder.final_status_wait_s = 0.0
         assert recorder.run(lambda: next(loops, 5) >= 5, poll_s=0.0) == "signal"
