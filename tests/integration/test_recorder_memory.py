@@ -24,7 +24,13 @@ import pytest
 
 from agents.scenario.file import load_scenario
 from deploy.cpu_load import process_status_kb
-from tests.integration.test_recorder_process import publish_paced, start_recorder, stop, wait_for
+from tests.integration.test_recorder_process import (
+    publish_paced,
+    pubs_keys,
+    start_recorder,
+    stop,
+    wait_for,
+)
 from tests.integration.test_transport_zenoh import free_port
 from tests.recorder_synth import SynthRun
 from transport.bus import wait_until_alive
@@ -87,8 +93,7 @@ def test_recorder_rss_does_not_grow_with_the_run(tmp_path: Path) -> None:
     try:
         with ZenohBus(ZenohConfig(connect=(endpoint,))) as bus:
             wait_until_alive(bus.watch_alive(keys.all_alive()), {keys.alive("recorder", 0)}, 20)
-            pubs = [bus.declare_publisher(k) for k in
-                    (keys.control(), keys.truth(), *map(keys.follower_state, range(scenario.n)))]
+            pubs = [bus.declare_publisher(k) for k in pubs_keys(keys)]
             wait_for(lambda: all(p.matched() for p in pubs), 10, "recorder subscription")
             run = SynthRun(scenario, keys, time.time() + 0.5, duration_s=RUN_S, rate_hz=RATE_HZ,
                            pre_s=0.0, post_s=0.0)
