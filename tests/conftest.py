@@ -4,10 +4,15 @@ deploy/test.sh runs the suite side by side (pytest-xdist, `--dist loadgroup`): a
 handed the next test in collection order as it finishes one, so the real swarms, whose
 length is real time, go first, longest first, and the short unit tests fill in behind them.
 A test's timeout says how long it may take, and stands in for its length.
+
+ENCLOSE_TEST_TIMEOUT_SCALE multiplies every test's timeout: deploy/test.sh runs the unit
+tests at nice 10 beside the swarms, where a test that takes 4 s alone was seen to take over
+60 s.  A timeout there still catches a hang; it is not a measure of speed.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Iterator
 
@@ -30,6 +35,22 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         return (0, -_timeout_s(item))
 
     items.sort(key=key)  # stable: equal keys keep the order they were collected in
+    scale = _timeout_scale()
+    if scale != 1.0:
+        for item in items:
+            # Put first, the closest marker is the one pytest-timeout reads.
+            item.add_marker(pytest.mark.timeout(_timeout_s(item) * scale), append=False)
+
+
+def _timeout_scale() -> float:
+    text = os.environ.get("ENCLOSE_TEST_TIMEOUT_SCALE", "1")
+    try:
+        scale = float(text)
+    except ValueError:
+        raise pytest.UsageError(f"ENCLOSE_TEST_TIMEOUT_SCALE={text!r} is not a number") from None
+    if not scale > 0:
+        raise pytest.UsageError(f"ENCLOSE_TEST_TIMEOUT_SCALE={text!r} must be above 0")
+    return scale
 
 
 @pytest.fixture(autouse=True)
