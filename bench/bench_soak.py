@@ -9,6 +9,9 @@ own).  At the end:
   them in %, and the least-squares slope over those samples in MB per hour; mean CPU in %
   of one core; the peak (VmHWM; the recorder's includes writing the outputs); the
   machine's 1-minute load average over the same samples (other work on the machine);
+  and the ceiling's growth: the highest RSS after the settling against the highest
+  before it, which stays near 0 for memory that swings under a bound (a recorder that
+  hands a worked-off backlog back) and grows with a leak as the point growth does;
 - per window of `--window-min` of experiment time: the followers' late ticks (their
   `overruns` / `ticks` counters from the statuses in recording.mcap) and the simulator's,
   and the worst errors (|e_rho|, |e_delta|, |r - LAP| from series.parquet);
@@ -109,6 +112,7 @@ def memory_table(samples: list[dict[str, Any]], settle_s: float) -> list[dict[st
         pid = mine[-1]["pid"]
         mine = [s for s in mine if s["pid"] == pid]
         flying = [s for s in mine if s["flying"] and s["t_s"] >= settle_s]
+        before = [s["rss_mb"] for s in mine if s["t_s"] < settle_s]
         row: dict[str, Any] = {"name": name, "restarted": len({s["pid"] for s in samples
                                                                if s["name"] == name}) > 1,
                                "peak_mb": round(max(s["hwm_mb"] for s in mine), 1)}
@@ -121,6 +125,9 @@ def memory_table(samples: list[dict[str, Any]], settle_s: float) -> list[dict[st
                                              [s["rss_mb"] for s in flying]), 2),
                 cpu_pct=round(100 * (last["cpu_s"] - first["cpu_s"])
                               / max(1e-9, last["t_s"] - first["t_s"]), 1))
+            if before:
+                ceiling = max(s["rss_mb"] for s in flying)
+                row["ceiling_growth_pct"] = round(100 * (ceiling - max(before)) / max(before), 2)
         out.append(row)
     return out
 
@@ -138,6 +145,8 @@ def role_table(memory: list[dict[str, Any]]) -> list[dict[str, Any]]:
              "rss_end_mb": [min(r["rss_end_mb"] for r in rows),
                             max(r["rss_end_mb"] for r in rows)],
              "growth_pct_max": max(r["growth_pct"] for r in rows),
+             "ceiling_growth_pct_max": max((r["ceiling_growth_pct"] for r in rows
+                                           if "ceiling_growth_pct" in r), default=None),
              "slope_mb_h_max": max((r["slope_mb_h"] for r in rows
                                     if r["slope_mb_h"] is not None), default=None),
              "peak_mb_max": max(r["peak_mb"] for r in rows)}
@@ -289,17 +298,18 @@ def show(summary: dict[str, Any]) -> None:
     print(f"soak {summary['case']}, {summary['minutes']:g} min "
           f"(windows of {summary['window_min']:g} min)")
     print(f"{'process':<14}{'RSS@5min':>10}{'RSS end':>10}{'growth':>9}{'MB/h':>9}"
-          f"{'CPU %':>8}{'peak':>8}")
+          f"{'CPU %':>8}{'peak':>8}{'ceiling':>9}")
     for r in summary["memory"]:
         if "rss_start_mb" not in r:
             continue
         print(f"{r['name']:<14}{r['rss_start_mb']:>10.1f}{r['rss_end_mb']:>10.1f}"
               f"{r['growth_pct']:>8.2f}%{_fmt(r['slope_mb_h']):>9}{r['cpu_pct']:>8.1f}"
-              f"{r['peak_mb']:>8.1f}")
+              f"{r['peak_mb']:>8.1f}{_fmt(r.get('ceiling_growth_pct')):>8}%")
     for g in summary["roles"]:
         print(f"{g['role']} ({g['processes']}): RSS {_span(g['rss_start_mb'])} -> "
               f"{_span(g['rss_end_mb'])} MB, growth at most {g['growth_pct_max']:+.2f} %, "
-              f"slope at most {_fmt(g['slope_mb_h_max'])} MB/h, peak {g['peak_mb_max']:.1f} MB")
+              f"slope at most {_fmt(g['slope_mb_h_max'])} MB/h, peak {g['peak_mb_max']:.1f} MB, "
+              f"ceiling growth at most {_fmt(g.get('ceiling_growth_pct_max'))} %")
     print(f"machine load (1-min average) after the settling: {summary['load_1min']}")
     for role, rows in summary["late_ticks"].items():
         cells = " ".join(f"{late}/{ticks}" for late, ticks in rows)
