@@ -76,32 +76,18 @@ def open_bus(opts: BusOptions, network: NetworkConfig, arrival_stamps: bool = Fa
     return bus
 
 
-# Under "batch", the vehicles' agents also take this much lower a weight: the simulator
-# stands for as many autopilots, each on a computer of its own in the field, and a fair
-# share per thread among 64 followers starved it (a 20-minute ring64 run collapsed at
-# minute 11: the simulator 40 % late, every vehicle failed safe).
-AGENT_NICE = 10
+def apply_agent_sched(network: NetworkConfig) -> None:
+    """Run this process SCHED_BATCH if the scenario says so (NetworkConfig.agent_sched).
 
-
-def apply_agent_sched(network: NetworkConfig, yield_to_sim: bool = False) -> None:
-    """Run this process SCHED_BATCH if the scenario says so (NetworkConfig.agent_sched),
-    and with `yield_to_sim` (a vehicle's agent) AGENT_NICE lower a priority too.
-
-    Called on the main thread before the bus opens: Linux sets a thread's policy and nice
-    value, and the threads made later (Zenoh's, the stall guard) inherit them.  A batch
-    thread does not preempt the running one when it wakes (the scheduler's tick does).
-    No privilege is needed for either."""
-    if network.agent_sched != "batch":
-        return
-    try:
-        os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
-    except (OSError, AttributeError) as exc:  # not Linux: the default policy stays
-        log.warning("agent_sched batch not applied: %s", exc)
-    if yield_to_sim:
+    Called on the main thread before the bus opens: Linux sets a thread's policy, and the
+    threads made later (Zenoh's, the stall guard) inherit it.  A batch thread does not
+    preempt the running one when it wakes (the scheduler's tick does); it gets the same
+    share of the CPU.  No privilege is needed."""
+    if network.agent_sched == "batch":
         try:
-            os.nice(AGENT_NICE)
-        except (OSError, AttributeError) as exc:
-            log.warning("agent_sched batch: nice %+d not applied: %s", AGENT_NICE, exc)
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+        except (OSError, AttributeError) as exc:  # not Linux: the default policy stays
+            log.warning("agent_sched batch not applied: %s", exc)
 
 
 def process_main(

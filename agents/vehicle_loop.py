@@ -114,7 +114,7 @@ def fly(opts: AgentOptions, scenario: Scenario, role: str, vehicle: int,
     """Take off, declare the process linked, tick until stopped; returns the exit code.
     `scenario` is the one the process loaded (with its command line's overrides)."""
     index = opts.index
-    apply_agent_sched(scenario.network, yield_to_sim=True)
+    apply_agent_sched(scenario.network)
     mav_opts = opts.vehicle
     cfg = AdapterConfig.px4_sitl(vehicle, mav_opts.mav_local_base, mav_opts.mav_vehicle_base)
     if mav_opts.mav_vehicle_host:  # a companion computer off the vehicle's host

@@ -82,8 +82,7 @@ class NetworkConfig:
     zenoh_runtime: str = "split"
     # "batch": followers, targets and the recorder run SCHED_BATCH (agents.process
     # apply_agent_sched): their wake-ups no longer preempt the simulator, which stands for
-    # the physical world, on a machine they oversubscribe (ring64 on 2 cores); followers
-    # and targets at nice +10 as well, so that the simulator gets the CPU it needs.
+    # the physical world, on a machine they oversubscribe (ring64 on 2 cores).
     agent_sched: str = "normal"
     faults: tuple[NetFault, ...] = ()  # partitions, isolations, degradations on a timeline
     # Numbers of the faults the OS cuts between hosts (`--os-cut`, deploy.netns.cut): the
