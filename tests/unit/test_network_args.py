@@ -78,7 +78,7 @@ def test_batch_is_set_on_the_calling_thread_and_inherited_by_its_threads() -> No
     from agents.process import apply_agent_sched
 
     seen: dict[str, int] = {}
-    before = os.sched_getscheduler(0)  # SCHED_IDLE where deploy/test.sh runs the unit tests
+    before = os.sched_getscheduler(0)  # as the test runner set it
 
     def agent() -> None:  # a thread of its own: pytest's main thread keeps its policy
         apply_agent_sched(load_scenario("ring64").network)
