@@ -126,8 +126,8 @@ def memory_table(samples: list[dict[str, Any]], settle_s: float) -> list[dict[st
                 cpu_pct=round(100 * (last["cpu_s"] - first["cpu_s"])
                               / max(1e-9, last["t_s"] - first["t_s"]), 1))
             if before:
-                ceiling = max(s["rss_mb"] for s in flying)
-                row["ceiling_growth_pct"] = round(100 * (ceiling - max(before)) / max(before), 2)
+                base, ceiling = max(before), max(s["rss_mb"] for s in flying)
+                row["ceiling_growth_pct"] = round(100 * (ceiling - base) / base, 2)
         out.append(row)
     return out
 

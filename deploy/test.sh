@@ -31,8 +31,8 @@ trap 'rm -rf "$beside"' EXIT
 (
   nice -n 10 "$bin/mypy" >"$beside/mypy.log" 2>&1
   echo $? >"$beside/mypy.rc"
-  ENCLOSE_TEST_TIMEOUT_SCALE=5 nice -n 10 "${pytest[@]}" -n "$(nproc)" -m "not integration and not serial" "$@" \
-    >"$beside/unit.log" 2>&1
+  ENCLOSE_TEST_TIMEOUT_SCALE=5 nice -n 10 "${pytest[@]}" -n "$(nproc)" \
+    -m "not integration and not serial" "$@" >"$beside/unit.log" 2>&1
   echo $? >"$beside/unit.rc"
 ) &
 beside_pid=$!

@@ -17,14 +17,15 @@ import sys
 from collections.abc import Iterator
 
 import pytest
-
-DEFAULT_TIMEOUT_S = 120.0  # pyproject.toml's [tool.pytest.ini_options] timeout
+from pytest_timeout import get_env_settings
 
 
 def _timeout_s(item: pytest.Item) -> float:
+    """The item's timeout marker, else pytest-timeout's own default (--timeout,
+    PYTEST_TIMEOUT or pyproject.toml's `timeout`, in its order); 0 is none."""
     marker = item.get_closest_marker("timeout")
     if marker is None or not marker.args:
-        return DEFAULT_TIMEOUT_S
+        return float(get_env_settings(item.config).timeout or 0.0)
     return float(marker.args[0])
 
 
