@@ -143,7 +143,7 @@ class HostLaunch(Launch):
                 prefix=pre)
         elif name == "recorder":
             self.sup.start(name, "deploy.recorder",
-                           [*argv, "--out", str(self.out), *self.recorder_sensor_argv()],
+                           [*argv, "--out", str(self.out), *self.recorder_output_argv()],
                            prefix=pre)
         elif name != "launcher":
             role, _, idx = name.rpartition("-")

@@ -87,10 +87,11 @@ class Launch:
         on = self.scenario.run.journal if self.opts.journal is None else self.opts.journal
         return ["--journal", str(self.out / "journal")] if on else []
 
-    def recorder_sensor_argv(self) -> list[str]:
-        """Noiseless target observations are the truth's target positions again: the
-        recorder leaves them out (deploy.recording.loop)."""
-        return [] if self.opts.noise_std_m > 0.0 else ["--no-sensor"]
+    def recorder_output_argv(self) -> list[str]:
+        """What the recorder leaves out: noiseless target observations (the truth's target
+        positions again, deploy.recording.loop), and the figures if asked."""
+        return ([] if self.opts.noise_std_m > 0.0 else ["--no-sensor"]) + (
+            [] if self.opts.figures else ["--no-figures"])
 
     def start_all(self) -> None:
         c, s = self.common(), self.scenario
@@ -123,7 +124,7 @@ class Launch:
         self.sup.start(
             "recorder", "deploy.recorder",
             [*joins, "--out", str(self.out), *sec("recorder"), *recorder_live_argv(self.opts.live),
-             *self.recorder_sensor_argv()],
+             *self.recorder_output_argv()],
             fork=True,
         )
         # Targets first: the followers come from the fork server, which may still be

@@ -35,6 +35,7 @@ class LaunchOptions:
     verbose: int = 0
     # Every follower journals its law's inputs (enclose replay); None: as the scenario says.
     journal: bool | None = None
+    figures: bool = True  # the recorder draws the run's figures at the end
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace, scenario: str | None,
@@ -54,6 +55,7 @@ class LaunchOptions:
             port_range=port_range,
             credentials_dir=credentials_dir, verbose=int(getattr(args, "verbose", 0)),
             journal=getattr(args, "journal", None),
+            figures=not getattr(args, "no_figures", False),
         )
 
     def scenario_ref(self) -> str:
@@ -72,7 +74,16 @@ class LaunchOptions:
             argv += ["--fault", fault]
         if self.journal is not None:
             argv.append("--journal" if self.journal else "--no-journal")
+        if not self.figures:
+            argv.append("--no-figures")
         return argv + (["--insecure"] if self.insecure else [])
+
+
+def add_figures_argument(p: argparse.ArgumentParser) -> None:
+    """--no-figures, for every command that records a run."""
+    p.add_argument("--no-figures", action="store_true",
+                   help="write the metrics, series and recording but draw no figures (saves "
+                   "~2 s of CPU a run; `enclose report RUN` draws them later)")
 
 
 def add_journal_argument(p: argparse.ArgumentParser) -> None:

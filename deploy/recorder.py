@@ -53,11 +53,12 @@ class RecorderOptions:
     live_host: str = DEFAULT_HOST
     record_sensor: bool = True
     verbose: bool = False
+    figures: bool = True  # drawn at the end
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> RecorderOptions:
         return cls(BusOptions.from_namespace(args), args.out, args.index, args.live_port,
-                   args.live_host, args.record_sensor, args.verbose)
+                   args.live_host, args.record_sensor, args.verbose, args.figures)
 
 
 def parse_options(argv: Sequence[str] | None) -> RecorderOptions:
@@ -75,6 +76,8 @@ def parse_options(argv: Sequence[str] | None) -> RecorderOptions:
     parser.add_argument("--no-sensor", dest="record_sensor", action="store_false",
                         help="do not record the target observations (the launcher's choice "
                         "when the sensor is noiseless: the truth holds the same positions)")
+    parser.add_argument("--no-figures", dest="figures", action="store_false",
+                        help="no figures at the end (`enclose report RUN` draws them later)")
     parser.add_argument("-v", "--verbose", action="store_true")
     return RecorderOptions.from_namespace(parser.parse_args(argv))
 
@@ -109,7 +112,8 @@ def _record(opts: RecorderOptions) -> int:
         with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus:
             live = start_live(opts)
             recorder = Recorder(bus, opts.bus.swarm, scenario, opts.out, index=opts.index,
-                                live=live, record_sensor=opts.record_sensor)
+                                live=live, record_sensor=opts.record_sensor,
+                                figures=opts.figures)
             mark("linked")  # its liveliness token is declared
             log_phases("recorder")
             try:

@@ -16,9 +16,6 @@ import numpy as np
 
 from agents.core.metrics import Metrics, MetricsAccumulator, WindowAccumulator, error_series
 from agents.core.timeseries import FloatArray, RunSeries, decimated_rows
-from deploy.figures import performance_figure, trajectory_figure
-from deploy.figures_links import LINKS_PNG, link_health_figure
-from deploy.marks import run_marks
 from deploy.recording.link_history import LINKS_CSV, read_links_csv
 from deploy.rundir import (
     METRICS_FILE,
@@ -75,12 +72,14 @@ def write_run_outputs(
     extra: Mapping[str, Any] | Callable[[], Mapping[str, Any]] | None = None,
     marks_s: list[float] | None = None,
     sinks: Sequence[ChunkSink] = (),
+    figures: bool = True,
 ) -> Metrics:
     """Metrics from the full-rate series; series.csv and series.parquet at most 100 Hz of
     it; figures from the rows of series.parquet that `enclose report` draws (taken on the
     way: reading a wide Parquet file back costs ~75 kB a column a row group).  One pass
     over the chunks; `extra` (metrics.json's other keys) may be a function, called once the
-    pass (and `sinks`) are done."""
+    pass (and `sinks`) are done.  `figures` False: none drawn (`enclose report` draws them
+    from the series file later)."""
     source = WholeSeries(series) if isinstance(series, RunSeries) else series
     run_dir.mkdir(parents=True, exist_ok=True)
     angles = np.asarray(info.angles_rad)
@@ -108,7 +107,8 @@ def write_run_outputs(
                for label, at_s, end_s, window in faults]
     write_metrics(run_dir, result, info, {**(extra() if callable(extra) else extra or {}),
                                           **({"net_faults": windows} if windows else {})})
-    _figures(run_dir, info, marks_s or [], drawn.series())
+    if figures:
+        _figures(run_dir, info, marks_s or [], drawn.series())
     return result
 
 
@@ -147,6 +147,12 @@ def _figures(run_dir: Path, info: RunInfo, marks_s: list[float],
     series file unless given: a long run's figures stay readable, quick and small);
     `marks_s`: membership changes; with the launcher's events (launch.json) they are marks
     on every figure.  links.png only where links.csv exists (networked runs)."""
+    # Imported to draw only: matplotlib costs ~0.6 s of CPU to import, which a run without
+    # figures (--no-figures) need not pay.
+    from deploy.figures import performance_figure, trajectory_figure
+    from deploy.figures_links import LINKS_PNG, link_health_figure
+    from deploy.marks import run_marks
+
     if series is None:
         series = read_series(series_file(run_dir), info.n, info.m, figure_rows(info.n))
     angles = np.asarray(info.angles_rad)

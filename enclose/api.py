@@ -34,7 +34,7 @@ if TYPE_CHECKING:
 ScenarioLike = Scenario | str | Path | None
 RUN_KEYS = ("duration_s", "swarm")
 LAUNCH_KEYS = ("zenoh_config", "noise_std_m", "link_timeout_s", "insecure", "restart",
-               "max_restarts", "faults", "port_range", "live")
+               "max_restarts", "faults", "port_range", "live", "figures")
 LAW_KEYS = ("law", "law_params")
 
 
@@ -48,7 +48,7 @@ def simulate(scenario: ScenarioLike = None, **overrides: Any) -> Run:
 
     `overrides`: dt_s, duration_s, out (default runs/simulate-<name>), engine
     ("auto", "numba", "numpy"), estimator_dt_s, progress (a bar on a terminal),
-    through_interface, law and law_params (`law_options`)."""
+    through_interface, figures (False: none drawn), law and law_params (`law_options`)."""
     from deploy.commands.simulate import SimulateOptions
     from deploy.commands.simulate import simulate as simulate_command
 
@@ -70,8 +70,9 @@ def run(scenario: ScenarioLike = None, **overrides: Any) -> Run:
     runs/run-<name>-<time>), swarm, insecure, noise_std_m, link_timeout_s, restart,
     max_restarts, faults (["AT_S:ACTION:TARGET[:DURATION_S]", ...]), port_range ("LO-HI"),
     zenoh_config, live (True or a deploy.live_args.LiveOptions: serve the live view; default
-    none), law and law_params (`law_options`), the network's (estimator, estimator_order,
-    link, zenoh_runtime, agent_sched, impair_seed, latency_stamps) and its impairments
+    none), figures (False: none drawn), law and law_params (`law_options`), the network's
+    (estimator, estimator_order, link, zenoh_runtime, agent_sched, impair_seed,
+    latency_stamps) and its impairments
     (loss, delay_ms, ...: agents.scenario.network.IMPAIRMENT_KEYS)."""
     from deploy.commands.run import RunOptions
     from deploy.commands.run import run as run_command

@@ -18,7 +18,7 @@ from agents.network_args import NetworkOptions
 from deploy.deployment import load_deployment
 from deploy.host_launch import HostLaunch
 from deploy.interrupts import interrupts
-from deploy.launch_options import LaunchOptions, add_journal_argument
+from deploy.launch_options import LaunchOptions, add_figures_argument, add_journal_argument
 from deploy.restarts import add_supervision_arguments
 from deploy.verdict import add_json_argument
 from transport.errors import DeployError
@@ -44,6 +44,7 @@ def register(sub: Any) -> None:
                    help="no mTLS/ACL, no MAVLink signing (not recommended)")
     add_json_argument(p)
     add_journal_argument(p)
+    add_figures_argument(p)
     add_supervision_arguments(p)
     p.set_defaults(func=_main)
 

@@ -14,7 +14,7 @@ from agents.scenario.file import load_scenario
 from agents.scenario.net_faults import check_window
 from deploy.interrupts import interrupts
 from deploy.launch import Launch
-from deploy.launch_options import LaunchOptions, add_journal_argument
+from deploy.launch_options import LaunchOptions, add_figures_argument, add_journal_argument
 from deploy.live_args import LiveOptions, add_live_arguments
 from deploy.netns.hosts import HostsOptions, add_hosts_arguments, run_on_hosts
 from deploy.netns.run import NetnsOptions, add_netns_arguments, run_in_namespace
@@ -54,6 +54,7 @@ def register(sub: Any) -> None:
         help="no Zenoh authentication/access control and no MAVLink signing (not recommended)",
     )
     add_journal_argument(p)
+    add_figures_argument(p)
     add_live_arguments(p)
     add_json_argument(p)
     add_supervision_arguments(p)

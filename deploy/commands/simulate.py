@@ -21,6 +21,7 @@ from agents.law.loader import make_law
 from agents.law_args import LawOptions, add_law_arguments, apply_law_arguments
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
+from deploy.launch_options import add_figures_argument
 from deploy.report import write_run_outputs
 from deploy.rundir import RunInfo
 from deploy.verdict import add_json_argument, announce
@@ -64,6 +65,7 @@ def register(sub: Any) -> None:
              "instead of its compiled engine",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_figures_argument(parser)
     add_json_argument(parser)
     add_law_arguments(parser)
     parser.set_defaults(func=_main)
@@ -102,12 +104,14 @@ class SimulateOptions:
     json: bool = False
     law: LawOptions = field(default_factory=LawOptions)  # --law, --law-param
     through_interface: bool = False  # the paper's law through the interface too
+    figures: bool = True
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SimulateOptions:
         return cls(args.scenario, args.dt, args.duration, args.out, args.engine,
                    args.estimator_dt, not args.no_progress, args.json,
-                   LawOptions.from_namespace(args), args.through_interface)
+                   LawOptions.from_namespace(args), args.through_interface,
+                   not args.no_figures)
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -143,7 +147,7 @@ def simulate(opts: SimulateOptions) -> int:
     info = RunInfo.from_scenario(scenario, "lockstep", duration)
     extra = {"dt_s": dt, "estimator_dt_s": est_dt, "engine": opts.engine,
              "integration_wall_s": wall, **law_extra}
-    write_run_outputs(out, series, info, extra)
+    write_run_outputs(out, series, info, extra, figures=opts.figures)
     log.info("integration took %.2f s wall; outputs in %s", wall, out)
     announce(out.resolve(), f"enclose simulate {scenario.name}", opts.json)
     return 0

@@ -85,8 +85,10 @@ class Recorder:
                  index: int = 0, period_s: float = 1.0,
                  final_status_wait_s: float = FINAL_STATUS_WAIT_S,
                  chunk_bytes: int = DEFAULT_CHUNK_BYTES, live: LiveServer | None = None,
-                 scene_hz: float | None = DEFAULT_SCENE_HZ, record_sensor: bool = True) -> None:
+                 scene_hz: float | None = DEFAULT_SCENE_HZ, record_sensor: bool = True,
+                 figures: bool = True) -> None:
         self.bus, self.scenario, self.run_dir = bus, scenario, run_dir
+        self.figures = figures  # drawn at the end (False: `enclose report` draws them later)
         run_dir.mkdir(parents=True, exist_ok=True)
         self.keys = SwarmKeys(swarm)
         self.index = index
@@ -248,12 +250,12 @@ class Recorder:
         self.feed.stop()
         self.mcap.close()
         try:
-            # Imported here: its figures need matplotlib (~1 s of imports), which would
-            # otherwise delay the recorder's start, and so every run's (issue 15).
+            # Imported here: it needs pyarrow and its figures matplotlib (~1 s of imports),
+            # which would otherwise delay the recorder's start, and so every run's.
             from deploy.recording.outputs import write_final_outputs
 
             metrics = write_final_outputs(self.run_dir, self.scenario, self.asm, self.counters(),
-                                          self.membership, self.link_history)
+                                          self.membership, self.link_history, self.figures)
         except Exception:
             log.exception("writing the run outputs failed")
             metrics = None

@@ -39,9 +39,10 @@ def write_final_outputs(
     recorder_extra: dict[str, Any],
     membership: list[tuple[float, frozenset[int]]] | None = None,
     link_history: LinkHistory | None = None,
+    figures: bool = True,
 ) -> Metrics | None:
-    """Metrics, series files and figures of the run; None (and metrics.json with "error")
-    if none."""
+    """Metrics, series files and (unless `figures` is False) figures of the run; None (and
+    metrics.json with "error") if none."""
     began = time.monotonic()
     try:
         assembly = asm.assemble()
@@ -70,7 +71,7 @@ def write_final_outputs(
         return out
 
     metrics = write_run_outputs(run_dir, assembly, info, extra, marks,
-                                () if phases is None else (phases,))
+                                () if phases is None else (phases,), figures)
     log.info("run outputs written in %.2f s", time.monotonic() - began)
     return metrics
 

@@ -56,7 +56,7 @@ def freeze(pid: int, length_s: float) -> tuple[float, float]:
 def run_with_pauses(out: Path, duration_s: float, plan: list[Pause], *extra: str,
                     start_timeout_s: float = 120.0) -> PausedRun:
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--duration",
-            str(duration_s), "--link-timeout", "60", *extra]
+            str(duration_s), "--link-timeout", "60", "--no-figures", *extra]
     walls: list[tuple[float, float]] = []
     with spawned_run(argv, out) as proc:
         for pause in sorted(plan, key=lambda p: p.at_s):

@@ -23,7 +23,7 @@ AGE_SLACK_MS = 25.0  # a sample waits for the receiver's next 50 Hz tick after i
 def test_seeded_run_delivers_what_was_configured(tmp_path: Path) -> None:
     out = tmp_path / "run"
     flags = ["--duration", "15", "--loss", str(LOSS), "--delay-ms", str(DELAY_MS),
-             "--impair-seed", "3"]
+             "--impair-seed", "3", "--no-figures"]
     with launched(out, *flags) as proc:
         output, _ = proc.communicate(timeout=200)
     assert proc.returncode == 0, output

@@ -66,7 +66,7 @@ def host_folder(cred_dir: Path, dst: Path) -> Path:
 
 def launch_run(out: Path, duration_s: float, *extra: str) -> list[str]:
     return [sys.executable, "-m", "deploy.cli", "run", "paper", "--out", str(out),
-            "--link-timeout", "60", "--duration", str(duration_s), *extra]
+            "--link-timeout", "60", "--duration", str(duration_s), "--no-figures", *extra]
 
 
 def started(launcher: Any) -> dict[str, str]:

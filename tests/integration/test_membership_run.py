@@ -37,7 +37,7 @@ def progress_t_s(out: Path) -> float:
 
 def run_with_kill(out: Path, *extra: str) -> tuple[int, str, dict[str, Any]]:
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--link-timeout", "60",
-            "--duration", str(DURATION_S), "--estimator", "robust", *extra]
+            "--duration", str(DURATION_S), "--estimator", "robust", "--no-figures", *extra]
     with spawned_run(argv, out) as proc:
         wait_for(lambda: progress_t_s(out) >= KILL_AT_S, 150.0, f"the run to be {KILL_AT_S} s in")
         assert signal_same(read_pids(out / "logs")["follower-0"], signal.SIGKILL)

@@ -118,7 +118,7 @@ def test_twenty_percent_of_udp_datagrams_on_loopback_are_really_lost() -> None:
 @contextlib.contextmanager
 def launched(out: Path, *extra: str) -> Iterator[subprocess.Popen[str]]:
     argv = [sys.executable, "-m", "deploy.cli", "run", "--netns", "--out", str(out),
-            "--link-timeout", "60", *extra]
+            "--link-timeout", "60", "--no-figures", *extra]
     with spawned(argv, out) as proc:
         try:
             yield proc

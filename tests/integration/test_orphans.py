@@ -30,7 +30,7 @@ def _left(ids: dict[str, ProcessId]) -> dict[str, ProcessId]:
 def test_no_process_of_the_run_outlives_a_sigkilled_launcher(tmp_path: Path) -> None:
     out = tmp_path / "run"
     argv = [sys.executable, "-m", "deploy.cli", "run", "paper", "--out", str(out),
-            "--duration", "60", "--link-timeout", "90", "--no-live"]
+            "--duration", "60", "--link-timeout", "90", "--no-live", "--no-figures"]
     with spawned_run(argv, out) as launcher:  # kills any survivor by PID and start time
         # Every process started, not yet linked (the followers' vehicles take seconds to
         # take off): the moment the issue found the simulator and followers left running.

@@ -44,7 +44,8 @@ def fly(out: Path, duration_s: float, fault: str,
     """A run of the paper's case with `fault` (and `more` options): its launch.json and
     metrics.json, after checking that nothing died and nothing is left running."""
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--link-timeout",
-            "60", "--duration", str(duration_s), "--fault", fault, "--no-live", *more]
+            "60", "--duration", str(duration_s), "--fault", fault, "--no-live",
+            "--no-figures", *more]
     with spawned_run(argv, out) as proc:
         output, _ = proc.communicate(timeout=duration_s + 150.0)
     assert proc.returncode == 0, output  # 3: a process died

@@ -24,7 +24,7 @@ def _replay(*argv: str) -> subprocess.CompletedProcess[str]:
 def test_every_follower_replays_bit_for_bit(tmp_path: Path) -> None:
     out = tmp_path / "run"
     flags = ["--duration", "15", "--loss", "0.1", "--impair-seed", "3",
-             "--fault", "5:pause:follower-1:2"]
+             "--fault", "5:pause:follower-1:2", "--no-figures"]
     with launched(out, *flags) as proc:
         output, _ = proc.communicate(timeout=240)
     assert proc.returncode == 0, output

@@ -177,7 +177,7 @@ def test_paper_case_forms_the_formation_and_every_process_exits_cleanly(tmp_path
 @pytest.mark.timeout(240)
 def test_ctrl_c_stops_every_process_and_keeps_the_recording(tmp_path: Path) -> None:
     out = tmp_path / "run"
-    with launched(out, "--duration", "600") as proc:
+    with launched(out, "--duration", "600", "--no-figures") as proc:
         def running() -> bool:
             try:
                 progress = json.loads((out / "progress.json").read_text())
@@ -209,7 +209,7 @@ def test_a_follower_dying_before_the_start_is_restarted_and_the_run_goes_on(
     tmp_path: Path,
 ) -> None:
     out = tmp_path / "run"
-    with launched(out, "--duration", "10", "--no-live") as proc:
+    with launched(out, "--duration", "10", "--no-live", "--no-figures") as proc:
         kill_at_birth(out, "follower-2")
         output, _ = proc.communicate(timeout=200)
     assert proc.returncode == 3, output  # the run went to its end, and says something died
@@ -222,6 +222,7 @@ def test_a_follower_dying_before_the_start_is_restarted_and_the_run_goes_on(
     assert codes["follower-2"] == 0 and launch["processes"]["follower-2"]["restarts"] == 1
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["samples"] > 100 and not metrics.get("silent_followers"), metrics
+    assert (out / "series.parquet").exists() and not list(out.glob("*.png"))  # --no-figures
 
 
 @pytest.mark.timeout(240)
@@ -229,7 +230,7 @@ def test_with_restart_never_a_follower_dying_before_the_start_ends_the_launch(
     tmp_path: Path,
 ) -> None:
     out = tmp_path / "run"
-    with launched(out, "--duration", "600", "--restart", "never") as proc:
+    with launched(out, "--duration", "600", "--restart", "never", "--no-figures") as proc:
         kill_at_birth(out, "follower-2")
         output, _ = proc.communicate(timeout=150)
     assert proc.returncode != 0

@@ -46,6 +46,18 @@ def test_simulate_writes_metrics_series_and_figures(tmp_path: Path) -> None:
 
 
 @pytest.mark.timeout(60)
+def test_no_figures_leaves_them_to_report(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    argv = ["simulate", "--dt", "0.02", "--duration", "10", "--out", str(out), "--no-progress",
+            "--no-figures"]
+    assert main(argv) == 0
+    assert (out / "metrics.json").exists() and (out / "series.parquet").exists()
+    assert not list(out.glob("*.png"))
+    assert main(["report", str(out)]) == 0
+    assert (out / "performance.png").stat().st_size > 10_000
+
+
+@pytest.mark.timeout(60)
 def test_broken_scenario_is_a_clear_error_and_exit_code(tmp_path: Path) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text(

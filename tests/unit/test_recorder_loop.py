@@ -269,16 +269,19 @@ def test_a_worked_off_backlog_is_handed_back_once(
     assert trims == [1]  # after the backlog, not on every step
 
 
-@pytest.mark.parametrize(("noise_std_m", "argv"), [(0.0, ["--no-sensor"]), (0.2, [])])
-def test_the_launcher_records_observations_only_when_they_are_noisy(
-        noise_std_m: float, argv: list[str]) -> None:
+@pytest.mark.parametrize(("noise_std_m", "figures", "argv"), [
+    (0.0, True, ["--no-sensor"]), (0.2, True, []), (0.2, False, ["--no-figures"])])
+def test_the_launcher_records_observations_only_when_they_are_noisy_and_figures_if_asked(
+        noise_std_m: float, figures: bool, argv: list[str]) -> None:
     from types import SimpleNamespace
 
     from deploy.launch import Launch
     from deploy.launch_options import LaunchOptions
 
-    launch = SimpleNamespace(opts=LaunchOptions(noise_std_m=noise_std_m))
-    assert Launch.recorder_sensor_argv(launch) == argv  # type: ignore[arg-type]
+    opts = LaunchOptions(noise_std_m=noise_std_m, figures=figures)
+    assert Launch.recorder_output_argv(SimpleNamespace(opts=opts)) == argv  # type: ignore[arg-type]
+    # A launcher in a namespace (netns, hosts) is told the same.
+    assert ("--no-figures" in opts.supervision_argv()) is not figures
 
 
 @pytest.mark.timeout(30)
