@@ -85,7 +85,8 @@ def write_run_outputs(
     angles = np.asarray(info.angles_rad)
     every, total, offset = _decimation(source.t_s), len(source.t_s), 0
     thin_total = len(decimated_rows(0, total, every, total))
-    drawn = _Drawn(thin_total, figure_rows(info.n))
+    # The figures' rows, taken on the way; none kept when no figure is drawn.
+    drawn = _Drawn(thin_total, figure_rows(info.n)) if figures else None
     metrics = MetricsAccumulator(info.steady_from_s, info.eps_rho_m, info.eps_delta)
     faults = [(label, at_s, end_s, WindowAccumulator((at_s, end_s), info.eps_rho_m,
                                                      info.eps_delta))
@@ -100,14 +101,15 @@ def write_run_outputs(
                 sink.add(chunk)
             thin = chunk.take(decimated_rows(offset, len(chunk.t_s), every, total))
             writer.add(thin, error_series(thin, info.successor, angles, info.rho_d_m))
-            drawn.add(thin)
+            if drawn is not None:
+                drawn.add(thin)
             offset += len(chunk.t_s)
     result = metrics.result()
     windows = [{"label": label, "at_s": at_s, "end_s": end_s, **window.result()}
                for label, at_s, end_s, window in faults]
     write_metrics(run_dir, result, info, {**(extra() if callable(extra) else extra or {}),
                                           **({"net_faults": windows} if windows else {})})
-    if figures:
+    if drawn is not None:
         _figures(run_dir, info, marks_s or [], drawn.series())
     return result
 
