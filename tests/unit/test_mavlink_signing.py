@@ -69,6 +69,30 @@ def test_good_unsigned_wrong_key_and_replay() -> None:
     assert v.counters["rejected_replay"] == 1 and v.counters["accepted_signed"] == 1
 
 
+def test_a_screened_frame_is_hashed_once_and_a_forgery_of_it_still_refused(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    import agents.mavlink.signing as signing
+
+    hashed: list[bytes] = []
+    real = signing.signature
+
+    def counting(key: bytes, part: bytes) -> bytes:
+        hashed.append(part)
+        return real(key, part)
+
+    monkeypatch.setattr(signing, "signature", counting)
+    v = SignatureVerifier(KEY, clock=lambda: NOW_S)
+    good = disarm(signer())
+    assert v.screen(good) is None and verdict(v, good) is None
+    assert len(hashed) == 1  # screen hashed it; check of the same bytes did not
+    assert verdict(v, good) == "replay" and len(hashed) == 2  # the memo is spent
+    second = disarm(signer(stamp_s=NOW_S + 1.0))
+    forged = second[:-6] + bytes(6)
+    assert v.screen(second) is None
+    assert verdict(v, forged) == "bad_signature"  # same signed part, another signature
+    assert verdict(v, second) is None
+
+
 def test_new_stream_more_than_a_minute_behind_is_refused() -> None:
     v = SignatureVerifier(KEY, clock=lambda: NOW_S)
     assert verdict(v, disarm(signer(stamp_s=NOW_S - 61.0, link_id=1))) == "replay"
