@@ -63,6 +63,7 @@ def open_bus(opts: BusOptions, network: NetworkConfig, arrival_stamps: bool = Fa
         user_config_path=opts.zenoh_config,
         link=network.link,
         runtime=network.zenoh_runtime,
+        lease_s=network.zenoh_lease_s,
         identity=None if opts.credentials is None else Identity.load(opts.credentials),
         mode=opts.mode,
         arrival_stamps=arrival_stamps,

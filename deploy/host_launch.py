@@ -166,7 +166,8 @@ class HostLaunch(Launch):
         bus = ZenohBus(ZenohConfig(  # our clock: the environment's (transport.clock)
             mode="client", connect=(self.router(k),), user_config_path=self.opts.zenoh_config,
             identity=self.secrets.identity("launcher"),
-            runtime=self.scenario.network.zenoh_runtime))
+            runtime=self.scenario.network.zenoh_runtime,
+            lease_s=self.scenario.network.zenoh_lease_s))
         if self.clocks_differ():
             bus.start_clock_sync(self.keys, f"router-{k}", len(self.dep.hosts),
                                  clock_of=parse_clock_hosts(self.clock_hosts()))

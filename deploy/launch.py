@@ -259,7 +259,8 @@ class Launch:
         return ZenohBus(ZenohConfig(
             connect=(self.endpoint,), user_config_path=self.opts.zenoh_config,
             link=self.scenario.network.link, identity=self.secrets.identity("launcher"),
-            runtime=self.scenario.network.zenoh_runtime))
+            runtime=self.scenario.network.zenoh_runtime,
+            lease_s=self.scenario.network.zenoh_lease_s))
 
     def fly(self, bus: Bus) -> None:
         start = bus.now_s() + START_DELAY_S

@@ -76,6 +76,7 @@ def sensor_buses(links: Sequence[SensorLink], opts: BusOptions,
         for link in links:
             bus = stack.enter_context(ZenohBus(ZenohConfig(
                 mode="client", connect=(link.endpoint,), user_config_path=opts.zenoh_config,
-                identity=identity, runtime=network.zenoh_runtime)))
+                identity=identity, runtime=network.zenoh_runtime,
+                lease_s=network.zenoh_lease_s)))
             buses.update(dict.fromkeys(link.followers, bus))
         yield buses

@@ -15,6 +15,9 @@ LINK_PROTOCOLS = ("tcp", "udp")
 # threads for receiving, sending and the rest; "one_thread", all of it on one.
 ZENOH_RUNTIMES = ("split", "one_thread")
 AGENT_SCHEDS = ("normal", "batch")
+# `[network] zenoh_lease_s` bounds, seconds: a lease under a second expires links on any
+# scheduling hiccup; over ten minutes, a frozen process would never leave.
+ZENOH_LEASE_RANGE_S = (1.0, 600.0)
 LOSS_MODELS = ("independent", "gilbert_elliott")
 
 
@@ -80,6 +83,10 @@ class NetworkConfig:
     links: tuple[tuple[int, int, LinkImpairment], ...] = ()  # (from, to) 0-based overrides
     seed: int = 0
     zenoh_runtime: str = "split"
+    # Every process's Zenoh lease, seconds (transport.zenoh_config.LEASE_KEY); None: Zenoh's
+    # 10 s.  Longer: fewer keep-alives over a large mesh, and a frozen process stays a
+    # member that much longer (docs/faults.md).
+    zenoh_lease_s: float | None = None
     # "batch": followers, targets and the recorder run SCHED_BATCH (agents.process
     # apply_agent_sched): their wake-ups no longer preempt the simulator, which stands for
     # the physical world, on a machine they oversubscribe (ring64 on 2 cores).

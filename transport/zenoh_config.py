@@ -27,7 +27,7 @@ import zenoh
 
 from transport.credentials import Identity
 from transport.errors import ConfigError
-from transport.network_schema import LINK_PROTOCOLS, ZENOH_RUNTIMES
+from transport.network_schema import LINK_PROTOCOLS, ZENOH_LEASE_RANGE_S, ZENOH_RUNTIMES
 
 LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
 # Zenoh's runtime, as ZENOH_RUNTIME (read once per process, when its first session opens).
@@ -75,6 +75,12 @@ ROUTER_OPEN_TIMEOUT_MS = 2000
 # through (one paused over 2 s re-links to its router when it runs again).
 ROUTER_LEASE_KEY = "transport/link/tx/lease"
 ROUTER_LEASE_MS = 2000
+# Peers and clients keep Zenoh's 10-s lease unless the scenario sets another
+# (`[network] zenoh_lease_s`): every link sends a keep-alive each quarter lease while it
+# carries nothing else, and in a full mesh most links carry nothing.  64 idle secure peers
+# cost 0.48 % of a core each with 10 s, 0.16 % with 30 s (`bench/bench_mesh_cost.py
+# --status-hz 0`); the lease is also how long a frozen (SIGSTOPped) process stays a member.
+LEASE_KEY = ROUTER_LEASE_KEY
 _MODES = ("peer", "client", "router")
 
 
@@ -93,8 +99,14 @@ class ZenohConfig:
     # GIL, on Zenoh's receiving thread for every sample, so off unless latency is measured.
     arrival_stamps: bool = False
     runtime: str = "split"  # one of ZENOH_RUNTIMES (scenario `[network] zenoh_runtime`)
+    # A peer's or client's lease (scenario `[network] zenoh_lease_s`); None: Zenoh's 10 s.
+    # A router keeps ROUTER_LEASE_MS whatever this says.
+    lease_s: float | None = None
 
     def __post_init__(self) -> None:
+        lo, hi = ZENOH_LEASE_RANGE_S
+        if self.lease_s is not None and not lo <= self.lease_s <= hi:
+            raise ConfigError("zenoh.lease_s", f"must be {lo:g}..{hi:g} s, got {self.lease_s!r}")
         if self.mode not in _MODES:
             raise ConfigError("zenoh.mode", f"{self.mode!r} not in {_MODES}")
         if self.runtime not in ZENOH_RUNTIMES:
@@ -158,6 +170,9 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
                                        "period_increase_factor": 2})
     if cfg.mode == "client":
         _put(config, "connect/timeout_ms", -1)
+    if cfg.mode != "router" and cfg.lease_s is not None \
+            and not (user and _is_set(config, default, LEASE_KEY)):
+        _put(config, LEASE_KEY, round(cfg.lease_s * 1000.0))
     if cfg.mode == "router":
         for key, value in ((ROUTER_BLOCK_CLOSE_KEY, ROUTER_BLOCK_CLOSE_US),
                            (ROUTER_OPEN_TIMEOUT_KEY, ROUTER_OPEN_TIMEOUT_MS),

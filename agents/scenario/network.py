@@ -12,6 +12,7 @@ from transport.network_schema import (
     AGENT_SCHEDS,
     LINK_PROTOCOLS,
     LOSS_MODELS,
+    ZENOH_LEASE_RANGE_S,
     ZENOH_RUNTIMES,
     LinkImpairment,
     NetworkConfig,
@@ -54,7 +55,8 @@ def impairment(table: Table, where: str, base: LinkImpairment) -> LinkImpairment
 
 
 def network(table: Table, n: int) -> NetworkConfig:
-    known = {"estimator", "link", "seed", "links", "zenoh_runtime", "agent_sched"}
+    known = {"estimator", "link", "seed", "links", "zenoh_runtime", "zenoh_lease_s",
+             "agent_sched"}
     unknown = set(table) - set(IMPAIRMENT_KEYS) - known
     if unknown:
         raise ScenarioError(f"network.{sorted(unknown)[0]}", "is not a known network setting")
@@ -89,4 +91,16 @@ def network(table: Table, n: int) -> NetworkConfig:
                              "network.zenoh_runtime"),
         agent_sched=choice(table.get("agent_sched", "normal"), AGENT_SCHEDS,
                            "network.agent_sched"),
+        zenoh_lease_s=lease(table.get("zenoh_lease_s")),
     )
+
+
+def lease(value: Any) -> float | None:
+    """`[network] zenoh_lease_s`: seconds within ZENOH_LEASE_RANGE_S, or absent (None)."""
+    if value is None:
+        return None
+    lo, hi = ZENOH_LEASE_RANGE_S
+    if isinstance(value, bool) or not isinstance(value, int | float) or not lo <= value <= hi:
+        raise ScenarioError("network.zenoh_lease_s", f"must be seconds in {lo:g}..{hi:g}, "
+                            f"got {value!r}")
+    return float(value)

@@ -250,6 +250,17 @@ def test_network_choices_default_accept_the_other_and_name_a_bad_value(
             parse_scenario(base + f"\n[network]\n{key} = {value}\n")
 
 
+def test_zenoh_lease_defaults_to_zenohs_takes_seconds_and_names_a_bad_value() -> None:
+    base = load_scenario_text()
+    assert parse_scenario(base).network.zenoh_lease_s is None  # Zenoh's own 10 s
+    assert parse_scenario(base + "\n[network]\nzenoh_lease_s = 30\n").network.zenoh_lease_s \
+        == 30.0
+    for bad in ("0.5", "601", "nan", "true", '"30"'):
+        with pytest.raises(ScenarioError, match=r"network\.zenoh_lease_s"):
+            parse_scenario(base + f"\n[network]\nzenoh_lease_s = {bad}\n")
+    assert load_scenario("ring64").network.zenoh_lease_s == 30.0
+
+
 def test_journal_is_on_by_default_a_boolean_and_ring64_turns_it_off() -> None:
     base = load_scenario_text()
     assert "[run]\n" in base

@@ -14,6 +14,7 @@ import pytest
 from transport.errors import ConfigError
 from transport.network_schema import ZENOH_RUNTIMES
 from transport.zenoh_config import (
+    LEASE_KEY,
     LINK_BUFFER_BYTES,
     ROUTER_BLOCK_CLOSE_KEY,
     ROUTER_BLOCK_CLOSE_US,
@@ -60,6 +61,17 @@ def test_routers_show_a_lost_link_within_their_lease_clients_keep_zenohs() -> No
     client = ZenohConfig(mode="client", connect=(loopback_endpoint(17004),))
     assert get(client, ROUTER_LEASE_KEY) == 10_000  # a paused client rides 10 s through
     assert get(ZenohConfig(), ROUTER_LEASE_KEY) == 10_000
+
+
+def test_a_scenario_lease_reaches_peers_and_clients_not_routers() -> None:
+    assert get(ZenohConfig(lease_s=30.0), LEASE_KEY) == 30_000
+    client = ZenohConfig(mode="client", connect=(loopback_endpoint(17004),), lease_s=2.5)
+    assert get(client, LEASE_KEY) == 2_500
+    router = ZenohConfig(mode="router", listen=(loopback_endpoint(17004),), lease_s=30.0)
+    assert get(router, ROUTER_LEASE_KEY) == ROUTER_LEASE_MS
+    for bad in (0.5, 601.0, float("nan")):
+        with pytest.raises(ConfigError, match=r"zenoh\.lease_s"):
+            ZenohConfig(lease_s=bad)
 
 
 def test_explicit_endpoints_and_lowlatency() -> None:
