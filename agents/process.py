@@ -16,6 +16,7 @@ from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import FrameType
 from typing import TypeVar
 
@@ -77,18 +78,52 @@ def open_bus(opts: BusOptions, network: NetworkConfig, arrival_stamps: bool = Fa
     return bus
 
 
-def apply_agent_sched(network: NetworkConfig) -> None:
-    """Run this process SCHED_BATCH if the scenario says so (NetworkConfig.agent_sched).
+# The recorder gives up this much less weight than the vehicles' agents: it must keep up
+# with all of them (a recorder behind holds its backlog in memory), the simulator first.
+AGENT_NICE_RECORDER_LESS = 2
+AUTOGROUP = Path("/proc/self/autogroup")
 
-    Called on the main thread before the bus opens: Linux sets a thread's policy, and the
-    threads made later (Zenoh's, the stall guard) inherit it.  A batch thread does not
-    preempt the running one when it wakes (the scheduler's tick does); it gets the same
-    share of the CPU.  No privilege is needed."""
+
+def apply_agent_sched(network: NetworkConfig, recorder: bool = False) -> None:
+    """Run this process SCHED_BATCH if the scenario says so (NetworkConfig.agent_sched),
+    and at its `agent_nice` (the recorder AGENT_NICE_RECORDER_LESS less): `yield_cpu`.
+
+    Called on the main thread before the bus opens: Linux sets a thread's policy and nice
+    value, and the threads made later (Zenoh's, the stall guard) inherit them.  A batch
+    thread does not preempt the running one when it wakes (the scheduler's tick does); it
+    gets the same share of the CPU.  No privilege is needed for either."""
     if network.agent_sched == "batch":
         try:
             os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
         except (OSError, AttributeError) as exc:  # not Linux: the default policy stays
             log.warning("agent_sched batch not applied: %s", exc)
+    nice = network.agent_nice - (AGENT_NICE_RECORDER_LESS if recorder else 0)
+    if nice > 0:
+        log.info("agent_nice %d: %s", nice, yield_cpu(nice))
+
+
+def yield_cpu(nice: int, autogroup: Path = AUTOGROUP, own_session: bool | None = None) -> str:
+    """Take `nice` lower a scheduling weight; how: "autogroup", "thread" or "not applied".
+
+    With autogroups (Linux's default), the CPU is shared between sessions, and every
+    enclose process is a session of its own: only the session's weight, its autogroup's
+    nice, moves its share; a thread's nice then orders threads within it alone.  Without
+    autogroups the thread's nice is the weight.  Both are set; the autogroup only when this
+    process leads its session (the autogroup is then this process's alone, never the
+    user's shell's).  Raising a nice needs no privilege."""
+    try:
+        os.nice(nice)
+    except OSError as exc:
+        return f"not applied: {exc}"
+    if own_session is None:
+        own_session = os.getsid(0) == os.getpid()
+    if not own_session:
+        return "thread"
+    try:
+        autogroup.write_text(f"{nice}\n")
+    except OSError:  # no autogroups in this kernel: the thread's nice is the weight
+        return "thread"
+    return "autogroup"
 
 
 def process_main(

@@ -18,6 +18,7 @@ AGENT_SCHEDS = ("normal", "batch")
 # `[network] zenoh_lease_s` bounds, seconds: a lease under a second expires links on any
 # scheduling hiccup; over ten minutes, a frozen process would never leave.
 ZENOH_LEASE_RANGE_S = (1.0, 600.0)
+AGENT_NICE_MAX = 19  # the largest nice value Linux has
 LOSS_MODELS = ("independent", "gilbert_elliott")
 
 
@@ -91,6 +92,11 @@ class NetworkConfig:
     # apply_agent_sched): their wake-ups no longer preempt the simulator, which stands for
     # the physical world, on a machine they oversubscribe (ring64 on 2 cores).
     agent_sched: str = "normal"
+    # The agents' scheduling weight below the simulator's (agents.process.yield_cpu): nice
+    # value of followers' and targets' own autogroups, the recorder's AGENT_NICE_RECORDER_LESS
+    # lower.  0: the kernel's fair share per process, which on a machine the agents
+    # oversubscribe leaves the simulator (the physical world) late.
+    agent_nice: int = 0
     faults: tuple[NetFault, ...] = ()  # partitions, isolations, degradations on a timeline
     # Numbers of the faults the OS cuts between hosts (`--os-cut`, deploy.netns.cut): the
     # receivers leave them alone.

@@ -9,6 +9,7 @@ from typing import Any
 from agents.scenario.model import ESTIMATORS
 from transport.errors import ScenarioError
 from transport.network_schema import (
+    AGENT_NICE_MAX,
     AGENT_SCHEDS,
     LINK_PROTOCOLS,
     LOSS_MODELS,
@@ -56,7 +57,7 @@ def impairment(table: Table, where: str, base: LinkImpairment) -> LinkImpairment
 
 def network(table: Table, n: int) -> NetworkConfig:
     known = {"estimator", "link", "seed", "links", "zenoh_runtime", "zenoh_lease_s",
-             "agent_sched"}
+             "agent_sched", "agent_nice"}
     unknown = set(table) - set(IMPAIRMENT_KEYS) - known
     if unknown:
         raise ScenarioError(f"network.{sorted(unknown)[0]}", "is not a known network setting")
@@ -92,7 +93,16 @@ def network(table: Table, n: int) -> NetworkConfig:
         agent_sched=choice(table.get("agent_sched", "normal"), AGENT_SCHEDS,
                            "network.agent_sched"),
         zenoh_lease_s=lease(table.get("zenoh_lease_s")),
+        agent_nice=agent_nice(table.get("agent_nice", 0)),
     )
+
+
+def agent_nice(value: Any) -> int:
+    """`[network] agent_nice`: a whole nice value 0..AGENT_NICE_MAX (a weight given up)."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= AGENT_NICE_MAX:
+        raise ScenarioError("network.agent_nice", f"must be a whole number 0..{AGENT_NICE_MAX}, "
+                            f"got {value!r}")
+    return value
 
 
 def lease(value: Any) -> float | None:

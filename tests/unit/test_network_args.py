@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import pytest
 
@@ -94,3 +95,43 @@ def test_batch_is_set_on_the_calling_thread_and_inherited_by_its_threads() -> No
     assert os.sched_getscheduler(0) == before
     apply_agent_sched(load_scenario().network)  # "normal": nothing changes
     assert os.sched_getscheduler(0) == before
+
+
+def test_yield_cpu_lowers_the_thread_and_its_own_sessions_autogroup(tmp_path: Path) -> None:
+    import os
+    import threading
+
+    from agents.process import yield_cpu
+
+    group = tmp_path / "autogroup"
+    seen: dict[str, object] = {}
+
+    def agent(own_session: bool, key: str) -> None:  # nice is per thread on Linux
+        before = os.getpriority(os.PRIO_PROCESS, 0)
+        seen[key] = (yield_cpu(3, group, own_session=own_session),
+                     os.getpriority(os.PRIO_PROCESS, 0) - before)
+
+    for own, key in ((False, "shared"), (True, "own")):
+        t = threading.Thread(target=agent, args=(own, key))
+        t.start()
+        t.join(timeout=10)
+    assert seen["shared"] == ("thread", 3)  # never the autogroup of a session not ours
+    assert seen["own"] == ("autogroup", 3) and group.read_text() == "3\n"
+    t = threading.Thread(target=agent, args=(True, "none"))
+    group.unlink()
+    group.mkdir()  # unwritable as a file: a kernel without autogroups
+    t.start()
+    t.join(timeout=10)
+    assert seen["none"] == ("thread", 3)
+
+
+def test_agent_nice_is_the_scenarios_whole_number_and_ring64_yields_to_the_simulator() -> None:
+    from agents.scenario.file import parse_scenario, shipped_text
+
+    base = shipped_text("paper")
+    assert load_scenario().network.agent_nice == 0
+    assert load_scenario("ring64").network.agent_nice == 5
+    assert parse_scenario(base + "\n[network]\nagent_nice = 19\n").network.agent_nice == 19
+    for bad in ("-1", "20", "2.5", "true", '"5"'):
+        with pytest.raises(ScenarioError, match=r"network\.agent_nice"):
+            parse_scenario(base + f"\n[network]\nagent_nice = {bad}\n")
