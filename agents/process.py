@@ -78,15 +78,14 @@ def open_bus(opts: BusOptions, network: NetworkConfig, arrival_stamps: bool = Fa
     return bus
 
 
-# The recorder gives up this much less weight than the vehicles' agents: it must keep up
-# with all of them (a recorder behind holds its backlog in memory), the simulator first.
-AGENT_NICE_RECORDER_LESS = 2
 AUTOGROUP = Path("/proc/self/autogroup")
 
 
-def apply_agent_sched(network: NetworkConfig, recorder: bool = False) -> None:
+def apply_agent_sched(network: NetworkConfig, vehicle_agent: bool = True) -> None:
     """Run this process SCHED_BATCH if the scenario says so (NetworkConfig.agent_sched),
-    and at its `agent_nice` (the recorder AGENT_NICE_RECORDER_LESS less): `yield_cpu`.
+    and a vehicle's agent (a follower, a target) at the scenario's `agent_nice`
+    (`yield_cpu`).  The recorder keeps its weight: it must keep up with every agent, and a
+    recorder behind holds its backlog in memory.
 
     Called on the main thread before the bus opens: Linux sets a thread's policy and nice
     value, and the threads made later (Zenoh's, the stall guard) inherit them.  A batch
@@ -97,9 +96,8 @@ def apply_agent_sched(network: NetworkConfig, recorder: bool = False) -> None:
             os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
         except (OSError, AttributeError) as exc:  # not Linux: the default policy stays
             log.warning("agent_sched batch not applied: %s", exc)
-    nice = network.agent_nice - (AGENT_NICE_RECORDER_LESS if recorder else 0)
-    if nice > 0:
-        log.info("agent_nice %d: %s", nice, yield_cpu(nice))
+    if vehicle_agent and network.agent_nice > 0:
+        log.info("agent_nice %d: %s", network.agent_nice, yield_cpu(network.agent_nice))
 
 
 def yield_cpu(nice: int, autogroup: Path = AUTOGROUP, own_session: bool | None = None) -> str:

@@ -108,7 +108,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _record(opts: RecorderOptions) -> int:
     try:
         scenario = load_run_scenario(opts.bus)
-        apply_agent_sched(scenario.network, recorder=True)
+        apply_agent_sched(scenario.network, vehicle_agent=False)
         with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus:
             live = start_live(opts)
             recorder = Recorder(bus, opts.bus.swarm, scenario, opts.out, index=opts.index,

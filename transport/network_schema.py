@@ -92,10 +92,10 @@ class NetworkConfig:
     # apply_agent_sched): their wake-ups no longer preempt the simulator, which stands for
     # the physical world, on a machine they oversubscribe (ring64 on 2 cores).
     agent_sched: str = "normal"
-    # The agents' scheduling weight below the simulator's (agents.process.yield_cpu): nice
-    # value of followers' and targets' own autogroups, the recorder's AGENT_NICE_RECORDER_LESS
-    # lower.  0: the kernel's fair share per process, which on a machine the agents
-    # oversubscribe leaves the simulator (the physical world) late.
+    # The vehicles' agents' scheduling weight below the simulator's and the recorder's
+    # (agents.process.yield_cpu): the nice of followers' and targets' own autogroups.  0:
+    # the kernel's fair share per process, which on a machine the agents oversubscribe
+    # leaves the simulator (the physical world) late.
     agent_nice: int = 0
     faults: tuple[NetFault, ...] = ()  # partitions, isolations, degradations on a timeline
     # Numbers of the faults the OS cuts between hosts (`--os-cut`, deploy.netns.cut): the
