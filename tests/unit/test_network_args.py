@@ -125,12 +125,12 @@ def test_yield_cpu_lowers_the_thread_and_its_own_sessions_autogroup(tmp_path: Pa
     assert seen["none"] == ("thread", 3)
 
 
-def test_agent_nice_is_the_scenarios_whole_number_and_ring64_yields_to_the_simulator() -> None:
+def test_agent_nice_is_the_scenarios_whole_number_and_off_by_default() -> None:
     from agents.scenario.file import parse_scenario, shipped_text
 
     base = shipped_text("paper")
     assert load_scenario().network.agent_nice == 0
-    assert load_scenario("ring64").network.agent_nice == 5
+    assert load_scenario("ring64").network.agent_nice == 0  # tried at 5: ring64.toml
     assert parse_scenario(base + "\n[network]\nagent_nice = 19\n").network.agent_nice == 19
     for bad in ("-1", "20", "2.5", "true", '"5"'):
         with pytest.raises(ScenarioError, match=r"network\.agent_nice"):
