@@ -274,7 +274,7 @@ class LinkDecoder(Decoder):
         for tally in [*self.tallies.values(), *self.retired.values()]:
             groups.setdefault(tally.link, []).append(tally)
         # A link with one tally (no sender gone from it) is read as it is: copying each
-        # histogram every second was most of a follower's status cost.
+        # histogram every second was about half of a follower's per-link counters.
         merged = {link: ts[0] if len(ts) == 1 else _absorbed(link, ts)
                   for link, ts in groups.items()}
         out: dict[str, int] = {}
