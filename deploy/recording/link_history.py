@@ -95,11 +95,11 @@ class LinkHistory:
                                 _ms(c.get(f"age_p99_us_{name}")))
             self._last[link] = now
             self._latest[link] = sample
-            # The fields by hand: dataclasses.astuple deep-copies, and was a quarter of
-            # ring64's recorder (~250 samples a second).
+            # The fields in their declared order (as `samples` reads them back), by hand:
+            # dataclasses.astuple deep-copies, and was a quarter of ring64's recorder.
             self._spool.write(",".join(map(_exact, (
-                sample.stamp_s, link, sample.rx, sample.offered, delivered, age,
-                sample.age_p50_ms, sample.age_p99_ms))) + "\n")
+                sample.stamp_s, sample.link, sample.rx, sample.offered, sample.delivered,
+                sample.age_mean_ms, sample.age_p50_ms, sample.age_p99_ms))) + "\n")
 
     def samples(self) -> Iterator[LinkSample]:
         """Every sample so far, in arrival order."""
