@@ -21,6 +21,7 @@ from agents.scenario.model import Scenario
 from deploy.forked import trim_heap
 from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import RunAssembler
+from deploy.recording.backlog import Backlog
 from deploy.recording.link_history import LinkHistory
 from deploy.recording.links import FINAL_STATES, link_report, unreadable_links
 from deploy.recording.live_server import LiveServer
@@ -47,10 +48,11 @@ MCAP_FILE = "recording.mcap"
 # backlog a stall or an insider's flood may need, and its ring's pages mapped early on.
 QUEUE_HOLD_S = 120.0
 QUEUE_MIN, QUEUE_MAX = 256, 16384
-# Samples taken from each queue per step: a backlog is worked off in steps of this many,
-# not decoded whole at once (20 s of ring64 would be ~50 000 objects alive together, a
-# high-water mark the heap keeps).
+# Samples handled of each key per step: a backlog is worked off in steps of this many, not
+# decoded whole at once (20 s of ring64 would be ~50 000 objects alive together, a
+# high-water mark the heap keeps).  Every step empties the rings into a compact Backlog.
 STEP_BATCH = 256
+DRAIN_PIECE = 1024
 # After a backlog is worked off, its memory (decoded samples, Zenoh's buffers) is free but
 # still resident: hand it back, at most this often.
 TRIM_EVERY_S = 10.0
@@ -121,6 +123,7 @@ class Recorder:
         # recorder decoded (1 280 a second), where it fell seconds behind.
         self._subs = [bus.subscribe(k, capacity) for k, capacity in
                       queue_capacities(self.keys, scenario, record_sensor).items()]
+        self.backlog = Backlog(sub.key_expr for sub in self._subs)
         # After the subscription: what arrives while we read back waits in its queue.
         self.carried: Counter[str] = Counter()
         self._carry_on()
@@ -137,12 +140,20 @@ class Recorder:
 
     # ---- one iteration -------------------------------------------------------------------
     def step(self) -> int:
-        """Drain and handle up to STEP_BATCH queued samples of each key; the number decoded."""
+        """Empty the rings into the backlog and handle up to STEP_BATCH of each key from it;
+        the number handled (decoded or refused)."""
         # Membership first: its events must not wait behind a backlog of samples.
         members = self.liveness.members(self.bus.now_s())
         if members and (not self.membership or members != self.membership[-1][1]):
             self.membership.append((self.bus.now_s(), members))
-        inbound = [item for sub in self._subs for item in self.decoder.drain(sub, STEP_BATCH)]
+        for sub in self._subs:
+            while True:  # in pieces: few unpacked samples alive at once (deploy.recording.backlog)
+                piece = sub.drain(DRAIN_PIECE)
+                self.backlog.take_in(sub.key_expr, piece)
+                if len(piece) < DRAIN_PIECE:
+                    break
+        taken = self.backlog.batch(STEP_BATCH)
+        inbound = self.decoder.decode_all(taken)
         for item in inbound:
             self._record(item.received.key, item.message, item.received.recv_stamp_s)
             self.feed.add(item.message, item.received.recv_stamp_s)
@@ -152,7 +163,7 @@ class Recorder:
             self._info = RunInfo.from_scenario(self.scenario, "networked",
                                                self.asm.start.duration_s)
             self._set_state("running")
-        return len(inbound)
+        return len(taken)
 
     def _record(self, key: str, msg: Message, recv_stamp_s: float) -> None:
         if msg.header.sender_id != self._stamper.sender_id:  # our own status is always fresh
@@ -198,7 +209,8 @@ class Recorder:
         """Loop until RunControl "stop", a signal (`stop_requested`) or overdue; the reason."""
         was_behind, trimmed_at = False, -math.inf
         while True:
-            behind = self.step() >= STEP_BATCH  # then straight on, without the poll's nap
+            self.step()
+            behind = len(self.backlog) > 0  # then straight on, without the poll's nap
             if was_behind and not behind and time.monotonic() - trimmed_at >= TRIM_EVERY_S:
                 trim_heap()
                 trimmed_at = time.monotonic()
@@ -214,7 +226,7 @@ class Recorder:
                 break
             if not behind:
                 time.sleep(poll_s)
-        while self.step() >= STEP_BATCH:  # whatever arrived with the stop word
+        while self.step() or self.backlog:  # whatever arrived with the stop word
             pass
         log.info("recording stops: %s", self.stop_reason)
         self.await_final_statuses(poll_s)
@@ -279,6 +291,9 @@ class Recorder:
                 "messages_per_topic": dict(sorted(self.mcap.messages.items())),
                 "messages_total": sum(self.mcap.messages.values()),
                 "dropped": dropped,
+                # Samples lost to a backlog beyond its bound, and the backlog's largest size.
+                "backlog": {"dropped": self.backlog.dropped,
+                            "peak_mb": round(self.backlog.peak_bytes / 2**20, 2)},
                 "decoder": self.decoder.counters(),
                 "stop_reason": self.stop_reason,
                 "wall_s": self.bus.now_s() - self._started_wall_s,
