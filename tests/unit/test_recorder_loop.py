@@ -245,11 +245,16 @@ def test_a_backlog_is_worked_off_a_batch_a_step(tmp_path: Path) -> None:
             MemoryBus(hub, "swarm", clock=lambda: clock[0]) as sbus:
         recorder = Recorder(rbus, "batch", ring64, tmp_path, scene_hz=None)
         backlog = publish_backlog(sbus, keys)
-        steps = [recorder.step() for _ in range(4)]
+        steps = [recorder.step()]
+        queued = len(recorder.backlog)  # the first step took every queue in whole
+        steps += [recorder.step() for _ in range(3)]
+        counted = recorder.counters()["recorder"]["backlog"]
         recorder.mcap.close()
+    assert queued >= backlog - STEP_BATCH
     assert steps[:2] == [STEP_BATCH, STEP_BATCH] and steps[3] == 0
     assert sum(steps) - backlog in (0, 1)  # and perhaps the recorder's own first status
     assert topics(tmp_path / MCAP_FILE)[keys.status("target", 0)] == backlog
+    assert counted["dropped"] == 0 and counted["peak_mb"] > 0
 
 
 @pytest.mark.timeout(30)
