@@ -53,6 +53,7 @@ QUEUE_MIN, QUEUE_MAX = 256, 16384
 # high-water mark the heap keeps).  Every step empties the rings into a compact Backlog.
 STEP_BATCH = 256
 DRAIN_PIECE = 1024
+DRAIN_PIECES_MAX = QUEUE_MAX // DRAIN_PIECE + 1
 # After a backlog is worked off, its memory (decoded samples, Zenoh's buffers) is free but
 # still resident: hand it back, at most this often.
 TRIM_EVERY_S = 10.0
@@ -139,15 +140,17 @@ class Recorder:
         self._set_state("linked")
 
     # ---- one iteration -------------------------------------------------------------------
-    def step(self) -> int:
-        """Empty the rings into the backlog and handle up to STEP_BATCH of each key from it;
-        the number handled (decoded or refused)."""
+    def step(self, drain: bool = True) -> int:
+        """Empty the rings into the backlog (unless not `drain`) and handle up to STEP_BATCH
+        of each key from it; the number handled (decoded or refused)."""
         # Membership first: its events must not wait behind a backlog of samples.
         members = self.liveness.members(self.bus.now_s())
         if members and (not self.membership or members != self.membership[-1][1]):
             self.membership.append((self.bus.now_s(), members))
-        for sub in self._subs:
-            while True:  # in pieces: few unpacked samples alive at once (deploy.recording.backlog)
+        for sub in self._subs if drain else ():
+            # In pieces: few unpacked samples alive at once (deploy.recording.backlog);
+            # at most a full ring's worth, however fast a flood refills it meanwhile.
+            for _ in range(DRAIN_PIECES_MAX):
                 piece = sub.drain(DRAIN_PIECE)
                 self.backlog.take_in(sub.key_expr, piece)
                 if len(piece) < DRAIN_PIECE:
@@ -226,8 +229,9 @@ class Recorder:
                 break
             if not behind:
                 time.sleep(poll_s)
-        while self.step() or self.backlog:  # whatever arrived with the stop word
-            pass
+        self.step()  # whatever arrived with the stop word, and then what was behind it
+        while self.backlog:  # (without taking more: a flood must not hold the stop up)
+            self.step(drain=False)
         log.info("recording stops: %s", self.stop_reason)
         self.await_final_statuses(poll_s)
         return self.stop_reason

@@ -12,6 +12,8 @@ from mcap.reader import make_reader
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.recording.loop import (
+    DRAIN_PIECE,
+    DRAIN_PIECES_MAX,
     MCAP_FILE,
     QUEUE_HOLD_S,
     QUEUE_MAX,
@@ -21,6 +23,7 @@ from deploy.recording.loop import (
 )
 from deploy.report import regenerate_figures
 from tests.recorder_synth import SynthRun
+from transport.bus import Received
 from transport.codec import decode, encode
 from transport.keys import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
@@ -307,3 +310,34 @@ def test_each_queue_holds_its_keys_traffic_and_no_more(name: str, sensor: bool) 
     assert statuses_per_s * QUEUE_HOLD_S <= statuses <= 2 * (statuses_per_s + 1) * QUEUE_HOLD_S
     assert sizes[keys.control()] <= 256 and sizes[keys.all_alive()] <= 256
     assert (keys.all_sensor_targets() in sizes) is sensor
+
+
+class _Flood:
+    """A subscription a flood refills as fast as it is drained: garbage, every time."""
+
+    def __init__(self, key_expr: str) -> None:
+        self.key_expr, self.drained = key_expr, 0
+
+    def drain(self, max_items: int | None = None) -> list[Received]:
+        n = max_items or 1
+        self.drained += n
+        return [Received(self.key_expr, b"\xc1", 0.0) for _ in range(n)]
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.timeout(60)
+def test_a_flood_cannot_hold_a_step_or_the_stop(tmp_path: Path) -> None:
+    hub = MemoryHub()
+    with MemoryBus(hub, "recorder") as rbus:
+        recorder = Recorder(rbus, "flood", load_scenario("paper"), tmp_path, scene_hz=None)
+        flood = _Flood(recorder._subs[0].key_expr)
+        recorder._subs = [flood]
+        recorder.step()  # a step takes at most a full ring's worth
+        assert flood.drained == len(recorder.backlog) + STEP_BATCH \
+            == DRAIN_PIECES_MAX * DRAIN_PIECE
+        recorder.step(drain=False)  # working a backlog off takes nothing more
+        assert flood.drained == DRAIN_PIECES_MAX * DRAIN_PIECE
+        assert recorder.decoder.dropped_total == 2 * STEP_BATCH  # garbage, counted
+        recorder.mcap.close()
