@@ -32,6 +32,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from deploy.cpu_load import process_status_kb
+from deploy.pids import read_pids
 
 CGROUP_V1, CGROUP_V2 = Path("/sys/fs/cgroup/cpu"), Path("/sys/fs/cgroup")
 
@@ -62,13 +63,6 @@ class Starver:
 
     def remove(self) -> None:
         self.group.rmdir()
-
-
-def _recorder_pid(out: Path) -> int | None:
-    try:
-        return int(json.loads((out / "logs" / "pids.json").read_text())["recorder"]["pid"])
-    except (OSError, ValueError, KeyError):
-        return None
 
 
 def _running(out: Path) -> bool:
@@ -105,7 +99,8 @@ def _watch(proc: subprocess.Popen[bytes], out: Path, args: argparse.Namespace,
     samples: list[tuple[float, float]] = []
     while proc.poll() is None:
         time.sleep(0.5)
-        pid = pid or _recorder_pid(out)
+        recorder = read_pids(out / "logs").get("recorder")
+        pid = pid or (recorder.pid if recorder is not None else None)
         if pid is None or (t0 is None and not _running(out)):
             continue
         t0 = t0 or time.monotonic()

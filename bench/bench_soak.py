@@ -242,7 +242,7 @@ def error_windows(out: Path, window_s: float) -> tuple[list[dict[str, float]],
     p95: list[dict[str, float]] = [{} for _ in peak]
     for (k, kind), parts in worst.items():
         values = np.concatenate(parts)
-        values = values[np.isfinite(values)]
+        values = values[~np.isnan(values)]  # an infinite error stays the worst
         if values.size:
             peak[k][kind] = float(values.max())
             p95[k][kind] = float(np.percentile(values, 95))
