@@ -27,6 +27,7 @@ from deploy.recording.links import FINAL_STATES, link_report, unreadable_links
 from deploy.recording.live_server import LiveServer
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
 from deploy.recording.progress import PROGRESS_FILE, behind_s, live_errors
+from deploy.recording.queues import STEP_BATCH, drain_into, queue_capacities
 from deploy.recording.resume import newest_part, read_back
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
 from deploy.recording.view_feed import ViewFeed
@@ -44,41 +45,11 @@ log = logging.getLogger(__name__)
 
 ROLE = "recorder"
 MCAP_FILE = "recording.mcap"
-# Each queue as long as its key's traffic fills in this time (at most QUEUE_MAX): all the
-# backlog a stall or an insider's flood may need, and its ring's pages mapped early on.
-QUEUE_HOLD_S = 120.0
-QUEUE_MIN, QUEUE_MAX = 256, 16384
-# Samples handled of each key per step: a backlog is worked off in steps of this many, not
-# decoded whole at once (20 s of ring64 would be ~50 000 objects alive together, a
-# high-water mark the heap keeps).  Every step empties the rings into a compact Backlog.
-STEP_BATCH = 256
-DRAIN_PIECE = 1024
-DRAIN_PIECES_MAX = QUEUE_MAX // DRAIN_PIECE + 1
 # After a backlog is worked off, its memory (decoded samples, Zenoh's buffers) is free but
 # still resident: hand it back, at most this often.
 TRIM_EVERY_S = 10.0
 OVERDUE_GRACE_S = 30.0  # stop on our own this long after the planned end if no "stop" came
 FINAL_STATUS_WAIT_S = 2.0  # after the stop, for the followers' "done" counters (links)
-
-
-def queue_capacities(keys: SwarmKeys, scenario: Scenario, sensor: bool) -> dict[str, int]:
-    """Each recorded key's queue, sized to QUEUE_HOLD_S of its traffic.
-
-    Not one size for all: Zenoh allocates a ring's whole capacity up front and the kernel
-    maps its pages as the write position first passes them, so a ring far larger than its
-    key's traffic reads as memory creeping up for as long as one lap takes: the statuses'
-    16384 slots at ~9 a second took 30 minutes of the paper's case, +4 MB."""
-    n, hz = scenario.n, scenario.run.rate_hz
-    # Truth and observations go out every simulator tick that gives at least the control
-    # rate (deploy.swarm_sim), under twice it: their rings fill in at most QUEUE_HOLD_S.
-    # Every process's status once a second.
-    per_s = {keys.all_follower_states(): n * hz, keys.all_sensor_targets(): n * hz,
-             keys.truth(): hz, keys.all_status(): n + scenario.m + 4.0}
-    return {k: _ring_size(per_s.get(k, 1.0) * QUEUE_HOLD_S) for k in keys.recorded(sensor)}
-
-
-def _ring_size(items: float) -> int:
-    return min(QUEUE_MAX, max(QUEUE_MIN, math.ceil(items)))
 
 
 class Recorder:
@@ -147,14 +118,8 @@ class Recorder:
         members = self.liveness.members(self.bus.now_s())
         if members and (not self.membership or members != self.membership[-1][1]):
             self.membership.append((self.bus.now_s(), members))
-        for sub in self._subs if drain else ():
-            # In pieces: few unpacked samples alive at once (deploy.recording.backlog);
-            # at most a full ring's worth, however fast a flood refills it meanwhile.
-            for _ in range(DRAIN_PIECES_MAX):
-                piece = sub.drain(DRAIN_PIECE)
-                self.backlog.take_in(sub.key_expr, piece)
-                if len(piece) < DRAIN_PIECE:
-                    break
+        if drain:
+            drain_into(self.backlog, self._subs)
         taken = self.backlog.batch(STEP_BATCH)
         inbound = self.decoder.decode_all(taken)
         for item in inbound:

@@ -8,7 +8,7 @@ part of the run.  A backlog does not: on a loaded machine the recorder falls beh
 then and its queues (bounded) grow to the largest backlog seen, a step of a few MB that
 stays; the growth is therefore judged by its median over 5-s stretches, which a ramp
 moves and a few steps do not.  The queues' rings are mapped as they first fill, within
-their first lap (deploy.recording.loop.queue_capacities): at this rate, the first 25 s.
+their first lap (deploy.recording.queues.queue_capacities): at this rate, the first 25 s.
 """
 
 from __future__ import annotations

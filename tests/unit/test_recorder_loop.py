@@ -11,14 +11,13 @@ from mcap.reader import make_reader
 
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
-from deploy.recording.loop import (
+from deploy.recording.loop import MCAP_FILE, Recorder
+from deploy.recording.queues import (
     DRAIN_PIECE,
     DRAIN_PIECES_MAX,
-    MCAP_FILE,
     QUEUE_HOLD_S,
     QUEUE_MAX,
     STEP_BATCH,
-    Recorder,
     queue_capacities,
 )
 from deploy.report import regenerate_figures
