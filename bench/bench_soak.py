@@ -30,14 +30,12 @@ Run: python bench/bench_soak.py [--case paper] [--minutes 10] [--window-min 2]
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import math
 import re
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -45,13 +43,22 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from soak_windows import (
+    ERROR_COLUMNS,
+    errors_over,
+    late_ok,
+    late_over,
+    late_per_minute,
+    verdict,
+    worst_errors,
+)
+
 from deploy.cpu_load import load_1min, process_cpu_s, process_status_kb
 from deploy.pids import read_pids
 
 _OUTPUTS = re.compile(r"run outputs written in ([0-9.]+) s")
 _STATE = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) .*recorder (stopping|done|failed)$",
                     re.MULTILINE)
-ERROR_COLUMNS = ("e_rho_m", "e_delta", "est_err_m")
 
 
 def flying(out: Path) -> bool:
@@ -173,82 +180,6 @@ def _round(v: float | None, digits: int) -> float | None:
     return None if v is None else round(v, digits)
 
 
-def late_ticks(out: Path, start_stamp_s: float, window_s: float) -> dict[str, list[list[int]]]:
-    """Per role ("follower", "sim"): per window, [late, ticks] summed over its processes,
-    from the differences of each process's counters between windows."""
-    from mcap.reader import make_reader
-
-    last: dict[str, dict[int, tuple[int, int]]] = {}  # process -> window -> counters
-    with open(out / "recording.mcap", "rb") as f:
-        for _schema, channel, message in make_reader(f).iter_messages():
-            if "/status/" not in channel.topic:
-                continue
-            body = json.loads(message.data)
-            if body.get("role") not in ("follower", "sim"):
-                continue
-            c = body.get("counters", {})
-            if "ticks" not in c or "overruns" not in c:
-                continue
-            w = math.floor((body["header"]["stamp_s"] - start_stamp_s) / window_s)
-            key = f"{body['role']}-{body['index']}"
-            last.setdefault(key, {})[w] = (int(c["overruns"]), int(c["ticks"]))
-    windows: dict[str, dict[int, list[int]]] = {}
-    for key, per in last.items():
-        before = (0, 0)
-        for w in sorted(per):
-            late, ticks = per[w]
-            if ticks < before[1]:  # a restarted process counts from zero again
-                before = (0, 0)
-            acc = windows.setdefault(key.rpartition("-")[0], {}).setdefault(w, [0, 0])
-            acc[0] += late - before[0]
-            acc[1] += ticks - before[1]
-            before = (late, ticks)
-    return {role: [per.get(w, [0, 0]) for w in range(max(per) + 1)]
-            for role, per in windows.items()}
-
-
-def series_batches(out: Path, rows: int = 4096) -> Iterator[dict[str, np.ndarray]]:
-    """series.parquet in batches of columns; series.csv where there is no Parquet file."""
-    parquet = out / "series.parquet"
-    if parquet.exists():
-        import pyarrow.parquet as pq
-
-        for batch in pq.ParquetFile(parquet).iter_batches(batch_size=rows):
-            yield {c: batch.column(c).to_numpy() for c in batch.schema.names}
-        return
-    with open(out / "series.csv") as f:
-        names = f.readline().strip().split(",")
-        while lines := list(itertools.islice(f, rows)):
-            data = np.loadtxt(lines, delimiter=",", ndmin=2)
-            yield {c: data[:, k] for k, c in enumerate(names)}
-
-
-def error_windows(out: Path, window_s: float) -> tuple[list[dict[str, float]],
-                                                      list[dict[str, float]]]:
-    """Per window, of the worst follower at each sample's |e_rho|, |e_delta|, |r - LAP|:
-    the max (what the verdict compares), and the 95th percentile (a transient moves the
-    max alone; a swarm that got worse moves both)."""
-    worst: dict[tuple[int, str], list[np.ndarray]] = {}
-    for batch in series_batches(out):
-        w = np.floor(batch["t_s"] / window_s).astype(int)
-        for kind in ERROR_COLUMNS:
-            names = [c for c in batch if re.fullmatch(rf"[a-z]+\d+_{kind}", c)]
-            values = np.nanmax(np.abs(np.column_stack([batch[c] for c in names])), axis=1)
-            for k in np.unique(w):
-                worst.setdefault((int(k), kind), []).append(values[w == k])
-    if not worst:
-        return [], []
-    peak: list[dict[str, float]] = [{} for _ in range(max(k for k, _ in worst) + 1)]
-    p95: list[dict[str, float]] = [{} for _ in peak]
-    for (k, kind), parts in worst.items():
-        values = np.concatenate(parts)
-        values = values[~np.isnan(values)]  # an infinite error stays the worst
-        if values.size:
-            peak[k][kind] = float(values.max())
-            p95[k][kind] = float(np.percentile(values, 95))
-    return peak, p95
-
-
 def outputs_s(out: Path) -> float | None:
     found = []
     for log in sorted((out / "logs").glob("recorder*.log")):
@@ -269,44 +200,59 @@ def stop_to_done_s(out: Path) -> float | None:
     return round((end - stamps["stopping"]).total_seconds(), 2)
 
 
-def verdict(first: dict[str, float], last: dict[str, float], bounds: dict[str, float]) -> bool:
-    return all(last.get(k, 0.0) <= max(1.25 * first.get(k, 0.0), bounds[k])
-               for k in ERROR_COLUMNS)
-
-
-def late_ok(first: list[int], last: list[int]) -> bool:
-    rate = [late / ticks if ticks else 0.0 for late, ticks in (first, last)]
-    return rate[1] <= 2 * rate[0] + 0.001
-
-
 def report(out: Path, args: argparse.Namespace, samples: list[dict[str, Any]]) -> dict[str, Any]:
     metrics = json.loads((out / "metrics.json").read_text())
     info = json.loads((out / "run.json").read_text())
-    window_s, settle_s = 60 * args.window_min, 60 * args.settle_min
+    settle_s = 60 * args.settle_min
     memory = memory_table(samples, settle_s)
-    late = late_ticks(out, metrics["start_stamp_s"], window_s)
-    errors, errors_p95 = error_windows(out, window_s)
-    first_w = math.ceil(settle_s / window_s)
-    last_w = int(args.minutes * 60 // window_s) - 1
-    bounds = {"e_rho_m": info["eps_rho_m"], "e_delta": info["eps_delta"],
-              "est_err_m": info["eps_rho_m"]}
     summary: dict[str, Any] = {
         "case": args.case, "minutes": args.minutes, "window_min": args.window_min,
         "memory": memory, "roles": role_table(memory), "load_1min": load_range(samples, settle_s),
-        "late_ticks": late, "errors": errors, "errors_p95": errors_p95,
         "outputs_s": outputs_s(out), "stop_to_done_s": stop_to_done_s(out),
         # How far behind the recorder fell (its backlog's peak) and what it lost to it.
         "recorder_backlog": metrics.get("recorder", {}).get("backlog"),
         "metrics": {k: metrics.get(k) for k in ("estimator_error_m", "radius_error_m",
                                                 "angle_error", "settle_time_s", "samples")},
     }
-    if 0 <= first_w < last_w < len(errors):
-        summary["errors_no_worse"] = verdict(errors[first_w], errors[last_w], bounds)
-    fol = late.get("follower", [])
-    if 0 <= first_w < last_w < len(fol):
-        summary["late_no_worse"] = late_ok(fol[first_w], fol[last_w])
-    summary["windows_compared"] = [first_w, last_w]
+    summary.update(compare(out, args, metrics["start_stamp_s"], {
+        "e_rho_m": info["eps_rho_m"], "e_delta": info["eps_delta"],
+        "est_err_m": info["eps_rho_m"]}))
     return summary
+
+
+def compare(out: Path, args: argparse.Namespace, start_stamp_s: float,
+            bounds: dict[str, float]) -> dict[str, Any]:
+    """Late ticks and errors per window, and two comparisons of the last against the first
+    steady stretch: the window after the settling against the last window, and (as the
+    issue puts it) the first steady `--compare-min` minutes against the last ones."""
+    late_min = late_per_minute(out, start_stamp_s)
+    t_s, worst = worst_errors(out)
+    w = args.window_min
+    windows = [(k * w, (k + 1) * w) for k in range(math.ceil(args.minutes / w - 1e-9))]
+    per_window = [errors_over(t_s, worst, span) for span in windows]
+    first_w, last_w = math.ceil(args.settle_min / w - 1e-9), len(windows) - 1
+    spans = [(args.settle_min, args.settle_min + args.compare_min),
+             (args.minutes - args.compare_min, args.minutes)]
+    per_span = [errors_over(t_s, worst, span) for span in spans]
+    out_: dict[str, Any] = {
+        "late_ticks": {role: [late_over(m, span) for span in windows]
+                       for role, m in late_min.items()},
+        "errors": [e[0] for e in per_window], "errors_p95": [e[1] for e in per_window],
+        "windows_compared": [first_w, last_w], "spans_compared": spans,
+        "span_late_ticks": {role: [late_over(m, span) for span in spans]
+                            for role, m in late_min.items()},
+        "span_errors": [e[0] for e in per_span], "span_errors_p95": [e[1] for e in per_span]}
+    fol = out_["late_ticks"].get("follower", [])
+    if 0 <= first_w < last_w:
+        out_["errors_no_worse"] = verdict(per_window[first_w][0], per_window[last_w][0], bounds)
+        if last_w < len(fol):
+            out_["late_no_worse"] = late_ok(fol[first_w], fol[last_w])
+    if spans[0][1] <= args.minutes:
+        out_["span_errors_no_worse"] = verdict(per_span[0][0], per_span[1][0], bounds)
+        fol_span = out_["span_late_ticks"].get("follower")
+        if fol_span:
+            out_["span_late_no_worse"] = late_ok(fol_span[0], fol_span[1])
+    return out_
 
 
 def show(summary: dict[str, Any]) -> None:
@@ -337,6 +283,16 @@ def show(summary: dict[str, Any]) -> None:
     first, last = summary["windows_compared"]
     print(f"window {last} against window {first}: errors no worse "
           f"{summary.get('errors_no_worse')}, late ticks no worse {summary.get('late_no_worse')}")
+    (a0, a1), (b0, b1) = summary["spans_compared"]
+    pairs = zip(summary["span_errors"], summary["span_errors_p95"], strict=True)
+    for k, (peak, p95) in enumerate(pairs):
+        cells = ", ".join(f"{kind} {peak.get(kind, math.nan):.4g} "
+                          f"(p95 {p95.get(kind, math.nan):.4g})" for kind in ERROR_COLUMNS)
+        late = {role: v[k] for role, v in summary["span_late_ticks"].items()}
+        print(f"minutes {(a0, b0)[k]:g}-{(a1, b1)[k]:g}: max {cells}; late ticks {late}")
+    print(f"minutes {b0:g}-{b1:g} against minutes {a0:g}-{a1:g}: errors no worse "
+          f"{summary.get('span_errors_no_worse')}, late ticks no worse "
+          f"{summary.get('span_late_no_worse')}")
     print(f"end-of-run outputs written in {summary['outputs_s']} s "
           f"({summary['stop_to_done_s']} s from the recorder's stop to done); "
           f"metrics {summary['metrics']}")
@@ -373,6 +329,9 @@ def parse_args() -> argparse.Namespace:
                         help="window of late ticks and errors (default: 10 min from 40-min "
                         "runs, else a fifth of the run)")
     parser.add_argument("--settle-min", type=float, default=5.0)
+    parser.add_argument("--compare-min", type=float, default=10.0,
+                        help="the last this many minutes against the first this many after "
+                        "the settling (default 10, as issue 'Hours, not minutes' asks)")
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--insecure", action="store_true")
     parser.add_argument("--report-only", action="store_true",
