@@ -234,7 +234,7 @@ def compare(out: Path, args: argparse.Namespace, start_stamp_s: float,
     spans = [(args.settle_min, args.settle_min + args.compare_min),
              (args.minutes - args.compare_min, args.minutes)]
     per_span = [errors_over(t_s, worst, span) for span in spans]
-    out_: dict[str, Any] = {
+    found: dict[str, Any] = {
         "late_ticks": {role: [late_over(m, span) for span in windows]
                        for role, m in late_min.items()},
         "errors": [e[0] for e in per_window], "errors_p95": [e[1] for e in per_window],
@@ -242,17 +242,17 @@ def compare(out: Path, args: argparse.Namespace, start_stamp_s: float,
         "span_late_ticks": {role: [late_over(m, span) for span in spans]
                             for role, m in late_min.items()},
         "span_errors": [e[0] for e in per_span], "span_errors_p95": [e[1] for e in per_span]}
-    fol = out_["late_ticks"].get("follower", [])
+    fol = found["late_ticks"].get("follower", [])
     if 0 <= first_w < last_w:
-        out_["errors_no_worse"] = verdict(per_window[first_w][0], per_window[last_w][0], bounds)
+        found["errors_no_worse"] = verdict(per_window[first_w][0], per_window[last_w][0], bounds)
         if last_w < len(fol):
-            out_["late_no_worse"] = late_ok(fol[first_w], fol[last_w])
+            found["late_no_worse"] = late_ok(fol[first_w], fol[last_w])
     if spans[0][1] <= args.minutes:
-        out_["span_errors_no_worse"] = verdict(per_span[0][0], per_span[1][0], bounds)
-        fol_span = out_["span_late_ticks"].get("follower")
+        found["span_errors_no_worse"] = verdict(per_span[0][0], per_span[1][0], bounds)
+        fol_span = found["span_late_ticks"].get("follower")
         if fol_span:
-            out_["span_late_no_worse"] = late_ok(fol_span[0], fol_span[1])
-    return out_
+            found["span_late_no_worse"] = late_ok(fol_span[0], fol_span[1])
+    return found
 
 
 def show(summary: dict[str, Any]) -> None:
