@@ -99,8 +99,9 @@ def _watch(proc: subprocess.Popen[bytes], out: Path, args: argparse.Namespace,
     samples: list[tuple[float, float]] = []
     while proc.poll() is None:
         time.sleep(0.5)
-        recorder = read_pids(out / "logs").get("recorder")
-        pid = pid or (recorder.pid if recorder is not None else None)
+        if pid is None:
+            recorder = read_pids(out / "logs").get("recorder")
+            pid = recorder.pid if recorder is not None else None
         if pid is None or (t0 is None and not _running(out)):
             continue
         t0 = t0 or time.monotonic()

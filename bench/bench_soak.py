@@ -242,17 +242,23 @@ def compare(out: Path, args: argparse.Namespace, start_stamp_s: float,
         "span_late_ticks": {role: [late_over(m, span) for span in spans]
                             for role, m in late_min.items()},
         "span_errors": [e[0] for e in per_span], "span_errors_p95": [e[1] for e in per_span]}
-    fol = found["late_ticks"].get("follower", [])
+    # A verdict only where both stretches hold data: an empty one would read "no worse".
     if 0 <= first_w < last_w:
-        found["errors_no_worse"] = verdict(per_window[first_w][0], per_window[last_w][0], bounds)
-        if last_w < len(fol):
-            found["late_no_worse"] = late_ok(fol[first_w], fol[last_w])
+        rows = found["late_ticks"].get("follower") or [[0, 0]] * len(windows)
+        fol = [rows[first_w], rows[last_w]]
+        _judge(found, "", (per_window[first_w][0], per_window[last_w][0]), fol, bounds)
     if spans[0][1] <= args.minutes:
-        found["span_errors_no_worse"] = verdict(per_span[0][0], per_span[1][0], bounds)
-        fol_span = found["span_late_ticks"].get("follower")
-        if fol_span:
-            found["span_late_no_worse"] = late_ok(fol_span[0], fol_span[1])
+        fol = found["span_late_ticks"].get("follower", [[0, 0], [0, 0]])
+        _judge(found, "span_", (per_span[0][0], per_span[1][0]), fol, bounds)
     return found
+
+
+def _judge(found: dict[str, Any], prefix: str, errors: tuple[dict[str, float], dict[str, float]],
+           late: list[list[int]], bounds: dict[str, float]) -> None:
+    if errors[0] and errors[1]:
+        found[f"{prefix}errors_no_worse"] = verdict(errors[0], errors[1], bounds)
+    if late[0][1] and late[1][1]:
+        found[f"{prefix}late_no_worse"] = late_ok(late[0], late[1])
 
 
 def show(summary: dict[str, Any]) -> None:
