@@ -97,6 +97,7 @@ def _watch(proc: subprocess.Popen[bytes], out: Path, args: argparse.Namespace,
     """RSS every 0.5 s from the start word on; the stall at its times."""
     pid, t0, state = None, None, "before"
     samples: list[tuple[float, float]] = []
+    maps: dict[str, dict[str, int]] = {}
     while proc.poll() is None:
         time.sleep(0.5)
         if pid is None:
@@ -115,7 +116,38 @@ def _watch(proc: subprocess.Popen[bytes], out: Path, args: argparse.Namespace,
         rss_kb = process_status_kb(pid, "VmRSS")
         if rss_kb is not None and t < args.duration_s:
             samples.append((t, rss_kb / 1024))
+        if args.maps and state == "before" and t >= args.at_s - 2:
+            maps["before"] = resident_by_mapping(pid)
+        elif args.maps and t < args.duration_s - 1:
+            maps["end"] = resident_by_mapping(pid)
+    if args.maps and len(maps) == 2:
+        _print_map_change(maps["before"], maps["end"])
     return samples
+
+
+def resident_by_mapping(pid: int) -> dict[str, int]:
+    """Resident kB of each mapping of `pid` (/proc/<pid>/smaps), by "start-end name"."""
+    rss: dict[str, int] = {}
+    name = ""
+    with contextlib.suppress(OSError), open(f"/proc/{pid}/smaps") as f:
+        for line in f:
+            head = line.split()
+            if "-" in head[0] and not head[0].endswith(":"):
+                name = f"{head[0]} {head[5] if len(head) > 5 else '[anon]'}"
+            elif head[0] == "Rss:":
+                rss[name] = int(head[1])
+    return rss
+
+
+def _print_map_change(before: dict[str, int], end: dict[str, int]) -> None:
+    """The mappings whose resident memory moved by 256 kB or more, and the totals."""
+    for name in sorted(set(before) | set(end)):
+        d = end.get(name, 0) - before.get(name, 0)
+        if abs(d) >= 256:
+            size_kb = (lambda a, b: (int(b, 16) - int(a, 16)) // 1024)(*name.split()[0].split("-"))
+            print(f"  {name} ({size_kb} kB): {before.get(name, 0)} -> {end.get(name, 0)} kB",
+                  flush=True)
+    print(f"  total resident {sum(before.values())} -> {sum(end.values())} kB", flush=True)
 
 
 def _summary(out: Path, samples: list[tuple[float, float]],
@@ -150,6 +182,9 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--quota-pct", type=float, default=10.0)
     parser.add_argument("--duration-s", type=float, default=110.0)
     parser.add_argument("--out", type=Path, default=Path("/tmp/backlog-swarm"))
+    parser.add_argument("--maps", action="store_true",
+                        help="print the recorder's mappings whose resident memory moved "
+                        "between the stall's start and the run's end (/proc/<pid>/smaps)")
     args = parser.parse_args()
     if args.at_s + args.stall_s + 15 > args.duration_s:
         parser.error("--at-s + --stall-s must end at least 15 s before --duration-s")

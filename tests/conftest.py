@@ -9,6 +9,10 @@ ENCLOSE_TEST_TIMEOUT_SCALE multiplies every test's timeout: deploy/test.sh runs 
 tests at idle priority beside the timed tests, where they take what those leave (beside
 swarms, a test that takes 4 s alone was seen to take over 60 s).  A timeout there still
 catches a hang; it is not a measure of speed.
+
+A real swarm starts only when the machine has room for it (tests/admission.py): the wait
+comes before the test's timeout starts, and shows in the report's properties.
+ENCLOSE_TEST_ADMISSION=0 starts every test at once.
 """
 
 from __future__ import annotations
@@ -19,6 +23,13 @@ from collections.abc import Iterator
 
 import pytest
 from pytest_timeout import get_env_settings
+
+from tests.admission import Gate
+
+# Cores of normal-priority demand under which a test starts: a timed test wants about a
+# core to itself on 2 cores; the other swarms fill the machine to about two thirds, which
+# on a machine where a paper swarm takes ~0.45 of a core is four side by side.
+SERIAL_ROOM, SWARM_ROOM = 0.3, 0.65
 
 
 def _timeout_s(item: pytest.Item) -> float:
@@ -53,6 +64,39 @@ def _timeout_scale() -> float:
     if not scale > 0:
         raise pytest.UsageError(f"ENCLOSE_TEST_TIMEOUT_SCALE={text!r} must be above 0")
     return scale
+
+
+@pytest.hookimpl(tryfirst=True, hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item) -> Iterator[None]:
+    """A real swarm waits for room before its protocol (and pytest-timeout's timer, which
+    this wraps) starts."""
+    if (item.get_closest_marker("integration") is not None
+            and os.environ.get("ENCLOSE_TEST_ADMISSION", "1") != "0"):
+        cores = len(os.sched_getaffinity(0))
+        share = SERIAL_ROOM if item.get_closest_marker("serial") is not None else SWARM_ROOM
+        waited_s, demand = Gate(threshold_cores=share * cores).admit()
+        item.user_properties.append(("admission_wait_s", round(waited_s, 1)))
+        item.user_properties.append(("admission_demand_cores", demand))
+    yield
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    """How long the swarms waited for room: the run's length depends on it."""
+    waits = [dict(r.user_properties)["admission_wait_s"]
+             for reports in terminalreporter.stats.values() for r in reports
+             if getattr(r, "when", None) == "call"
+             and "admission_wait_s" in dict(getattr(r, "user_properties", ()))]
+    if waits and max(waits) >= 1.0:
+        terminalreporter.write_line(
+            f"admission: {len(waits)} real swarms waited {sum(waits):.0f} s in all for room "
+            f"on the machine, at most {max(waits):.0f} s (tests/admission.py)")
+    not_judged = [w for w in terminalreporter.stats.get("warnings", [])
+                  if "NotJudged" in str(getattr(w, "message", ""))]
+    if not_judged:
+        terminalreporter.write_line(
+            f"real time: {len(not_judged)} accuracy checks not judged, their runs' machine did "
+            "not keep real time (tests/integration/real_time.py; the warnings name them)",
+            yellow=True, bold=True)
 
 
 @pytest.fixture(autouse=True)

@@ -25,6 +25,7 @@ from pathlib import Path
 import pytest
 
 from deploy.run_secrets import MAVLINK_SECRET_FILE
+from tests.integration.real_time import judged
 from tests.integration.runs import spawned_run, wait_for
 
 pytestmark = pytest.mark.integration
@@ -77,9 +78,10 @@ def test_attack_changes_nothing_and_every_hostile_input_is_counted(tmp_path: Pat
     assert launcher.returncode == 0, "".join(lines) + output
     rep = json.loads(report_path.read_text())
     metrics = json.loads((out / "metrics.json").read_text())
-    assert metrics["estimator_error_m"] < 0.0999
-    assert metrics["radius_error_m"] < 0.0999
-    assert metrics["angle_error"] < 0.0199
+    with judged(out):
+        assert metrics["estimator_error_m"] < 0.0999
+        assert metrics["radius_error_m"] < 0.0999
+        assert metrics["angle_error"] < 0.0199
     status = json.loads((out / "launch.json").read_text())["status"]
     # MAVLink: every unsigned command refused and counted; none acknowledged.
     assert rep["mavlink_unsigned_sent"] > 400 and rep["mavlink_acks"] == 0

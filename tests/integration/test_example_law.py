@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 
+from tests.integration.real_time import judged
 from tests.integration.runs import spawned, spawned_run
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]
@@ -82,7 +83,8 @@ def test_the_example_law_networked(tmp_path: Path) -> None:
     done = subprocess.CompletedProcess(argv, proc.returncode, stdout, "")
     assert done.returncode == 0, done.stdout[-3000:]
     metrics = json.loads((out / "metrics.json").read_text())
-    within_bounds(metrics, "networked")
+    with judged(out):
+        within_bounds(metrics, "networked")
     assert json.loads((out / "run.json").read_text())["law"] == LAW
     launch = json.loads((out / "launch.json").read_text())
     followers = {k: v for k, v in launch["status_at_stop"].items() if k.startswith("follower-")}
@@ -114,7 +116,9 @@ def test_the_example_law_against_the_papers_in_a_sweep(tmp_path: Path) -> None:
         rows = {Path(r["law"]).name: r for r in csv.DictReader(f)}
     assert set(rows) == {LAW, "paper"} and all(r["status"] == "done" for r in rows.values())
     for law, row in rows.items():
-        within_bounds({k: float(row[k]) for k in BOUNDS}, law)
+        with judged(tmp_path / "out" / row["cell"]):
+            within_bounds({k: float(row[k]) for k in BOUNDS}, law)
     # The paper's finite-time estimator is closer than plain consensus (0.010 m, 0.038 m).
-    assert float(rows["paper"]["estimator_error_m"]) < float(rows[LAW]["estimator_error_m"])
+    with judged(tmp_path / "out" / rows["paper"]["cell"]):
+        assert float(rows["paper"]["estimator_error_m"]) < float(rows[LAW]["estimator_error_m"])
     assert (tmp_path / "out" / "error_vs_law.png").stat().st_size > 0

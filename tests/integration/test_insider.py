@@ -36,6 +36,7 @@ import pytest
 
 from deploy.host_keys import CA_KEY, needed_files
 from deploy.run_secrets import MAVLINK_SECRET_FILE, signing_key_file
+from tests.integration.real_time import judged
 from tests.integration.rogue import BAD_TOKENS
 from tests.integration.runs import spawned_run, wait_for
 from tests.integration.test_attack import STARTED
@@ -145,7 +146,8 @@ def test_a_compromised_host_cannot_fly_blind_or_fake_the_others(tmp_path: Path) 
     # The other three followers flew the paper's case within its bounds, each of them.
     worst = worst_per_follower(out / "series.csv", metrics["steady_from_s"])
     for i in (i for i in range(N) if i != ROGUE):
-        assert all(worst[i][k] < bound for k, bound in BOUNDS.items()), (i, worst)
+        with judged(out):
+            assert all(worst[i][k] < bound for k, bound in BOUNDS.items()), (i, worst)
     followers = {n: c for n, c in status.items() if n.startswith("follower-")}
     assert len(followers) == N and all(c["state"] == "done" for c in followers.values())
     assert all(p["exit_code"] == 0 for p in launch["processes"].values())
@@ -223,9 +225,10 @@ def test_tokens_the_acl_would_refuse_are_ignored_when_nothing_refuses_them(
     metrics = json.loads((out / "metrics.json").read_text())
     launch = json.loads((out / "launch.json").read_text())
     assert bus["tokens_declared"] == len(BAD_TOKENS) and bus["token_flaps"] > 40
-    assert metrics["estimator_error_m"] < BOUNDS["est"]
-    assert metrics["radius_error_m"] < BOUNDS["e_rho"]
-    assert metrics["angle_error"] < BOUNDS["e_delta"]
+    with judged(out):
+        assert metrics["estimator_error_m"] < BOUNDS["est"]
+        assert metrics["radius_error_m"] < BOUNDS["e_rho"]
+        assert metrics["angle_error"] < BOUNDS["e_delta"]
     assert all(p["exit_code"] == 0 for p in launch["processes"].values())
     assert launch["events"] == []
     # Every receiver of tokens ignored and counted each bad one, and nothing restarted.
