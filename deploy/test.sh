@@ -7,7 +7,8 @@
 # workers, or a third timed lane, cost the paper's run its radius and command-jump bounds).
 # Then the other real swarms side by side, alone (pytest-xdist; each run takes a port slot
 # of its own): they mostly wait on real time, so four workers per two cores keep the cores
-# ~90 % busy.  Arguments go to every pass, e.g. `bash deploy/test.sh tests/unit`.
+# ~90 % busy; on a slower machine fewer run at once (each real swarm waits for room:
+# tests/admission.py).  Arguments go to every pass, e.g. `bash deploy/test.sh tests/unit`.
 # ENCLOSE_TEST_WORKERS sets the number of swarm workers.
 set -uo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
