@@ -72,7 +72,8 @@ def pytest_runtest_protocol(item: pytest.Item) -> Iterator[None]:
     this wraps) starts."""
     if (item.get_closest_marker("integration") is not None
             and os.environ.get("ENCLOSE_TEST_ADMISSION", "1") != "0"):
-        cores = len(os.sched_getaffinity(0))
+        cores = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                 else os.cpu_count() or 1)
         share = SERIAL_ROOM if item.get_closest_marker("serial") is not None else SWARM_ROOM
         waited_s, demand = Gate(threshold_cores=share * cores).admit()
         item.user_properties.append(("admission_wait_s", round(waited_s, 1)))
