@@ -116,9 +116,10 @@ def _watch(proc: subprocess.Popen[bytes], out: Path, args: argparse.Namespace,
         rss_kb = process_status_kb(pid, "VmRSS")
         if rss_kb is not None and t < args.duration_s:
             samples.append((t, rss_kb / 1024))
+        # Read smaps only in the seconds each snapshot needs: it walks the recorder's pages.
         if args.maps and state == "before" and t >= args.at_s - 2:
             maps["before"] = resident_by_mapping(pid)
-        elif args.maps and t < args.duration_s - 1:
+        elif args.maps and args.duration_s - 3 <= t < args.duration_s - 1:
             maps["end"] = resident_by_mapping(pid)
     if args.maps and len(maps) == 2:
         _print_map_change(maps["before"], maps["end"])
@@ -144,7 +145,8 @@ def _print_map_change(before: dict[str, int], end: dict[str, int]) -> None:
     for name in sorted(set(before) | set(end)):
         d = end.get(name, 0) - before.get(name, 0)
         if abs(d) >= 256:
-            size_kb = (lambda a, b: (int(b, 16) - int(a, 16)) // 1024)(*name.split()[0].split("-"))
+            first, last = name.split()[0].split("-")
+            size_kb = (int(last, 16) - int(first, 16)) // 1024
             print(f"  {name} ({size_kb} kB): {before.get(name, 0)} -> {end.get(name, 0)} kB",
                   flush=True)
     print(f"  total resident {sum(before.values())} -> {sum(end.values())} kB", flush=True)

@@ -16,7 +16,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 PROC = Path("/proc")
-_TICKS_PER_S = float(os.sysconf("SC_CLK_TCK")) if hasattr(os, "sysconf") else 100.0
+TICKS_PER_S = float(os.sysconf("SC_CLK_TCK")) if hasattr(os, "sysconf") else 100.0
+
+
+def stat_fields(text: str) -> list[str]:
+    """The fields of a /proc/<pid>/stat line after the command name: [0] is field 3
+    (state), [11] and [12] utime and stime, [16] nice, [38] the scheduling policy.  The
+    command name (field 2) may hold spaces and parentheses: split after its last ')'."""
+    return text.rpartition(")")[2].split()
 
 
 def process_cpu_s(pid: int, proc: Path = PROC) -> float | None:
@@ -25,10 +32,9 @@ def process_cpu_s(pid: int, proc: Path = PROC) -> float | None:
         text = (proc / str(pid) / "stat").read_text()
     except OSError:
         return None
-    # The command name (field 2) may hold spaces and parentheses: split after its last ')'.
-    fields = text.rpartition(")")[2].split()
+    fields = stat_fields(text)
     try:
-        return (int(fields[11]) + int(fields[12])) / _TICKS_PER_S
+        return (int(fields[11]) + int(fields[12])) / TICKS_PER_S
     except (IndexError, ValueError):
         return None
 

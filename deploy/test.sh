@@ -28,7 +28,7 @@ idle=(chrt --idle 0)
 "${idle[@]}" true 2>/dev/null || idle=(nice -n 19)
 # A real swarm starts when the machine has room for it (tests/admission.py), but its
 # figures still depend on the machine's moment (a shared VM's speed was seen to vary
-# twofold from minute to minute): a failed swarm test runs once more, after a pause, and
+# fourfold from minute to minute): a failed swarm test runs once more, after a pause, and
 # the summary counts it ("rerun").  One that fails twice fails the suite.
 rerun=(--reruns 1 --reruns-delay 5)
 beside="$(mktemp -d)"

@@ -18,7 +18,6 @@ shows its load before the next one is judged.
 from __future__ import annotations
 
 import fcntl
-import os
 import tempfile
 import time
 from collections.abc import Callable
@@ -26,10 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-PROC = Path("/proc")
+from deploy.cpu_load import PROC, TICKS_PER_S, stat_fields
+
 SCHED_IDLE = 5
 BACKGROUND_NICE = 10  # at or above: background work, not counted
-_TICKS_PER_S = float(os.sysconf("SC_CLK_TCK"))
 LOCK_FILE = Path(tempfile.gettempdir()) / "enclose-test-admission.lock"
 
 
@@ -44,9 +43,7 @@ def foreground_ticks(proc: Path = PROC) -> dict[int, int]:
             text = (entry / "stat").read_text()
         except OSError:  # ended meanwhile
             continue
-        # The command name (field 2) may hold spaces and parentheses: split after its last
-        # ')'; fields[0] is then field 3 (state).
-        fields = text.rpartition(")")[2].split()
+        fields = stat_fields(text)
         try:
             cpu, nice, policy = int(fields[11]) + int(fields[12]), int(fields[16]), int(fields[38])
         except (IndexError, ValueError):
@@ -61,7 +58,7 @@ def demand_cores(before: dict[int, int], after: dict[int, int], seconds: float) 
     process that started in between counts whole (its ticks so far are of that time); one
     that ended does not count (its last ticks are lost with it)."""
     used = sum(t - before.get(pid, 0) for pid, t in after.items())
-    return max(0.0, used / _TICKS_PER_S / seconds)
+    return max(0.0, used / TICKS_PER_S / seconds)
 
 
 @dataclass(frozen=True)

@@ -83,10 +83,10 @@ def pytest_runtest_protocol(item: pytest.Item) -> Iterator[None]:
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
     """How long the swarms waited for room: the run's length depends on it."""
-    waits = [dict(r.user_properties)["admission_wait_s"]
-             for reports in terminalreporter.stats.values() for r in reports
+    waits = [wait for reports in terminalreporter.stats.values() for r in reports
              if getattr(r, "when", None) == "call"
-             and "admission_wait_s" in dict(getattr(r, "user_properties", ()))]
+             and (wait := dict(getattr(r, "user_properties", ())).get("admission_wait_s"))
+             is not None]
     if waits and max(waits) >= 1.0:
         terminalreporter.write_line(
             f"admission: {len(waits)} real swarms waited {sum(waits):.0f} s in all for room "

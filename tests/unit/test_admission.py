@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.admission import _TICKS_PER_S, Gate, demand_cores, foreground_ticks
+from deploy.cpu_load import TICKS_PER_S
+from tests.admission import Gate, demand_cores, foreground_ticks
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -42,7 +43,7 @@ def test_counts_normal_priority_processes_only(tmp_path: Path) -> None:
 
 
 def test_demand_is_the_ticks_used_over_the_window() -> None:
-    ticks = int(_TICKS_PER_S)
+    ticks = int(TICKS_PER_S)
     before = {1: 0, 2: 5 * ticks, 3: 7}  # 3 ends in the window: not counted
     after = {1: ticks, 2: 5 * ticks + ticks // 2, 4: ticks // 2}  # 4 started in it
     assert demand_cores(before, after, 2.0) == pytest.approx(1.0)
