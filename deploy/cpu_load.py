@@ -170,6 +170,24 @@ class CpuSampler:
 SATURATED_PCT = 95.0
 
 
+def start_saturation_note(since: tuple[int, int] | None, now: tuple[int, int] | None,
+                          load: float | None, processes: int) -> str | None:
+    """Why a start-up failed, when the machine was saturated between the `machine_ticks`
+    readings `since` (the spawns) and `now`: its processes then starve one another, and a
+    simulator starved for seconds looks like a vehicle that does not answer.  None if the
+    machine had room, or was not read."""
+    if since is None or now is None or now[1] <= since[1]:
+        return None
+    busy_pct = 100.0 * (now[0] - since[0]) / (now[1] - since[1])
+    if busy_pct < SATURATED_PCT:
+        return None
+    load_text = "" if load is None else f", load {load:.0f}"
+    return (f"The machine was {busy_pct:.0f} % busy from the spawns on ({os.cpu_count() or 1} "
+            f"cores{load_text}, {processes} processes of this run): they need more CPU than "
+            "it has, and the start-up failed for it.  Try a smaller swarm, a lower [run] "
+            "rate_hz, or a machine with more free cores.")
+
+
 def _by_role(per: dict[str, float], each: str, unit: str, targets_at_most: bool) -> list[str]:
     """Followers as mean and max (`each` after the mean), the other processes one by one,
     the targets as one figure (their mean, or their max when `targets_at_most`)."""

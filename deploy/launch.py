@@ -18,7 +18,7 @@ from agents.network_args import network_overrides
 from agents.phases import mark
 from agents.scenario.faults import parse_fault_flag
 from agents.scenario.model import Scenario
-from deploy.cpu_load import CpuSampler
+from deploy.cpu_load import CpuSampler, load_1min, machine_ticks, start_saturation_note
 from deploy.faults import FaultRunner
 from deploy.json_files import write_json_atomic
 from deploy.launch_end import exit_code, launch_report, stop_in_order
@@ -76,6 +76,7 @@ class Launch:
         self.started_s = time.monotonic()
         self.t0_s = float("inf")  # monotonic time of the experiment's start, once known
         self.cpu = CpuSampler()  # what each process cost, sampled while flying (see fly)
+        self.spawn_ticks: tuple[int, int] | None = None  # the machine's, as the spawns begin
 
     def common(self) -> list[str]:
         extra = ["--zenoh-config", self.opts.zenoh_config] if self.opts.zenoh_config else []
@@ -95,27 +96,13 @@ class Launch:
 
     def start_all(self) -> None:
         c, s = self.common(), self.scenario
-        mav = [
-            "--mav-local-base",
-            str(self.adapter_base),
-            "--mav-vehicle-base",
-            str(self.vehicle_base),
-        ]
+        mav = ["--mav-local-base", str(self.adapter_base),
+               "--mav-vehicle-base", str(self.vehicle_base)]
         self.sup.start(
-            "sim",
-            "deploy.swarm_sim",
-            [
-                *c,
-                "--listen",
-                self.endpoint,
-                "--base-port",
-                str(self.vehicle_base),
-                "--send-base-port",
-                str(self.adapter_base),
-                "--noise-std-m",
-                str(self.opts.noise_std_m),
-                *self.secrets.args_for("sim"),
-            ],
+            "sim", "deploy.swarm_sim",
+            [*c, "--listen", self.endpoint, "--base-port", str(self.vehicle_base),
+             "--send-base-port", str(self.adapter_base),
+             "--noise-std-m", str(self.opts.noise_std_m), *self.secrets.args_for("sim")],
             fork=True,
         )
         joins = [*c, "--connect", self.endpoint]
@@ -146,6 +133,18 @@ class Launch:
         )
 
     def wait_linked(self, bus: Bus, t0: float) -> None:
+        """Until every process declared itself linked; a start-up that fails on a
+        saturated machine says so (deploy.cpu_load.start_saturation_note)."""
+        try:
+            self._until_linked(bus, t0)
+        except DeployError as exc:
+            note = start_saturation_note(self.spawn_ticks, machine_ticks(), load_1min(),
+                                         len(self.sup.children))
+            if note is None:
+                raise
+            raise DeployError(f"{exc}\n{note}") from exc
+
+    def _until_linked(self, bus: Bus, t0: float) -> None:
         watch = bus.watch_alive(self.keys.all_alive())
         expected, shown = self.expected_tokens(), -1
         deadline = t0 + self.opts.link_timeout_s
@@ -208,6 +207,7 @@ class Launch:
             self.sup.end_forks()
             raise
         mark("credentials")
+        self.spawn_ticks = machine_ticks()
         try:
             self.start_all()
             self.sup.end_forks()

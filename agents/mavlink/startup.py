@@ -172,13 +172,22 @@ def connect(ad: MavlinkAdapter, t: StartupTimeouts,
     wait_heartbeat(ad, t)
     mark("heartbeat")
     set_rates(ad, t)
-    state = wait_until(ad, lambda s: s.link_ok, t.position_s, "LOCAL_POSITION_NED")
+    state = wait_position(ad, t)
     if ad.home_amsl_m is None:
         command(ad, MAV_CMD_REQUEST_MESSAGE, (MSG_HOME_POSITION,), t)
         state = wait_until(ad, lambda _s: ad.home_amsl_m is not None, t.position_s,
-                           "home altitude")
+                           "home altitude", clock=HeardClock(ad, t.silent_s, "home altitude"))
     mark("position")
     return state
+
+
+def wait_position(ad: MavlinkAdapter, t: StartupTimeouts) -> VehicleState:
+    """Wait for position telemetry (LOCAL_POSITION_NED: the link up) for `position_s` of
+    heard time, as a command waits: a vehicle heard (HEARTBEATs) without a position for that
+    long has none to give, one starved of CPU and sending nothing is unheard (64 followers
+    on a slow 2-core machine all gave up here within their first 9 s of wall time)."""
+    return wait_until(ad, lambda s: s.link_ok, t.position_s, "LOCAL_POSITION_NED",
+                      clock=HeardClock(ad, t.silent_s, "LOCAL_POSITION_NED"))
 
 
 def set_rates(ad: MavlinkAdapter, t: StartupTimeouts) -> None:

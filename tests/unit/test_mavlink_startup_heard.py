@@ -11,7 +11,7 @@ from typing import cast
 import pytest
 
 from agents.mavlink.adapter import MavlinkAdapter
-from agents.mavlink.startup import StartupTimeouts, command, set_mode
+from agents.mavlink.startup import StartupTimeouts, command, set_mode, wait_position
 from agents.mavlink.vehicle_types import VehicleState
 from tests.unit.test_mavlink_adapter import ADDR, feed, heartbeat, make
 from transport.errors import MavlinkError
@@ -96,6 +96,37 @@ def test_mode_confirmation_waits_out_a_quiet_vehicle_too() -> None:
     v = ScriptedVehicle(quiet_from_s=0.1, quiet_until_s=6.0, answers_at_s=6.0)
     set_mode(cast(MavlinkAdapter, v), "OFFBOARD", T)
     assert v.state.mode == "OFFBOARD" and v.t >= 6.0
+
+
+def test_position_is_waited_for_through_a_starved_simulators_silence() -> None:
+    v = ScriptedVehicle(quiet_from_s=0.0, quiet_until_s=8.0, answers_at_s=0.0)
+    state = wait_position(cast(MavlinkAdapter, v), T)  # position_s: 5 s
+    assert state.link_ok and v.t == pytest.approx(8.0, abs=0.1)
+
+
+class HeartbeatsOnly(ScriptedVehicle):
+    """Heard (its HEARTBEATs), but it never streams a position."""
+
+    def __init__(self) -> None:
+        super().__init__(quiet_from_s=math.inf, quiet_until_s=math.inf, answers_at_s=0.0)
+        self.telemetry_seen = False
+
+    @property
+    def state(self) -> VehicleState:
+        return VehicleState((0.0,) * 3, (0.0,) * 3, self.t, True, self._mode, False)
+
+
+def test_a_heard_vehicle_without_position_still_fails_after_position_s() -> None:
+    v = HeartbeatsOnly()
+    with pytest.raises(MavlinkError, match=r"5\.0 s waiting for LOCAL_POSITION_NED"):
+        wait_position(cast(MavlinkAdapter, v), T)
+    assert v.t == pytest.approx(5.0, abs=0.1)
+
+
+def test_a_silent_vehicle_fails_the_position_wait_after_silent_s() -> None:
+    v = ScriptedVehicle(quiet_from_s=0.0, quiet_until_s=math.inf, answers_at_s=0.0)
+    with pytest.raises(MavlinkError, match=r"unheard for 20\.0 s while waiting for LOCAL_POS"):
+        wait_position(cast(MavlinkAdapter, v), T)
 
 
 def test_adapter_hears_its_vehicle_not_a_ground_station() -> None:
