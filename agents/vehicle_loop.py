@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 from agents.liveness import StallGuard
@@ -78,11 +78,11 @@ class VehicleWatch:
         return now_s - self.since_s >= self.recover_after_s
 
 
-def _start_again(mav: MavlinkAdapter, altitude_m: float, stop: StopFlag, role: str,
-                 index: int, timeouts: StartupTimeouts) -> bool:
+def _start_again(mav: MavlinkAdapter, altitude_m: float, stop: StopFlag, who: str,
+                 timeouts: StartupTimeouts) -> bool:
     """The start-up sequence again (it skips what is already done); False if stopped."""
-    log.warning("%s %d: vehicle not flying our setpoints (armed=%s mode=%s link=%s): "
-                "starting it up again", role, index, mav.state.armed, mav.state.mode,
+    log.warning("%s: vehicle not flying our setpoints (armed=%s mode=%s link=%s): "
+                "starting it up again", who, mav.state.armed, mav.state.mode,
                 mav.state.link_ok)
     stop.interrupt = True
     try:
@@ -90,7 +90,7 @@ def _start_again(mav: MavlinkAdapter, altitude_m: float, stop: StopFlag, role: s
     except KeyboardInterrupt:
         return False
     except MavlinkError as exc:  # e.g. no heartbeat yet: try again after RECOVER_AFTER_S
-        log.warning("%s %d: start-up failed, will retry: %s", role, index, exc)
+        log.warning("%s: start-up failed, will retry: %s", who, exc)
     finally:
         stop.interrupt = False
     return not stop.raised
@@ -109,12 +109,8 @@ def _declare_alive(bus: Bus, key: str, role: str) -> tuple[Token | StallGuard, C
     return bus.declare_token(key), _nothing
 
 
-def fly(opts: AgentOptions, scenario: Scenario, role: str, vehicle: int,
-        make_node: NodeFactory) -> int:
-    """Take off, declare the process linked, tick until stopped; returns the exit code.
-    `scenario` is the one the process loaded (with its command line's overrides)."""
-    index = opts.index
-    apply_agent_sched(scenario.network)
+def adapter_config(opts: AgentOptions, vehicle: int) -> AdapterConfig:
+    """The MAVLink link to vehicle `vehicle` as the command line sets it."""
     mav_opts = opts.vehicle
     cfg = AdapterConfig.px4_sitl(vehicle, mav_opts.mav_local_base, mav_opts.mav_vehicle_base)
     if mav_opts.mav_vehicle_host:  # a companion computer off the vehicle's host
@@ -122,13 +118,21 @@ def fly(opts: AgentOptions, scenario: Scenario, role: str, vehicle: int,
     if mav_opts.signing_key is not None:  # link id: the vehicle's number, one stream per agent
         cfg = replace(cfg, signing_key=load_key(mav_opts.signing_key),
                       signing_link_id=vehicle & 0xFF)
-    keys = SwarmKeys(opts.bus.swarm)
+    return cfg
+
+
+def fly(opts: AgentOptions, scenario: Scenario, role: str, vehicle: int,
+        make_node: NodeFactory) -> int:
+    """Take off, declare the process linked, tick until stopped; returns the exit code.
+    `scenario` is the one the process loaded (with its command line's overrides)."""
+    index = opts.index
+    apply_agent_sched(scenario.network)
     # Position as often as the loop reads it, no more: each frame is a datagram to verify
     # and decode (a 20-Hz ring64 follower took 2.5 a tick at the 50 Hz default).
     timeouts = StartupTimeouts(telemetry_hz=scenario.run.rate_hz)
     stamps = role == "follower" and opts.bus.network.latency_stamps
     with stop_on_signals() as stop, open_bus(opts.bus, scenario.network, stamps) as bus, \
-            MavlinkAdapter(cfg, bus.now_s) as mav:
+            MavlinkAdapter(adapter_config(opts, vehicle), bus.now_s) as mav:
         node = make_node(bus, mav)
         node.status.set("starting")
         mark("node")  # subscriptions, publishers and first status declared
@@ -140,7 +144,7 @@ def fly(opts: AgentOptions, scenario: Scenario, role: str, vehicle: int,
             node.close()
             return 0
         stop.interrupt = False
-        token, alive = _declare_alive(bus, keys.alive(role, index), role)
+        token, alive = _declare_alive(bus, SwarmKeys(opts.bus.swarm).alive(role, index), role)
         node.status.set("linked")
         mark("linked")
         log_phases(f"{role} {index}")
@@ -150,48 +154,75 @@ def fly(opts: AgentOptions, scenario: Scenario, role: str, vehicle: int,
         # A node with work between ticks (the follower's estimator) does it in the wait.
         idle = getattr(node, "idle", None)
         ticker = Ticker(period, bus.now_s, phase_s=phase, sleep=idle or time.sleep)
-        watch, keeper = VehicleWatch(), OffboardKeeper(mav)
-
-        def extra() -> dict[str, int]:
-            # What the adapter refused or dropped (signatures, flood): agents.mavlink.rx_gate.
-            # Not "rx_": that prefix names a link's counters (deploy.recording.links).
-            signing = {k: v for k, v in mav.counters.items()
-                       if k.startswith(("signing_", "mav_"))}
-            return {"overruns": ticker.overruns, "ticks": ticker.ticks,
-                    "offboard_requests": keeper.requests,
-                    **mav.clock_counters(), **signing, **node.counters()}
-
-        def heartbeat() -> None:
-            alive()
-            if node.status.due():
-                node.status.publish(extra=extra())
-
+        flight = Flight(node, mav, ticker, alive, stop, f"{role} {index}",
+                        scenario.vehicle.altitude_m, timeouts)
         try:
-            while not stop.raised and bus.now_s() < node.stop_s:
-                now = ticker.wait()
-                if watch.lost(mav.state, mav.flavour, now):
-                    node.status.counters["vehicle_restarts"] += 1
-                    # Still a member while re-arming (agents.liveness.StallGuard).
-                    mav.on_wait = heartbeat
-                    try:
-                        again = _start_again(mav, scenario.vehicle.altitude_m, stop, role,
-                                             index, timeouts)
-                    finally:
-                        mav.on_wait = None
-                    if not again:
-                        break
-                    watch.since_s = None
-                    continue
-                alive()
-                node.tick(now)
-                keeper.check(now)
-                node.status.state = "running" if node.start_s is not None else "linked"
-                if node.status.due():
-                    node.status.publish(extra=extra())
-            node.status.set("done", extra=extra())
-            log.info("%s %d done: ticks=%d overruns=%d %s", role, index, ticker.ticks,
-                     ticker.overruns, node.counters())
+            flight.run(bus.now_s)
         finally:
             token.close()
             node.close()
     return 0
+
+
+@dataclass
+class Flight:
+    """The loop of a linked process, `run`: tick the node at its rate, keep the vehicle in
+    offboard, start it up again when it stopped flying our setpoints, publish the status."""
+
+    node: VehicleNode
+    mav: MavlinkAdapter
+    ticker: Ticker
+    alive: Callable[[], None]
+    stop: StopFlag
+    who: str  # "follower 3"
+    altitude_m: float
+    timeouts: StartupTimeouts
+    watch: VehicleWatch = field(default_factory=VehicleWatch)
+
+    def __post_init__(self) -> None:
+        self.keeper = OffboardKeeper(self.mav)
+
+    def run(self, now_s: Callable[[], float]) -> None:
+        node, ticker = self.node, self.ticker
+        while not self.stop.raised and now_s() < node.stop_s:
+            now = ticker.wait()
+            if self.watch.lost(self.mav.state, self.mav.flavour, now):
+                if not self.recover():
+                    break
+                continue
+            self.alive()
+            node.tick(now)
+            self.keeper.check(now)
+            node.status.state = "running" if node.start_s is not None else "linked"
+            if node.status.due():
+                node.status.publish(extra=self.extra())
+        node.status.set("done", extra=self.extra())
+        log.info("%s done: ticks=%d overruns=%d %s", self.who, ticker.ticks, ticker.overruns,
+                 node.counters())
+
+    def recover(self) -> bool:
+        """The vehicle's start-up again, still a member meanwhile (agents.liveness.StallGuard);
+        False if the process was stopped during it."""
+        self.node.status.counters["vehicle_restarts"] += 1
+        self.mav.on_wait = self.heartbeat
+        try:
+            again = _start_again(self.mav, self.altitude_m, self.stop, self.who, self.timeouts)
+        finally:
+            self.mav.on_wait = None
+        self.watch.since_s = None
+        return again
+
+    def heartbeat(self) -> None:
+        self.alive()
+        if self.node.status.due():
+            self.node.status.publish(extra=self.extra())
+
+    def extra(self) -> dict[str, int]:
+        """The loop's and the adapter's counters beside the node's, for the status."""
+        # What the adapter refused or dropped (signatures, flood): agents.mavlink.rx_gate.
+        # Not "rx_": that prefix names a link's counters (deploy.recording.links).
+        mav = self.mav
+        signing = {k: v for k, v in mav.counters.items() if k.startswith(("signing_", "mav_"))}
+        return {"overruns": self.ticker.overruns, "ticks": self.ticker.ticks,
+                "offboard_requests": self.keeper.requests,
+                **mav.clock_counters(), **signing, **self.node.counters()}

@@ -188,15 +188,9 @@ class Launch:
 
     def execute(self) -> int:
         self.out.mkdir(parents=True, exist_ok=True)
-        log.info(
-            "run directory %s; swarm %s; Zenoh rendezvous %s; vehicles on UDP 127.0.0.1:%d+; "
-            "agents on UDP 127.0.0.1:%d+",
-            self.out,
-            self.keys.swarm,
-            self.endpoint,
-            self.vehicle_base,
-            self.adapter_base,
-        )
+        log.info("run directory %s; swarm %s; Zenoh rendezvous %s; vehicles on UDP "
+                 "127.0.0.1:%d+; agents on UDP 127.0.0.1:%d+", self.out, self.keys.swarm,
+                 self.endpoint, self.vehicle_base, self.adapter_base)
         t0 = time.monotonic()
         if self.forks_followers:
             self.sup.start_fork_server()
@@ -214,31 +208,7 @@ class Launch:
             mark("spawned")
             with self.open_bus() as bus:
                 mark("bus_open")
-                self.board.subscription = bus.subscribe(self.keys.all_status())
-                self.wait_linked(bus, t0)
-                mark("linked")
-                self.timings["link_s"] = time.monotonic() - t0
-                self.timings["linked_wall_s"] = time.time()
-                log.info(
-                    "all %d processes linked in %.1f s",
-                    len(self.expected_tokens()),
-                    self.timings["link_s"],
-                )
-                self.live_url = announce_live_url(self.opts.live, self.out)
-                try:
-                    self.fly(bus)
-                except KeyboardInterrupt:
-                    interrupted = True
-                    log.warning("interrupted: stopping the run, keeping what was recorded")
-                self.status_at_stop = self.board.as_dict()
-                self.write_launch()  # the recorder draws its events on the figures
-                bus.publish(
-                    self.keys.control(),
-                    encode(
-                        RunControl(self._stamper(bus).header(), "stop", bus.now_s(), 0.0)
-                    ),
-                )
-                stop_in_order(self)
+                interrupted = self.link_and_fly(bus, t0)
         except KeyboardInterrupt:
             interrupted = True
             log.warning("interrupted before the start")
@@ -248,6 +218,30 @@ class Launch:
             self.sup.stop_all()
             self.write_launch()
         return exit_code(self, interrupted)
+
+    def link_and_fly(self, bus: Bus, t0: float) -> bool:
+        """Wait for every process, fly the run, stop it in order; True if interrupted
+        (Ctrl-C) during the flight, whose recording is kept."""
+        self.board.subscription = bus.subscribe(self.keys.all_status())
+        self.wait_linked(bus, t0)
+        mark("linked")
+        self.timings["link_s"] = time.monotonic() - t0
+        self.timings["linked_wall_s"] = time.time()
+        log.info("all %d processes linked in %.1f s", len(self.expected_tokens()),
+                 self.timings["link_s"])
+        self.live_url = announce_live_url(self.opts.live, self.out)
+        interrupted = False
+        try:
+            self.fly(bus)
+        except KeyboardInterrupt:
+            interrupted = True
+            log.warning("interrupted: stopping the run, keeping what was recorded")
+        self.status_at_stop = self.board.as_dict()
+        self.write_launch()  # the recorder draws its events on the figures
+        stop_word = RunControl(self._stamper(bus).header(), "stop", bus.now_s(), 0.0)
+        bus.publish(self.keys.control(), encode(stop_word))
+        stop_in_order(self)
+        return interrupted
 
     def make_secrets(self) -> RunSecrets:
         s = self.scenario

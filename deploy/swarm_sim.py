@@ -182,10 +182,9 @@ class SwarmSimOptions:
                    args.send_base_port, args.signing_secret, tuple(args.sensor_link))
 
 
-def run(opts: SwarmSimOptions) -> int:
-    scenario = load_run_scenario(opts.bus)
-    tick_hz = opts.rate_hz or sim_tick_hz(scenario.run.rate_hz)
-    cfg = SimConfig(
+def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> SimConfig:
+    """The vehicles' MAVLink side as the command line sets it."""
+    return SimConfig(
         rate_hz=tick_hz,
         telemetry_hz=opts.telemetry_hz or tick_hz,
         flavour=scenario.vehicle.flavour,
@@ -194,21 +193,22 @@ def run(opts: SwarmSimOptions) -> int:
         send_base_port=opts.send_base_port,
         signing_secret=None if opts.signing_secret is None else load_key(opts.signing_secret),
     )
+
+
+def run(opts: SwarmSimOptions) -> int:
+    scenario = load_run_scenario(opts.bus)
+    tick_hz = opts.rate_hz or sim_tick_hz(scenario.run.rate_hz)
+    cfg = sim_config(opts, scenario, tick_hz)
     keys = SwarmKeys(opts.bus.swarm)
     links = [parse_sensor_link(text, scenario.n) for text in opts.sensor_links]
     with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus, \
             sensor_buses(links, opts.bus, scenario.network) as linked:
         sim = Simulator(spawn_points_ned(scenario), scenario.vehicle, scenario.home, cfg)
         sensor = SensorPublisher(
-            scenario,
-            bus,
-            keys,
+            scenario, bus, keys,
             sensor_every_ticks(tick_hz, opts.sensor_hz or scenario.run.rate_hz),
-            opts.noise_std_m,
-            opts.seed,
-            late_s=lambda t: sim.boot_time_s() - t,
-            sensor_buses=linked,
-        )
+            opts.noise_std_m, opts.seed, late_s=lambda t: sim.boot_time_s() - t,
+            sensor_buses=linked)
         status = StatusReporter(bus, keys, "sim", 0)
         sim.on_tick.append(sensor)
 
@@ -235,15 +235,9 @@ def run(opts: SwarmSimOptions) -> int:
             sensor.close()
             sim.close()
         status.set("done", extra=loop_counters())
-    log.info(
-        "simulator stopped at t=%.1f s: ticks=%d overruns=%d catch-ups=%d (%d ticks) %s",
-        sim.sim_time_s,
-        stats.ticks,
-        stats.overruns,
-        stats.catch_ups,
-        stats.caught_up_ticks,
-        dict(sim.counters),
-    )
+    log.info("simulator stopped at t=%.1f s: ticks=%d overruns=%d catch-ups=%d (%d ticks) %s",
+             sim.sim_time_s, stats.ticks, stats.overruns, stats.catch_ups,
+             stats.caught_up_ticks, dict(sim.counters))
     return 0
 
 
