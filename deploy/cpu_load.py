@@ -74,6 +74,14 @@ def load_1min(proc: Path = PROC) -> float | None:
         return None
 
 
+def busy_pct(first: tuple[int, int], last: tuple[int, int]) -> float | None:
+    """How busy the machine was between two `machine_ticks` readings, in %; None if no
+    tick passed between them."""
+    if last[1] <= first[1]:
+        return None
+    return 100.0 * (last[0] - first[0]) / (last[1] - first[1])
+
+
 @dataclass
 class _Window:
     """Running sums over the samples at or after `from_s` (nothing per sample is kept: the
@@ -157,8 +165,9 @@ class CpuSampler:
             out["process_peak_rss_mb"] = {k: round(v, 1)
                                           for k, v in sorted(self.peak_rss_mb.items())}
         first, last = w.machine_first, w.machine_last
-        if w.machine_samples >= 2 and first and last and last[1] > first[1]:
-            out["machine_busy_pct"] = round(100.0 * (last[0] - first[0]) / (last[1] - first[1]), 1)
+        busy = busy_pct(first, last) if w.machine_samples >= 2 and first and last else None
+        if busy is not None:
+            out["machine_busy_pct"] = round(busy, 1)
             if w.loads[1]:
                 out["load_1min"] = round(w.loads[0] / w.loads[1], 2)
             out["cores"] = cores or os.cpu_count() or 1
@@ -176,13 +185,11 @@ def start_saturation_note(since: tuple[int, int] | None, now: tuple[int, int] | 
     readings `since` (the spawns) and `now`: its processes then starve one another, and a
     simulator starved for seconds looks like a vehicle that does not answer.  None if the
     machine had room, or was not read."""
-    if since is None or now is None or now[1] <= since[1]:
-        return None
-    busy_pct = 100.0 * (now[0] - since[0]) / (now[1] - since[1])
-    if busy_pct < SATURATED_PCT:
+    busy = None if since is None or now is None else busy_pct(since, now)
+    if busy is None or busy < SATURATED_PCT:
         return None
     load_text = "" if load is None else f", load {load:.0f}"
-    return (f"The machine was {busy_pct:.0f} % busy from the spawns on ({os.cpu_count() or 1} "
+    return (f"The machine was {busy:.0f} % busy from the spawns on ({os.cpu_count() or 1} "
             f"cores{load_text}, {processes} processes of this run): they need more CPU than "
             "it has, and the start-up failed for it.  Try a smaller swarm, a lower [run] "
             "rate_hz, or a machine with more free cores.")

@@ -48,9 +48,9 @@ beside_pid=$!
 "${pytest[@]}" -n 2 --dist loadgroup -m serial "${rerun[@]}" "$@"
 alone=$?
 workers="${ENCLOSE_TEST_WORKERS:-$((2 * $(nproc)))}"
-# The swarms do not wait for the unit tests: admission keeps a third of the cores free
-# for the swarms' bursts, and the idle-priority worker runs in it (on the slow VM the
-# unit tests ended 1.5-2.5 min after the serial tier and held the swarms back as long).
+# The swarms do not wait for the unit tests: admission starts a swarm only while the
+# others use under 0.65 of the cores, and the idle-priority worker runs in what they leave
+# (on the slow VM the suite took 14.3-15.2 min so, 16.6-17.7 min with the swarms waiting).
 # --dist loadgroup hands each worker one test at a time (and one queued), in collection
 # order: longest first (tests/conftest.py).
 "${pytest[@]}" -n "$workers" --dist loadgroup -m "integration and not serial" "${rerun[@]}" "$@"
