@@ -6,9 +6,9 @@ length is real time, go first, longest first, and the short unit tests fill in b
 A test's timeout says how long it may take, and stands in for its length.
 
 ENCLOSE_TEST_TIMEOUT_SCALE multiplies every test's timeout: deploy/test.sh runs the unit
-tests at idle priority beside the timed tests and the swarms, where they take what those
-leave (beside swarms, a test that takes 4 s alone was seen to take over 60 s).  A timeout
-there still catches a hang; it is not a measure of speed.
+tests at idle priority beside the timed tests, where they take what those leave (beside
+swarms, a test that takes 4 s alone was seen to take over 60 s).  A timeout there still
+catches a hang; it is not a measure of speed.
 
 A real swarm starts only when the machine has room for it (tests/admission.py): the wait
 comes before the test's timeout starts, and shows in the report's properties.
