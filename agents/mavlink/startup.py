@@ -112,6 +112,15 @@ def wait_until(ad: MavlinkAdapter, ok: Callable[[VehicleState], bool], timeout_s
         ad.wait_readable(max(0.0, min(wake, 0.05)))
 
 
+def wait_heard(ad: MavlinkAdapter, ok: Callable[[VehicleState], bool], timeout_s: float,
+               what: str, t: StartupTimeouts, heard_what: str | None = None,
+               keepalive_hz: float = 0.0) -> VehicleState:
+    """`wait_until` counting only time the vehicle is heard (HeardClock), and failing once it
+    is unheard for `t.silent_s`; `heard_what` names the wait in that error (default `what`)."""
+    clock = HeardClock(ad, t.silent_s, heard_what or what)
+    return wait_until(ad, ok, timeout_s, what, keepalive_hz, clock)
+
+
 def command(ad: MavlinkAdapter, cmd: int, params: tuple[float, ...], t: StartupTimeouts,
             keepalive_hz: float = 0.0) -> None:
     """Send a command until ACCEPTED; raises CommandRejectedError or MavlinkError on timeout.
@@ -158,8 +167,8 @@ def set_mode(ad: MavlinkAdapter, name: str, t: StartupTimeouts, keepalive_hz: fl
     if ad.flavour is None:
         raise MavlinkError("flavour unknown: no heartbeat yet")
     command(ad, MAV_CMD_DO_SET_MODE, do_set_mode_params(ad.flavour, name), t, keepalive_hz)
-    wait_until(ad, lambda s: s.mode == name, t.command_s, f"mode {name} in HEARTBEAT",
-               keepalive_hz, HeardClock(ad, t.silent_s, f"mode {name}"))
+    wait_heard(ad, lambda s: s.mode == name, t.command_s, f"mode {name} in HEARTBEAT", t,
+               f"mode {name}", keepalive_hz)
 
 
 def _no_mark(phase: str) -> None:
@@ -175,8 +184,8 @@ def connect(ad: MavlinkAdapter, t: StartupTimeouts,
     state = wait_position(ad, t)
     if ad.home_amsl_m is None:
         command(ad, MAV_CMD_REQUEST_MESSAGE, (MSG_HOME_POSITION,), t)
-        state = wait_until(ad, lambda _s: ad.home_amsl_m is not None, t.position_s,
-                           "home altitude", clock=HeardClock(ad, t.silent_s, "home altitude"))
+        state = wait_heard(ad, lambda _s: ad.home_amsl_m is not None, t.position_s,
+                           "home altitude", t)
     mark("position")
     return state
 
@@ -186,8 +195,7 @@ def wait_position(ad: MavlinkAdapter, t: StartupTimeouts) -> VehicleState:
     heard time, as a command waits: a vehicle heard (HEARTBEATs) without a position for that
     long has none to give, one starved of CPU and sending nothing is unheard (64 followers
     on a slow 2-core machine all gave up here within their first 9 s of wall time)."""
-    return wait_until(ad, lambda s: s.link_ok, t.position_s, "LOCAL_POSITION_NED",
-                      clock=HeardClock(ad, t.silent_s, "LOCAL_POSITION_NED"))
+    return wait_heard(ad, lambda s: s.link_ok, t.position_s, "LOCAL_POSITION_NED", t)
 
 
 def set_rates(ad: MavlinkAdapter, t: StartupTimeouts) -> None:
@@ -241,9 +249,9 @@ def take_off(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts,
     mark("armed")
     command(ad, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, math.nan, math.nan, math.nan, alt_param), t)
     mark("takeoff_accepted")
-    state = wait_until(ad, lambda s: s.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m,
-                       t.takeoff_s, f"take-off to {altitude_m:.1f} m", t.setpoint_hz,
-                       HeardClock(ad, t.silent_s, "the take-off"))
+    state = wait_heard(ad, lambda s: s.pos_enu_m[2] >= altitude_m - t.altitude_tolerance_m,
+                       t.takeoff_s, f"take-off to {altitude_m:.1f} m", t, "the take-off",
+                       t.setpoint_hz)
     mark("at_altitude")
     return state
 

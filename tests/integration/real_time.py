@@ -11,6 +11,12 @@ runs of 2026-11-26; 5.2 % and 13 % were still inside).  Every run records that i
 real time; when the run's own record says it did not, it becomes a `NotJudged` warning
 that names the figures, and the test goes on to its other assertions.  It never turns a
 pass into anything else, and a run without a load record is judged.
+
+Late ticks excuse a failure only where the machine was the cause: a run whose machine had
+room (under MACHINE_ROOM_BUSY_PCT busy with a 1-min load under its cores) or one of whose
+own processes took a core's worth (OWN_BOTTLENECK_CPU_PCT) is judged, since there the
+project made itself late.  Of 40 runs kept on a slow test VM (2026-11-27), the 22 that
+lost real time had the machine 76.6-100 % busy and no process above 38 % of a core.
 """
 
 from __future__ import annotations
@@ -20,9 +26,12 @@ import json
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 SIM_LATE_MAX_PCT = 5.0  # the simulator, the first process to fall behind
 FOLLOWERS_LATE_MAX_PCT = 1.0
+MACHINE_ROOM_BUSY_PCT = 50.0
+OWN_BOTTLENECK_CPU_PCT = 80.0
 
 
 class NotJudged(UserWarning):
@@ -41,8 +50,23 @@ def lost_real_time(run_dir: Path) -> str | None:
     if (sim is None or sim < SIM_LATE_MAX_PCT) and (
             followers is None or followers < FOLLOWERS_LATE_MAX_PCT):
         return None
+    if _late_by_itself(load):
+        return None
     return (f"the simulator late on {sim} % of its ticks, the followers on {followers} %, "
             f"the machine {load.get('machine_busy_pct')} % busy (load {load.get('load_1min')})")
+
+
+def _late_by_itself(load: dict[str, Any]) -> bool:
+    """Whether the run was late with the machine not to blame: room to spare, or one of its
+    own processes using a whole core (a slow simulator is the project's, not the VM's)."""
+    busy, load_1min, cores = (load.get("machine_busy_pct"), load.get("load_1min"),
+                              load.get("cores"))
+    if (busy is not None and busy < MACHINE_ROOM_BUSY_PCT and load_1min is not None
+            and cores and load_1min < cores):
+        return True
+    cpu = load.get("process_cpu_pct") or {}
+    return any(isinstance(v, (int, float)) and v >= OWN_BOTTLENECK_CPU_PCT
+               for v in cpu.values())
 
 
 @contextlib.contextmanager

@@ -57,3 +57,30 @@ def test_other_errors_pass_through(tmp_path: Path) -> None:
     run = _run(tmp_path, 60.0, 5.0)
     with pytest.raises(KeyError), judged(run):
         raise KeyError("acks_own")
+
+
+def _loaded(tmp_path: Path, busy_pct: float, load_1min: float,
+            cpu_pct: dict[str, float]) -> Path:
+    load = {"ticks": {"sim_overrun_pct": 9.0, "overrun_pct": 0.1}, "machine_busy_pct": busy_pct,
+            "load_1min": load_1min, "cores": 2, "process_cpu_pct": cpu_pct}
+    (tmp_path / "launch.json").write_text(json.dumps({"load": load}))
+    return tmp_path
+
+
+def test_late_on_a_machine_with_room_is_judged(tmp_path: Path) -> None:
+    run = _loaded(tmp_path, 35.0, 1.2, {"sim": 30.0, "follower-0": 9.0})
+    assert lost_real_time(run) is None
+    with pytest.raises(AssertionError, match="radius"), judged(run):
+        raise AssertionError("radius 0.3")
+
+
+def test_late_behind_a_process_of_its_own_at_a_core_is_judged(tmp_path: Path) -> None:
+    run = _loaded(tmp_path, 98.0, 12.0, {"sim": 97.5, "follower-0": 9.0})
+    assert lost_real_time(run) is None
+
+
+@pytest.mark.parametrize(("busy", "load_1min"), [(35.0, 4.0), (76.6, 1.5), (99.0, 10.5)])
+def test_late_on_a_busy_or_queued_machine_is_not_judged(
+        tmp_path: Path, busy: float, load_1min: float) -> None:
+    run = _loaded(tmp_path, busy, load_1min, {"sim": 16.5, "recorder": 13.4})
+    assert lost_real_time(run) is not None
