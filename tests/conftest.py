@@ -6,9 +6,10 @@ length is real time, go first, longest first, and the short unit tests fill in b
 A test's timeout says how long it may take, and stands in for its length.
 
 ENCLOSE_TEST_TIMEOUT_SCALE multiplies every test's timeout: deploy/test.sh runs the unit
-tests at idle priority beside the timed tests, where they take what those leave (beside
-swarms, a test that takes 4 s alone was seen to take over 60 s).  A timeout there still
-catches a hang; it is not a measure of speed.
+tests at idle priority beside the timed tests (those marked `realtime`) and beside the
+swarms (the others), where they take what those leave (beside swarms, a test that takes
+4 s alone was seen to take over 60 s).  A timeout there still catches a hang; it is not a
+measure of speed.
 
 A real swarm starts only when the machine has room for it (tests/admission.py): the wait
 comes before the test's timeout starts, and shows in the report's properties.
@@ -22,9 +23,17 @@ import sys
 from collections.abc import Iterator
 
 import pytest
+from hypothesis import settings
 from pytest_timeout import get_env_settings
 
 from tests.admission import Gate
+
+pytest_plugins = ["tests.realtime_guard"]
+
+# Hypothesis's 200-ms deadline per example measures the machine, not the code: beside the
+# swarms an example may wait that long for the CPU.  Each test's timeout still catches a hang.
+settings.register_profile("enclose", deadline=None)
+settings.load_profile("enclose")
 
 # Cores of normal-priority demand under which a test starts: a timed test wants about a
 # core to itself on 2 cores; the other swarms fill the machine to about two thirds, which

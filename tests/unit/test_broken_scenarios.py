@@ -62,6 +62,7 @@ def test_broken_scenario_is_one_line_naming_the_field(
     assert field in errors[0] and "\n" not in errors[0], (what, errors[0])
 
 
+@pytest.mark.realtime
 def test_broken_scenario_from_the_shell_has_no_traceback(tmp_path: Path) -> None:
     path = tmp_path / "broken.toml"
     path.write_text(BROKEN[1][1])

@@ -57,6 +57,7 @@ def test_no_figures_leaves_them_to_report(tmp_path: Path) -> None:
     assert (out / "performance.png").stat().st_size > 10_000
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(60)
 def test_broken_scenario_is_a_clear_error_and_exit_code(tmp_path: Path) -> None:
     bad = tmp_path / "bad.toml"

@@ -17,6 +17,7 @@ pytestmark = pytest.mark.timeout(120)
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.realtime
 def test_guide_builds_strict(tmp_path: Path) -> None:
     pytest.importorskip("mkdocs")
     proc = subprocess.run(

@@ -60,6 +60,7 @@ def state(pid: int | None) -> str:
     return Path(f"/proc/{pid}/stat").read_text().split(")")[1].split()[0]
 
 
+@pytest.mark.realtime
 def test_runner_pauses_resumes_restarts_and_kills(tmp_path: Path) -> None:
     sup = Supervisor(tmp_path)
     try:

@@ -112,6 +112,7 @@ def test_enclose_keys_command_from_a_deployment_file_or_a_host_count(tmp_path: P
     assert not (tmp_path / "c" / "h1" / "sim.json").exists()
 
 
+@pytest.mark.realtime
 def test_enclose_host_refuses_a_folder_with_the_ca_key_before_starting_anything(
         keys: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     dep_file = tmp_path / "dep.toml"

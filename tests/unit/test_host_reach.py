@@ -19,7 +19,7 @@ from transport.peer_clock import ClockBook
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
-pytestmark = pytest.mark.timeout(30)
+pytestmark = [pytest.mark.timeout(30), pytest.mark.realtime]
 KEYS = SwarmKeys("s")
 
 

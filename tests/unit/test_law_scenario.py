@@ -168,6 +168,7 @@ def test_simulate_with_a_bad_law_is_one_line_and_exit_code_2(
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("command", ["simulate", "run"])
 def test_a_bad_law_stops_the_command_before_any_process(command: str, tmp_path: Path) -> None:
     path = scenario_with(tmp_path, '[law]\nmodule = "mylaw:Gone"', GOOD_LAW)

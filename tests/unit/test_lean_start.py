@@ -61,6 +61,7 @@ for name in ("paper", "ring16"):
 """
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(90)
 def test_a_follower_and_the_launcher_import_none_of_the_heavy_packages() -> None:
     swarm = imported_by("import agents.follower.main, agents.target, deploy.swarm_sim")
@@ -114,6 +115,7 @@ TargetMotion(load_scenario("paper", whole_run=False), horizon_s=10.0).state(1.0)
 FULL_DIALECT = "pymavlink.dialects.v20.common"
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(120)
 def test_a_follower_and_a_target_hold_the_lean_mavlink_dialect_not_the_full_one() -> None:
     """pymavlink's common dialect costs ~4.8 MB a process; the agents' lean one ~0.6."""
@@ -138,6 +140,7 @@ print(before - process_status_kb(os.getpid(), "VmRSS"))
 """
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(60)
 @pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="malloc_trim is glibc's")
 def test_trimming_the_heap_before_forking_returns_the_compilers_memory() -> None:
@@ -156,6 +159,7 @@ def wait_exit(proc: object, timeout_s: float = 20.0) -> int | None:
     return None
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(30)
 def test_a_forked_child_runs_main_with_its_own_log_pid_and_exit_code(tmp_path: Path) -> None:
     log = tmp_path / "child.log"
@@ -226,6 +230,7 @@ def test_no_latency_without_arrival_stamps() -> None:
     assert not any("lat" in k for k in d.counters())
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(30)
 def test_no_fork_while_a_thread_runs(tmp_path: Path) -> None:
     import threading
@@ -252,6 +257,7 @@ def test_no_fork_while_a_thread_runs(tmp_path: Path) -> None:
         helper.join()
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(60)
 def test_the_fork_server_forks_lean_children_that_this_process_waits_for(
         tmp_path: Path) -> None:
@@ -310,6 +316,7 @@ def zygote_alive(pid: int) -> bool:
         return False
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(60)
 def test_the_fork_server_dies_with_a_killed_launcher(tmp_path: Path) -> None:
     launcher = subprocess.run([sys.executable, "-c", KILLED_LAUNCHER, str(tmp_path / "z.log")],

@@ -13,7 +13,7 @@ import pytest
 
 from deploy.pids import ProcessId, identify, is_alive, signal_same
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.timeout(60), pytest.mark.realtime]
 
 # A launcher that starts one child of each kind, stops one (a `pause` fault), prints
 # their PIDs and is killed.

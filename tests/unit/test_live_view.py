@@ -196,6 +196,7 @@ def test_health_thresholds(ratio: float | None, age_ms: float | None, expected: 
     assert health(ratio, age_ms) == expected
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(30)
 def test_server_takes_the_next_free_port_and_a_real_client_decodes_the_scene() -> None:
     with socket.socket() as busy:

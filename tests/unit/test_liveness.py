@@ -97,6 +97,7 @@ def test_a_token_whose_return_was_missed_is_found_by_asking_again() -> None:
     assert watch.members(0.2 + REFRESH_S) == {1}  # the new watch's history
 
 
+@pytest.mark.realtime
 def test_a_stuck_loop_withdraws_its_token_and_declares_it_again_when_it_runs() -> None:
     hub = MemoryHub()
     now = [0.0]
@@ -120,6 +121,7 @@ def test_a_stuck_loop_withdraws_its_token_and_declares_it_again_when_it_runs() -
     assert watch.members(5.4) == frozenset()  # closing withdraws it for good
 
 
+@pytest.mark.realtime
 def test_the_guards_own_thread_withdraws_the_token_of_a_loop_that_stopped() -> None:
     hub = MemoryHub()
     guard = StallGuard(MemoryBus(hub, "f2"), KEYS.alive("follower", 2), stall_s=0.2,

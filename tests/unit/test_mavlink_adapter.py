@@ -127,6 +127,7 @@ def test_ack_recorded() -> None:
     assert ad.acks[400] == 0
 
 
+@pytest.mark.realtime
 def test_statustext_kept_and_a_failing_handler_is_contained() -> None:
     ad, clock = make()
     feed(ad, heartbeat(), clock.t)
@@ -169,6 +170,7 @@ def next_of(sock: socket.socket, kind: str):
                 return m
 
 
+@pytest.mark.realtime
 def test_timesync_requests_answered_and_replies_lock_the_clock_map() -> None:
     ad, clock, vehicle = open_pair()
     try:
@@ -224,6 +226,7 @@ def kernel_stamping() -> Iterator[None]:
         probe.close()
 
 
+@pytest.mark.realtime
 @pytest.mark.usefixtures("kernel_stamping")
 def test_queued_datagrams_are_stamped_with_their_arrival() -> None:
     ad, clock, vehicle = open_pair()
@@ -262,6 +265,7 @@ def test_offboard_is_requested_again_after_the_failsafe_hold_only() -> None:
     assert len(sent) == 2
 
 
+@pytest.mark.realtime
 def test_a_blocking_wait_calls_the_on_wait_hook() -> None:
     """While start-up helpers block (re-arming mid-run), the process keeps its heartbeat."""
     calls: list[int] = []
@@ -274,6 +278,7 @@ def test_a_blocking_wait_calls_the_on_wait_hook() -> None:
     assert len(calls) == 2
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(30)
 def test_a_type_the_lean_dialect_lacks_is_counted_apart_from_bad_bytes() -> None:
     """A real PX4 streams BATTERY_STATUS and more: framed, not ours, not garbage."""

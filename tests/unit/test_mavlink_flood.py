@@ -147,6 +147,7 @@ def gcs(key: bytes | None, link_id: int = 0):  # type: ignore[no-untyped-def]
     return mav
 
 
+@pytest.mark.realtime
 def test_unsigned_heartbeat_registers_no_peer_when_signing(signed_sim: Simulator) -> None:
     ep, row = signed_sim.endpoints[0], signed_sim._rows[0]
     ep.on_datagram(heartbeat(gcs(None)), ("127.0.0.1", 5000), 0.0, row)
@@ -156,6 +157,7 @@ def test_unsigned_heartbeat_registers_no_peer_when_signing(signed_sim: Simulator
     assert list(ep.peers) == [("127.0.0.1", 5001)]
 
 
+@pytest.mark.realtime
 def test_spoofed_frames_do_not_churn_the_peer_table(signed_sim: Simulator) -> None:
     ep, row = signed_sim.endpoints[0], signed_sim._rows[0]
     real = [("127.0.0.1", 6000 + k) for k in range(MAX_PEERS)]
@@ -175,6 +177,7 @@ def test_spoofed_frames_do_not_churn_the_peer_table(signed_sim: Simulator) -> No
     assert ("127.0.0.1", 9000) in ep.peers and len(ep.peers) == MAX_PEERS
 
 
+@pytest.mark.realtime
 def test_without_signing_any_sender_is_a_peer_as_before() -> None:
     sim = make_sim()
     try:
@@ -186,6 +189,7 @@ def test_without_signing_any_sender_is_a_peer_as_before() -> None:
         sim.close()
 
 
+@pytest.mark.realtime
 def test_a_flooded_vehicle_costs_one_budget_a_tick_and_the_others_are_served(
         signed_sim: Simulator) -> None:
     ports = signed_sim.listen_ports()

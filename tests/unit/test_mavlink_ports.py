@@ -8,6 +8,8 @@ import pytest
 
 from deploy.ports import PX4_SITL_BASES, mavlink_bases, udp_block_free
 
+pytestmark = pytest.mark.realtime
+
 
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize("count", [6, 34, 40, 66, 130])

@@ -144,6 +144,7 @@ def signed_sim() -> Iterator[Simulator]:
         s.close()
 
 
+@pytest.mark.realtime
 def test_vehicle_with_a_key_drops_unsigned_commands_and_obeys_signed_ones(
         signed_sim: Simulator) -> None:
     ep = signed_sim.endpoints[0]
@@ -196,6 +197,7 @@ def test_signing_stream_keeps_to_the_wall_clock() -> None:
     assert SignatureVerifier(KEY).check(frame, 76, 245, 191) is None
 
 
+@pytest.mark.realtime
 def test_keyed_adapter_takes_the_vehicles_signed_telemetry_and_drops_forgeries(
         signed_sim: Simulator) -> None:
     import time
@@ -222,6 +224,7 @@ def test_keyed_adapter_takes_the_vehicles_signed_telemetry_and_drops_forgeries(
     assert ad.state.pos_enu_m == pytest.approx((east, north, -down))
 
 
+@pytest.mark.realtime
 def test_adapter_setpoints_decode_and_verify_in_stock_pymavlink() -> None:
     """The adapter packs its setpoints by struct: stock pymavlink, keyed, must check their
     signatures and read the fields the adapter meant (ENU (1, 2, 3) is NED (2, 1, -3))."""

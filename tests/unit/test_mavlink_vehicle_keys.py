@@ -108,6 +108,7 @@ def secret_sim() -> Iterator[Simulator]:
         s.close()
 
 
+@pytest.mark.realtime
 def test_vehicle_refuses_another_vehicles_key_and_names_it(secret_sim: Simulator) -> None:
     ep, row = secret_sim.endpoints[0], secret_sim._rows[0]
     addr = ("127.0.0.1", 9)
@@ -123,6 +124,7 @@ def test_vehicle_refuses_another_vehicles_key_and_names_it(secret_sim: Simulator
     assert c["commands"] == 1
 
 
+@pytest.mark.realtime
 def test_vehicle_telemetry_is_signed_with_its_own_key(secret_sim: Simulator) -> None:
     """Vehicle 2's telemetry passes vehicle 2's key and fails vehicle 1's: an agent holding
     vehicle 1's key refuses it, even sent in vehicle 1's name."""

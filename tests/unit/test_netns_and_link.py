@@ -32,6 +32,7 @@ def test_default_listen_endpoint_follows_the_link_protocol() -> None:
         loopback_endpoint(7447, "serial")
 
 
+@pytest.mark.realtime
 def test_rendezvous_endpoint_is_of_the_link_protocol_and_avoids_the_mavlink_blocks() -> None:
     assert rendezvous_endpoint("tcp").startswith("tcp/127.0.0.1:")
     every_port = [range(1, 65536)]
@@ -73,6 +74,7 @@ def test_inner_command_is_the_same_run_without_netns(tmp_path: Path) -> None:
     assert argv[argv.index("--duration") + 1] == "30.0"
 
 
+@pytest.mark.realtime
 def test_missing_tools_or_root_are_named(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(netns.os, "geteuid", lambda: 1000)
     assert "root" in (netns.unavailable() or "")

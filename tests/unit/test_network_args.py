@@ -72,6 +72,7 @@ def test_agent_sched_follows_the_scenario_unless_overridden() -> None:
         parse("--agent-sched", "fifo")
 
 
+@pytest.mark.realtime
 def test_batch_is_set_on_the_calling_thread_and_inherited_by_its_threads() -> None:
     import os
     import threading
@@ -97,6 +98,7 @@ def test_batch_is_set_on_the_calling_thread_and_inherited_by_its_threads() -> No
     assert os.sched_getscheduler(0) == before
 
 
+@pytest.mark.realtime
 def test_yield_cpu_lowers_the_thread_and_its_own_sessions_autogroup(tmp_path: Path) -> None:
     import os
     import threading

@@ -54,6 +54,7 @@ def test_start_time_is_field_22_even_after_a_command_name_with_spaces_and_parens
     assert me is not None and me == start_ticks(os.getpid())
 
 
+@pytest.mark.realtime
 def test_a_live_process_with_another_start_time_is_not_signalled() -> None:
     proc = _sleeper()
     try:
@@ -74,6 +75,7 @@ def test_a_live_process_with_another_start_time_is_not_signalled() -> None:
         proc.wait()
 
 
+@pytest.mark.realtime
 def test_a_reaped_child_is_never_signalled_again() -> None:
     proc = subprocess.Popen([sys.executable, "-c", "pass"])
     ident = identify(proc.pid)
@@ -99,6 +101,7 @@ def test_pids_file_round_trips_and_skips_what_is_not_an_entry(tmp_path: Path) ->
     assert read_pids(tmp_path / "nowhere") == {}
 
 
+@pytest.mark.realtime
 def test_the_supervisor_records_start_times_and_a_cleanup_kills_only_live_ones(
         tmp_path: Path) -> None:
     sup = Supervisor(tmp_path)

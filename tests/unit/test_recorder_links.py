@@ -47,6 +47,7 @@ def test_link_report_ratios_ages_and_sources() -> None:
     assert links["f0->f1"]["sent"] == 95 and links["f0->f1"]["sent_source"] == "recorder"
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(60)
 def test_recorder_waits_boundedly_for_final_statuses_and_reports_links(tmp_path: Path) -> None:
     paper, keys = load_scenario("paper"), SwarmKeys("links")
@@ -75,6 +76,7 @@ def test_recorder_waits_boundedly_for_final_statuses_and_reports_links(tmp_path:
     assert links["f3->f2"]["sent"] == 71 and links["f3->f2"]["sent_source"] == "recorder"
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(30)
 def test_no_wait_when_every_follower_is_done(tmp_path: Path) -> None:
     paper, keys = load_scenario("paper"), SwarmKeys("done")

@@ -99,6 +99,7 @@ def test_no_truth_gives_error_metrics_and_keeps_the_mcap(
     assert not (tmp_path / "series.csv").exists()
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(30)
 def test_signal_stops_the_loop(paper: Scenario, tmp_path: Path) -> None:
     with MemoryBus(MemoryHub(), "recorder") as rbus:
@@ -259,6 +260,7 @@ def test_a_backlog_is_worked_off_a_batch_a_step(tmp_path: Path) -> None:
     assert counted["dropped"] == 0 and counted["peak_mb"] > 0
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(30)
 def test_a_worked_off_backlog_is_handed_back_once(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

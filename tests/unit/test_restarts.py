@@ -32,6 +32,7 @@ def test_policy_backoff_doubles_to_a_cap_and_is_validated() -> None:
     assert how_it_ended(2) == {"exit_code": 2}
 
 
+@pytest.mark.realtime
 def test_on_failure_restarts_a_killed_follower_with_backoff_then_gives_up(tmp_path: Path) -> None:
     sup = Supervisor(tmp_path)
     try:
@@ -55,6 +56,7 @@ def test_on_failure_restarts_a_killed_follower_with_backoff_then_gives_up(tmp_pa
         sup.stop_all(grace_s=1.0)
 
 
+@pytest.mark.realtime
 def test_never_leaves_it_dead_and_a_clean_exit_is_no_death(tmp_path: Path) -> None:
     sup = Supervisor(tmp_path)
     try:
@@ -77,6 +79,7 @@ def test_never_leaves_it_dead_and_a_clean_exit_is_no_death(tmp_path: Path) -> No
         sup.stop_all(grace_s=1.0)
 
 
+@pytest.mark.realtime
 def test_the_run_aborts_when_the_simulator_or_all_but_one_follower_die(tmp_path: Path) -> None:
     sup = Supervisor(tmp_path)
     try:
@@ -99,6 +102,7 @@ def test_the_run_aborts_when_the_simulator_or_all_but_one_follower_die(tmp_path:
         sup.stop_all(grace_s=1.0)
 
 
+@pytest.mark.realtime
 def test_rebase_restamps_start_up_events_from_the_start_and_keeps_restart_counts(
     tmp_path: Path,
 ) -> None:
@@ -120,6 +124,7 @@ def test_rebase_restamps_start_up_events_from_the_start_and_keeps_restart_counts
         sup.stop_all(grace_s=1.0)
 
 
+@pytest.mark.realtime
 def test_a_death_not_yet_checked_is_not_dead_for_good(tmp_path: Path) -> None:
     """The launcher ends a launch on a process dead for good; one that died after the
     watchdog's last look may still be restarted (a start-up race that ended a ring64

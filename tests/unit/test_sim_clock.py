@@ -18,6 +18,8 @@ from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 from sim_backend.setpoint import decode_setpoint
 from tests.mavlink_fuzz import queued_datagrams
 
+pytestmark = pytest.mark.realtime
+
 
 class FakeClock:
     def __init__(self) -> None:

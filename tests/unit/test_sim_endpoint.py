@@ -13,6 +13,8 @@ from agents.mavlink.wire import decode_datagram, new_codec
 from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 
+pytestmark = pytest.mark.realtime
+
 
 @pytest.fixture
 def sim() -> Iterator[Simulator]:

@@ -27,6 +27,8 @@ from tests.mavlink_fuzz import (
     target_offset,
 )
 
+pytestmark = pytest.mark.realtime
+
 SETTINGS = settings(max_examples=150, deadline=None,
                     suppress_health_check=[HealthCheck.function_scoped_fixture])
 COMMANDS = (20, 21, 22, 176, 192, 400, 410, 510, 511, 512, 519, 520, 31000)

@@ -44,6 +44,7 @@ def test_each_holder_gets_its_own_slot_and_a_full_machine_waits(tmp_path: Path) 
     assert flags[1] != placement_flags(again)[1]  # a fresh swarm name per cell
 
 
+@pytest.mark.realtime
 def test_port_range_packs_the_run_and_names_what_is_wrong() -> None:
     ports = slot_ports(19)  # the last slot: least likely to be held by a sweep running now
     vehicle, adapter, endpoint = ports_in_range(ports, 6, "tcp", secure=True)
@@ -74,6 +75,7 @@ class MeetingRunner(FakeRunner):
         return super().run_cell(argv, out_dir, timeout_s)
 
 
+@pytest.mark.realtime
 def test_jobs_run_cells_side_by_side_and_give_the_sequential_table(tmp_path: Path) -> None:
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
@@ -106,6 +108,7 @@ class CountingRunner(FakeRunner):
         return 0
 
 
+@pytest.mark.realtime
 def test_ctrl_c_in_a_parallel_sweep_stops_it_and_resumes(tmp_path: Path) -> None:
     spec = load_sweep(sweep_file(tmp_path))
     signals = StopSignals()

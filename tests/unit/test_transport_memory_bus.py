@@ -126,6 +126,7 @@ def test_decoder_drains_subscription_and_drops_garbage() -> None:
                                       "drop_msgpack": 1, "statuses_rejected": 1}
 
 
+@pytest.mark.realtime
 def test_wait_until_alive_returns_or_names_the_missing() -> None:
     hub = MemoryHub()
     with MemoryBus(hub) as launcher, MemoryBus(hub) as f0:

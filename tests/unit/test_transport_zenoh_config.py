@@ -132,6 +132,7 @@ def test_unparsable_user_file_rejected(tmp_path: Path) -> None:
 
 
 
+@pytest.mark.realtime
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize(("preset", "runtime", "rx_threads"),
                          [(None, "split", 1), ("(rx: (worker_threads: 2))", "split", 2),
