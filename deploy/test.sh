@@ -30,8 +30,8 @@ idle=(chrt --idle 0)
 # A real swarm starts when the machine has room for it (tests/admission.py), but its
 # figures still depend on the machine's moment (a shared VM's speed was seen to vary
 # fourfold from minute to minute): a failed swarm test runs once more, after a pause, and
-# the summary counts it ("rerun").  One that fails twice fails the suite.
-rerun=(--reruns 1 --reruns-delay 5)
+# the summary counts and names it ("RERUN").  One that fails twice fails the suite.
+rerun=(--reruns 1 --reruns-delay 5 -rR)
 beside="$(mktemp -d)"
 trap 'rm -rf "$beside"' EXIT
 # The unit tests' timeouts are five times their own beside the timed tests, ten times beside
