@@ -16,7 +16,7 @@ import socket
 import subprocess
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -43,15 +43,13 @@ def active() -> bool:
 
 
 @pytest.fixture(autouse=True)
-def _no_real_time(request: pytest.FixtureRequest,
-                  monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+def _no_real_time(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
     """In the pass beside the swarms, an unmarked unit test may not start threads or
-    processes, open sockets or sleep."""
+    processes, open sockets or sleep (monkeypatch undoes it after the test)."""
     item = request.node
     if (active() and item.get_closest_marker("integration") is None
             and item.get_closest_marker("realtime") is None):
         refuse_real_time(monkeypatch)
-    yield
 
 
 def refuse_real_time(monkeypatch: pytest.MonkeyPatch) -> None:
