@@ -21,6 +21,7 @@ from agents.mavlink.adapter import MavlinkAdapter
 from agents.process import StatusReporter, load_run_scenario, process_main
 from agents.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
 from agents.scenario.model import Scenario
+from agents.tick_cost import NoCost, TickCost
 from agents.vehicle_loop import fly
 from transport.access import sender_ids
 from transport.bus import Bus
@@ -72,6 +73,7 @@ class TargetNode:
         self.decoder = Decoder(expect=(RunControl,), limits=DEFAULT_LIMITS,
                                senders=sender_ids(scenario.n, scenario.m))
         self.status = StatusReporter(bus, self.keys, "target", index)
+        self.cost: TickCost | NoCost = NoCost()  # set by the loop (agents.tick_cost)
         self.start_s: float | None = None
         self.stop_s = math.inf
 
@@ -82,7 +84,9 @@ class TargetNode:
                 self.start_s, self.stop_s = msg.start_stamp_s, msg.start_stamp_s + msg.duration_s
             elif isinstance(msg, RunControl):
                 self.stop_s = min(self.stop_s, now_s)
+        self.cost.mark("receive")
         state = self.vehicle.poll()
+        self.cost.mark("mav_in")
         ref_pos, ref_vel = reference(self.motion, self.start_s, now_s)
         pos = np.asarray(state.pos_enu_m)
         if not state.link_ok or not np.all(np.isfinite(pos)):
@@ -90,11 +94,13 @@ class TargetNode:
             return
         u = tracking_command(ref_pos[self.index], ref_vel[self.index], pos[:2], self.speed_max_m_s)
         climb = ALTITUDE_GAIN_PER_S * (self.altitude_m - pos[2])
+        self.cost.mark("law")
         if not self.vehicle.send_velocity_enu((float(u[0]), float(u[1]), float(climb))):
             self.status.counters["setpoints_refused"] += 1
+        self.cost.mark("mav_out")
 
     def counters(self) -> dict[str, int]:
-        return self.decoder.counters()
+        return {**self.decoder.counters(), **self.cost.counters()}
 
     def close(self) -> None:
         self.control.close()

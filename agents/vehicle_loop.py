@@ -25,6 +25,7 @@ from agents.process import (
 )
 from agents.process_options import AgentOptions
 from agents.scenario.model import Scenario
+from agents.tick_cost import NoCost, TickCost, tick_cost
 from transport.bus import Bus, Token
 from transport.errors import MavlinkError
 from transport.keys import SwarmKeys
@@ -34,6 +35,7 @@ log = logging.getLogger(__name__)
 
 class VehicleNode(Protocol):
     status: StatusReporter
+    cost: TickCost | NoCost  # the loop's phase marks (agents.tick_cost)
     start_s: float | None
     stop_s: float
 
@@ -184,8 +186,14 @@ class Flight:
 
     def run(self, now_s: Callable[[], float]) -> None:
         node, ticker = self.node, self.ticker
+        cost = node.cost = tick_cost()
+        measuring = False  # the cost from the start word on: the steady stretch
         while not self.stop.raised and now_s() < node.stop_s:
             now = ticker.wait()
+            cost.mark("wait")
+            if not measuring and node.start_s is not None:
+                measuring = True
+                cost.begin()
             if self.watch.lost(self.mav.state, self.mav.flavour, now):
                 if not self.recover():
                     break
@@ -196,6 +204,7 @@ class Flight:
             node.status.state = "running" if node.start_s is not None else "linked"
             if node.status.due():
                 node.status.publish(extra=self.extra())
+            cost.mark("loop")
         node.status.set("done", extra=self.extra())
         log.info("%s done: ticks=%d overruns=%d %s", self.who, ticker.ticks, ticker.overruns,
                  node.counters())

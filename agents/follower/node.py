@@ -25,6 +25,7 @@ from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.member_hold import MemberHold
 from agents.process import StatusReporter
 from agents.scenario.model import Scenario
+from agents.tick_cost import NoCost, TickCost
 from transport.access import sender_ids
 from transport.bus import Bus, Subscription
 from transport.checks import DEFAULT_LIMITS
@@ -102,6 +103,8 @@ class FollowerNode:
         # Started into a running swarm (restarted, or back after a leave): publish nothing
         # until our first estimate continues the neighbours' (LawRunner.join).
         self.joining = joining
+        # Phase CPU of a tick (agents.tick_cost), set by the loop when it is measured.
+        self.cost: TickCost | NoCost = NoCost()
 
     def _follow(self, peers: set[int]) -> None:
         """Subscribe to exactly the states of `peers` (neighbours and successor).
@@ -120,9 +123,13 @@ class FollowerNode:
 
     def tick(self, now_s: float) -> None:
         """The loop body: members, receive, the law, the command, publish."""
+        cost = self.cost
         self.regroup(now_s)
+        cost.mark("members")
         self.ingest()
+        cost.mark("receive")
         state = self.vehicle.poll()
+        cost.mark("mav_in")
         # The law is computed for the instant its command leaves, not the tick's nominal
         # one: if we were descheduled since, our inputs are fresher than now_s.
         now_s = max(now_s, self.bus.now_s())
@@ -135,6 +142,7 @@ class FollowerNode:
             runner.join(self.latest.peers, now_s)
         flying = running and (runner.last_r is not None or self.latest.ready(runner.setup))
         stepped = self._step(now_s, own, command=True) if flying else None
+        cost.mark("law")
         if running and not flying:
             counters["ticks_not_ready"] += 1
         u = 0j if stepped is None else stepped[0].u_m_s  # a failed law: hold
@@ -142,6 +150,7 @@ class FollowerNode:
             counters["ticks_without_vehicle"] += 1
             u = 0j  # hover until our vehicle is heard again
         self._command(state, u)
+        cost.mark("mav_out")
         self.last_state, self.last_own, self.last_u = state, own, u
         if self.joining and runner.last_r is None:
             counters["ticks_joining"] += 1  # p~ would throw the running ring
@@ -153,6 +162,7 @@ class FollowerNode:
             r = runner.standing_estimate(self.latest.targets, now_s)
             self._publish(now_s, state, r, 0j, u, NO_FIELDS)
         # else the law failed: its neighbours keep its last state until it is stale
+        cost.mark("publish")
 
     def _step(self, now_s: float, own: Sample, command: bool) -> tuple[Output, LawFields] | None:
         """One step of the law on the newest inputs; None if it failed (LawRunner)."""
@@ -160,7 +170,7 @@ class FollowerNode:
         setup = runner.setup
         self._heard_again(now_s)
         peers = stand_ins(latest.peers, setup, runner.last_r, now_s)
-        stepped = runner.step(now_s, command, own, latest.targets, peers)
+        stepped = runner.step(now_s, command, own, latest.targets, peers, self.cost)
         if command and stepped is not None:
             self.status.counters["stale_inputs"] += latest.stale(setup, peers, now_s)
             for j in setup.neighbours:
@@ -299,7 +309,8 @@ class FollowerNode:
         links = self.bus.counters() if isinstance(self.bus, ImpairedBus) else {}
         sent = self.stamper.next_seq + self.est_stamper.next_seq
         return {**self.decoder.counters(), **self.liveness.counters(), **ages, **links,
-                "states_sent": sent, "law_failures": self.runner.failures}
+                "states_sent": sent, "law_failures": self.runner.failures,
+                **self.cost.counters()}
 
     def close(self) -> None:
         for sub in [*self.subs, *self.peer_subs.values(), *self.est_subs.values()]:

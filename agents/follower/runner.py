@@ -21,11 +21,13 @@ from typing import Any
 from agents.follower.journal import JournalWriter
 from agents.follower.membership import joined_estimate
 from agents.law.interface import Inputs, Law, Output, Peer, Sample, Setup, reference
+from agents.tick_cost import NoCost, TickCost
 from transport.law_fields import FieldSpec, LawFields, LawValue
 
 log = logging.getLogger("enclose.follower")
 LOG_EVERY_S = 10.0
 _new = tuple.__new__
+NO_COST = NoCost()
 
 
 class LawRunner:
@@ -56,11 +58,14 @@ class LawRunner:
             self.journal = None
 
     def step(self, now_s: float, command: bool, own: Sample, targets: Mapping[int, Sample],
-             peers: Mapping[int, Peer]) -> tuple[Output, LawFields] | None:
-        """`_step`, journaled."""
+             peers: Mapping[int, Peer], cost: TickCost | NoCost = NO_COST,
+             ) -> tuple[Output, LawFields] | None:
+        """`_step`, journaled; `cost` marks the two (agents.tick_cost)."""
         result = self._step(now_s, command, own, targets, peers)
         if self.journal is not None:
+            cost.mark("law")
             self._journal(self.journal.step, now_s, command, own, targets, peers, result)
+            cost.mark("journal")
         return result
 
     def _step(self, now_s: float, command: bool, own: Sample, targets: Mapping[int, Sample],
