@@ -109,6 +109,11 @@ class TokenSet:
         self.refresh_after_s = REFRESH_S  # a change: a missing one may be on its way back
         return True
 
+    @property
+    def pending_changes(self) -> bool:
+        """Noted changes not applied yet (the flap limit holds them)."""
+        return bool(self._pending)
+
     def due_refresh(self, now_s: float) -> bool:
         """True when the watch should be declared again (and the next time is set)."""
         if self.expected <= self.tokens:
@@ -133,9 +138,17 @@ class MembershipWatch:
         self.watch = bus.watch_alive(keys.alive_of("follower"))
         self.refreshes = 0
         self.log = RateLimitedLog(log)
+        self._members: frozenset[int] | None = None
 
     def members(self, now_s: float) -> frozenset[int]:
-        for ev in self.watch.drain_events():
+        """The member set; the same object as long as nothing changed (its readers
+        recompute only on a new one: it is read every tick)."""
+        events = self.watch.drain_events()
+        tracker = self.tracker
+        if not events and self._members is not None and not tracker.pending_changes \
+                and tracker.expected <= tracker.tokens:
+            return self._members  # the common tick: no event, all present, nothing held
+        for ev in events:
             index = self._follower(ev.key)
             if index is not None:
                 self.tracker.note(index, ev.alive)
@@ -148,7 +161,11 @@ class MembershipWatch:
             self.refreshes += 1
             self.watch.close()
             self.watch = self.bus.watch_alive(self.keys.alive_of("follower"))
-        return frozenset(self.tracker.tokens)
+        members = frozenset(self.tracker.tokens)
+        if members != self._members:
+            self._members = members
+        assert self._members is not None
+        return self._members
 
     def _follower(self, key: str) -> int | None:
         """The follower whose token `key` is, if it is one of the scenario's."""

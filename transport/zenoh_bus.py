@@ -48,12 +48,18 @@ _CONGESTION = {
 _PUT = zenoh.SampleKind.PUT
 
 
-def _received(sample: zenoh.Sample, now_s: float, arrival_s: float | None) -> Received:
+def _received(sample: zenoh.Sample, now_s: float, arrival_s: float | None,
+              key: str | None) -> Received:
+    """`key`: the subscription's own where it names one key (no conversion per sample);
+    None for a wildcard subscription, whose samples also carry their HLC's source (the
+    recorder keeps it: many publishers share such a subscription; on one key the ACL
+    admits one publisher, whose sender id the message carries)."""
     stamp = sample.timestamp
-    hlc_s, source = (None, None) if stamp is None else (
-        stamp.get_time_as_ntp64().as_secs_f64(), str(stamp.get_id()))
-    return build(Received, {"key": str(sample.key_expr), "payload": sample.payload.to_bytes(),
-                            "recv_stamp_s": now_s, "hlc_stamp_s": hlc_s, "hlc_source": source,
+    hlc_s = None if stamp is None else stamp.get_time_as_ntp64().as_secs_f64()
+    source = None if key is not None or stamp is None else str(stamp.get_id())
+    return build(Received, {"key": key or str(sample.key_expr),
+                            "payload": sample.payload.to_bytes(), "recv_stamp_s": now_s,
+                            "hlc_stamp_s": hlc_s, "hlc_source": source,
                             "arrival_s": arrival_s})
 
 
@@ -68,6 +74,7 @@ class ZenohSubscription:
     def __init__(self, bus: ZenohBus, key_expr: str, capacity: int,
                  stamp_arrival: bool = False) -> None:
         self.key_expr = key_expr
+        self._key = None if any(c in key_expr for c in "*$") else key_expr  # _received
         self._bus = bus
         self._arrived: deque[tuple[float, zenoh.Sample]] | None = None
         self._ring: zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]] | None = None
@@ -103,7 +110,7 @@ class ZenohSubscription:
                 # the ring while we drain, and a starved process (ring64's recorder, 2
                 # cores) preempted mid-drain took samples stamped after one early reading,
                 # refused them as future-stamped (4305 in one run) and lost them.
-                out.append(_received(sample, clock(), None))
+                out.append(_received(sample, clock(), None, self._key))
                 if max_items is not None and len(out) >= max_items:
                     break
             sample = try_recv()
@@ -116,7 +123,8 @@ class ZenohSubscription:
         while self._arrived and (max_items is None or len(out) < max_items):
             arrival_s, sample = self._arrived.popleft()
             if sample.kind == _PUT:
-                out.append(_received(sample, clock(), arrival_s))  # as drain: never before it
+                # the clock read as in drain: never before the sample is taken
+                out.append(_received(sample, clock(), arrival_s, self._key))
         return out
 
     def close(self) -> None:

@@ -70,6 +70,7 @@ class FollowerNode:
         self.liveness = MembershipWatch(bus, self.keys, scenario.n)
         self.hold = MemberHold(decided=self.members)  # a partition's far side is held
         self.silent: frozenset[int] = frozenset()  # neighbours not heard for a hold
+        self._alive: frozenset[int] | None = None  # the token set regroup last decided on
         self.subs = [
             bus.subscribe(self.keys.sensor_targets(index)),
             bus.subscribe(self.keys.control()),
@@ -196,10 +197,14 @@ class FollowerNode:
         linked, so until then the planned ring is the member set.  The tokens seen before
         (followers finish take-off one after another) are partial sets whose links would
         only show up as spurious links in the run's report."""
-        tokens = self.liveness.members(now_s) | {self.index}
+        alive = self.liveness.members(now_s)
         if self.start_s is None:
             return
-        members = self.hold.members(tokens, now_s)
+        hold = self.hold
+        if alive is self._alive and not hold.pending and not hold.held:
+            return  # the tokens and the held groups as on the last tick: no change
+        self._alive = alive
+        members = hold.members(alive | {self.index}, now_s)
         self.status.counters["far_sides_held"] = self.hold.holds
         if members == self.members:
             return

@@ -73,6 +73,7 @@ def drain_with(ring: PreemptedRing, clock: FakeClock) -> list[float]:
     sub = object.__new__(ZenohSubscription)
     sub.key_expr, sub._arrived, sub._ring = KEY, None, ring  # type: ignore[assignment]
     sub._bus = FakeBus(clock)  # type: ignore[assignment]
+    sub._key = KEY  # an exact key: its samples are named by it
     return [rec.recv_stamp_s for rec in sub.drain()]
 
 
@@ -94,4 +95,5 @@ def test_max_items_still_bounds_a_drain() -> None:
     ring = PreemptedRing(clock, count=10, pause_s=0.0)
     sub.key_expr, sub._arrived, sub._ring = KEY, None, ring  # type: ignore[assignment]
     sub._bus = FakeBus(clock)  # type: ignore[assignment]
+    sub._key = KEY  # an exact key: its samples are named by it
     assert len(sub.drain(3)) == 3 and len(sub.drain()) == 7
