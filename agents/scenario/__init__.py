@@ -4,7 +4,7 @@
 - `agents.scenario.file`: `load_scenario` / `parse_scenario`, the one way to build one.
 - `agents.scenario.fields`, `.tables`, `.network`, `.faults`: the field readers and the
   per-table parsers, each error naming its field; `.checks`: the paper's assumptions.
-- `shipped/`: the scenarios that come with enclose (paper, ring16, ring32, ring64).
+- `shipped/`: the scenarios that come with enclose (paper, ring16, ring32, ring64, ring128).
 
 The network schema (`NetworkConfig`, `LinkImpairment`) is transport's:
 `transport.network_schema`.  Import from the modules; this package re-exports nothing.
