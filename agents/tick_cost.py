@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 # In the order a tick runs them.  `wait` is the sleep to the tick and its wake-up; `loop`
@@ -25,10 +26,10 @@ TASKS = Path("/proc/self/task")
 ENV = "ENCLOSE_TICK_COST"
 
 
-def thread_cpu_ns(tasks: Path = TASKS) -> dict[str, int]:
-    """CPU so far of this process's threads, ns, by group: "main" (the thread that asks),
-    "zenoh", "other".  Threads that ended are gone from the sum."""
-    main = threading.get_native_id()
+def thread_cpu_ns(tasks: Path = TASKS, main: int | None = None) -> dict[str, int]:
+    """CPU so far of this process's threads, ns, by group: "main" (thread `main`, by
+    default the one that asks), "zenoh", "other".  Threads that ended are gone from the sum."""
+    main = threading.get_native_id() if main is None else main
     out = {"main": 0, "zenoh": 0, "other": 0}
     for task in tasks.iterdir():
         try:
@@ -50,8 +51,10 @@ class TickCost:
 
     enabled = True
 
-    def __init__(self, tasks: Path = TASKS) -> None:
-        self.tasks = tasks
+    def __init__(self, tasks: Path = TASKS, clock: Callable[[], int] = time.thread_time_ns,
+                 main: int | None = None) -> None:
+        self.tasks, self.clock = tasks, clock
+        self.main = threading.get_native_id() if main is None else main  # the loop's thread
         self.ns = dict.fromkeys(PHASES, 0)
         self.ticks = 0
         self._last_ns: int | None = None
@@ -61,13 +64,13 @@ class TickCost:
         """Start (again) from here: the steady stretch, not the start-up."""
         self.ns = dict.fromkeys(PHASES, 0)
         self.ticks = 0
-        self._last_ns = time.thread_time_ns()
-        self._threads0 = thread_cpu_ns(self.tasks)
+        self._last_ns = self.clock()
+        self._threads0 = thread_cpu_ns(self.tasks, self.main)
 
     def mark(self, phase: str) -> None:
         if self._last_ns is None:
             return
-        now = time.thread_time_ns()
+        now = self.clock()
         self.ns[phase] += now - self._last_ns
         self._last_ns = now
         if phase == "wait":
@@ -77,7 +80,7 @@ class TickCost:
         """cost_ticks, cost_us_<phase> and cost_us_thread_<group>, summed since `begin`."""
         if self._threads0 is None:
             return {}
-        now = thread_cpu_ns(self.tasks)
+        now = thread_cpu_ns(self.tasks, self.main)
         out = {"cost_ticks": self.ticks}
         out.update({f"cost_us_{p}": ns // 1000 for p, ns in self.ns.items()})
         out.update({f"cost_us_thread_{g}": (now[g] - self._threads0.get(g, 0)) // 1000

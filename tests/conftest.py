@@ -107,6 +107,15 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
             f"real time: {len(not_judged)} accuracy checks not judged, their runs' machine did "
             "not keep real time (tests/integration/real_time.py; the warnings name them)",
             yellow=True, bold=True)
+    # The excuses a pass took, counted always (zero included) where real swarms ran: an
+    # idle machine must need none (a rerun is named above by -rR, a NotJudged by its warning).
+    swarms = any(getattr(r, "when", None) == "call" and "integration" in r.keywords
+                 for reports in terminalreporter.stats.values() for r in reports)
+    if swarms:
+        reruns = len(terminalreporter.stats.get("rerun", []))
+        terminalreporter.write_line(
+            f"excuses: {reruns} reruns, {len(not_judged)} accuracy checks not judged",
+            yellow=bool(reruns or not_judged))
 
 
 @pytest.fixture(autouse=True)
