@@ -40,6 +40,7 @@ router_port = 7447
 processes = ["follower-0", "follower-1", "follower-2", "follower-3"]
 """
 STOP_S = 20.0
+CHECKOUT = Path(__file__).resolve().parents[2]
 
 
 @dataclass
@@ -68,10 +69,14 @@ class TwoHosts:
         return proc
 
     def start(self, host: str, argv: Sequence[str], name: str) -> subprocess.Popen[bytes]:
-        """Any other process in a host's namespace (by `name`, stopped with the hosts)."""
+        """Any other process in a host's namespace (by `name`, stopped with the hosts); the
+        checkout's own modules (tests.*) importable."""
         log = self.logs[name] = (self.root / f"{name}.log").open("wb")
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+            [str(CHECKOUT), *filter(None, [os.environ.get("PYTHONPATH")])])}
         proc = self.procs[name] = subprocess.Popen(
-            self.in_host(host, argv), cwd=self.root, stdout=log, stderr=subprocess.STDOUT)
+            self.in_host(host, argv), cwd=self.root, stdout=log, stderr=subprocess.STDOUT,
+            env=env)
         return proc
 
     def wait_all(self, timeout_s: float) -> None:
