@@ -33,6 +33,7 @@ log = logging.getLogger("enclose.sim")
 FLAG = "--sensor-link"
 OPEN_TRY_MS = 1000  # each try to open a sensing link waits this long for its router
 LOG_EVERY_TRIES = 30
+RETRY_S = 0.25
 
 
 @dataclass(frozen=True)
@@ -96,6 +97,7 @@ class LinkBus(BusBase):
                 tried += 1
                 if tried % LOG_EVERY_TRIES == 1:
                     log.info("sensing link %s not up yet: %s", cfg.connect, exc)
+                self._stop.wait(RETRY_S)  # a try refused at once must not spin
                 continue
             with self._lock:
                 if not self._stop.is_set():

@@ -217,7 +217,8 @@ def run(opts: SwarmSimOptions) -> int:
             return {"ticks": st.ticks, "overruns": st.overruns, "catch_ups": st.catch_ups,
                     "caught_up_ticks": st.caught_up_ticks, "resyncs": st.resyncs,
                     **dict(sim.counters), **wrong_key_senders(sim.counters, scenario.n),
-                    **sensor.liveness.counters()}
+                    **sensor.liveness.counters(),
+                    "sensing_link_dropped": sum(b.dropped for b in set(linked.values()))}
 
         def report(_t: float, _s: FleetState) -> None:
             if status.due():
