@@ -48,6 +48,11 @@ class VehicleNode(Protocol):
 
 NodeFactory = Callable[[Bus, MavlinkAdapter], VehicleNode]
 RECOVER_AFTER_S = 0.5  # not flying our setpoints this long: start the vehicle up again
+# An agent whose vehicle is on another host (`--mav-vehicle-host`) waits for its first
+# HEARTBEAT as long as the launcher waits for the swarm (`enclose host --link-timeout`'s
+# default), not the 10 s of a vehicle on its own host: the hosts are started apart, and
+# the simulator's may come up a minute after the companion's (docs/multihost.md).
+REMOTE_HEARTBEAT_S = 120.0
 
 
 @dataclass
@@ -132,6 +137,8 @@ def fly(opts: AgentOptions, scenario: Scenario, role: str, vehicle: int,
     # Position as often as the loop reads it, no more: each frame is a datagram to verify
     # and decode (a 20-Hz ring64 follower took 2.5 a tick at the 50 Hz default).
     timeouts = StartupTimeouts(telemetry_hz=scenario.run.rate_hz)
+    if opts.vehicle.mav_vehicle_host:  # hosts are started apart (docs/multihost.md)
+        timeouts = replace(timeouts, heartbeat_s=REMOTE_HEARTBEAT_S)
     stamps = role == "follower" and opts.bus.network.latency_stamps
     with stop_on_signals() as stop, open_bus(opts.bus, scenario.network, stamps) as bus, \
             MavlinkAdapter(adapter_config(opts, vehicle), bus.now_s) as mav:

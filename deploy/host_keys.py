@@ -5,15 +5,17 @@
     OUT_DIR/operator/   everything, the CA's private key (`ca.key`, to add hosts later) and
                         the MAVLink secret included: keep it offline, copy it nowhere
     OUT_DIR/<host>/     what the processes the deployment places on <host> need, and its
-                        router: the CA certificate, the ACL, their own certificates and
-                        keys, and their own MAVLink key material; nothing of another host's
-                        processes, never the CA key
+                        router: the CA certificate, the host's ACL, their own
+                        certificates and keys, and their own MAVLink key material; nothing
+                        of another host's processes, never the CA key
 
 A host folder holds exactly the files `RunSecrets.args_for` hands its processes (and the
 files their identity files name): what a process is given is decided there, once, and a
 host gets no more.  So a host that does not run the simulator gets no MAVLink secret
-that the simulator alone is given.  `enclose host --credentials DIR` checks its folder
-(`check_folder`): a CA key in it, or a missing file, is refused.
+that the simulator alone is given.  Each host's ACL is its own: another host's router
+may bring its processes only what that host's processes may put (transport.access), so
+a folder's router key relays nothing of another host's.  `enclose host --credentials
+DIR` checks its folder (`check_folder`): a CA key in it, or a missing file, is refused.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from pathlib import Path
 
 from deploy.deployment import Deployment
 from deploy.run_secrets import RunSecrets, write_mavlink_keys
+from transport.access import access_control
 from transport.credentials import Identity, identity_file, make_credentials
 from transport.errors import ConfigError
 from transport.keys import SwarmKeys
@@ -34,6 +37,7 @@ from transport.keys import SwarmKeys
 log = logging.getLogger("enclose.keys")
 OPERATOR = "operator"
 CA_KEY = "ca.key"
+ACL_FILE = "acl.json"
 IDENTITY_FILES = ("ca", "cert", "key", "acl")  # the files an identity file names
 SHOW_MISSING = 6  # missing files named in the error
 
@@ -88,7 +92,21 @@ def write_swarm_keys(out_dir: Path, dep: Deployment, n: int, m: int,
         for name in host_names(dep, k):
             for f in needed_files(operator, name):
                 _copy_private(operator / f, folder / f)
+        _write_acl(folder / ACL_FILE, host_acl(dep, k, n, m))
     return folders
+
+
+def host_acl(dep: Deployment, k: int, n: int, m: int) -> dict[str, object]:
+    """The ACL of host k's processes: another host's router brings them only what that
+    host's own processes may put (transport.access.relayed_keys)."""
+    return access_control(SwarmKeys(dep.swarm), n, m, len(dep.hosts),
+                          hosts=[h.processes for h in dep.hosts], here=k)
+
+
+def _write_acl(path: Path, acl: dict[str, object]) -> None:
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as out:
+        json.dump(acl, out, indent=1)
 
 
 def check_folder(folder: Path, names: Iterable[str], host: str) -> Path:

@@ -69,7 +69,7 @@ class HostLaunch(Launch):
         if os_cut:  # the children leave these to the OS (transport.impairment)
             opts = replace(opts, network=replace(opts.network, os_cut=os_cut))
         super().__init__(scenario, opts, out, dep.swarm, duration_s)
-        self.coordinator = dep.host_of("launcher") in local
+        self.coordinator = self.sends_control = dep.host_of("launcher") in local
         self.sim_address = dep.hosts[dep.host_of("sim")].address
         self.host_cut: HostCut | None = None
         self.cut_dropped: int | None = None
@@ -162,10 +162,14 @@ class HostLaunch(Launch):
         return argv
 
     def open_bus(self) -> ZenohBus:
-        k = self.dep.host_of("launcher")
+        """The coordinator's session as the launcher; another host's as its router (the
+        one identity every host holds: a host without the launcher never has its key),
+        which only watches its own processes link and stop (`sends_control`)."""
+        k = self.dep.host_of("launcher") if self.coordinator else self.local[0]
+        name = "launcher" if self.coordinator else f"router-{k}"
         bus = ZenohBus(ZenohConfig(  # our clock: the environment's (transport.clock)
             mode="client", connect=(self.router(k),), user_config_path=self.opts.zenoh_config,
-            identity=self.secrets.identity("launcher"),
+            identity=self.secrets.identity(name),
             runtime=self.scenario.network.zenoh_runtime,
             lease_s=self.scenario.network.zenoh_lease_s))
         if self.clocks_differ():

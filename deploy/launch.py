@@ -51,6 +51,7 @@ class Launch:
 
     # The followers are forked by a fork server (deploy.zygote), started first thing.
     forks_followers = True
+    sends_control = True  # the start and stop words (deploy.host_launch: its host only)
 
     def __init__(
         self, scenario: Scenario, opts: LaunchOptions, out: Path, swarm: str, duration_s: float
@@ -238,8 +239,9 @@ class Launch:
             log.warning("interrupted: stopping the run, keeping what was recorded")
         self.status_at_stop = self.board.as_dict()
         self.write_launch()  # the recorder draws its events on the figures
-        stop_word = RunControl(self._stamper(bus).header(), "stop", bus.now_s(), 0.0)
-        bus.publish(self.keys.control(), encode(stop_word))
+        if self.sends_control:
+            stop_word = RunControl(self._stamper(bus).header(), "stop", bus.now_s(), 0.0)
+            bus.publish(self.keys.control(), encode(stop_word))
         stop_in_order(self)
         return interrupted
 

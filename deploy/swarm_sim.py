@@ -35,7 +35,7 @@ from agents.process import (
 from agents.process_options import BusOptions, add_bus_arguments
 from agents.scenario.model import Scenario
 from deploy.run_secrets import agent_of_vehicle
-from deploy.sensor_links import parse_sensor_link, sensor_buses
+from deploy.sensor_links import LinkBus, parse_sensor_link, sensor_buses
 from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from transport.bus import Bus
@@ -58,7 +58,7 @@ class SensorPublisher:
         noise_std_m: float = 0.0,
         seed: int = 0,
         late_s: Callable[[float], float] = lambda _t: 0.0,
-        sensor_buses: Mapping[int, Bus] | None = None,
+        sensor_buses: Mapping[int, Bus | LinkBus] | None = None,
     ) -> None:
         self.n, self.m = scenario.n, scenario.m
         self.bus, self.keys, self.every = bus, keys, max(1, every_ticks)
@@ -217,7 +217,8 @@ def run(opts: SwarmSimOptions) -> int:
             return {"ticks": st.ticks, "overruns": st.overruns, "catch_ups": st.catch_ups,
                     "caught_up_ticks": st.caught_up_ticks, "resyncs": st.resyncs,
                     **dict(sim.counters), **wrong_key_senders(sim.counters, scenario.n),
-                    **sensor.liveness.counters()}
+                    **sensor.liveness.counters(),
+                    "sensing_link_dropped": sum(b.dropped for b in set(linked.values()))}
 
         def report(_t: float, _s: FleetState) -> None:
             if status.due():

@@ -11,10 +11,19 @@ names (mTLS, see transport.credentials), so a rule is bound to an authenticated 
 - Ingress puts and liveliness tokens are allowed per process, on its own keys only:
   follower i its states (both rates), status and token; the simulator sensor and truth keys; targets
   and the recorder their status; only the launcher run control.
+- Across hosts (deploy.host_keys), a router relays for others, and a rule binds the *link*
+  a message arrived on, never the process that made it (Zenoh 1.10's ACL interceptor is
+  built per transport from its peer's certificate).  So each host's ACL is its own
+  (`here`): its own router and the first host's (the hub of the star every other router
+  links to) relay every key; any other host's router only the keys of that host's own
+  processes and its clock probes.  A stolen host folder, router key and all, then puts
+  nothing past the other hosts' ingress but what its own processes may.
 Anything else, and any link without a swarm certificate, is denied.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 from transport.keys import SwarmKeys
 
@@ -44,10 +53,29 @@ def sender_ids(n_followers: int, n_targets: int, n_routers: int = 0) -> frozense
     return frozenset(map(sender_id, process_names(n_followers, n_targets, n_routers)))
 
 
+HUB = 0  # the router every other host's links to (deploy.deployment.router_links)
+
+
+def relayed_keys(keys: SwarmKeys, k: int, hosts: Sequence[Sequence[str]] | None,
+                 here: int | None, n_followers: int) -> list[str]:
+    """The keys router k's link may bring into a process of host `here`: all of them from
+    this host's own router and from the hub (they relay for every host), or when the hosts
+    are not known; else what host k's own processes may put, and k's clock probes.  The
+    simulator's sensing of a follower on host k comes to k straight (deploy.sensor_links)
+    and goes no further: the hub's recorder records the sensing of its own host only."""
+    if hosts is None or k in (here, HUB):
+        return [keys.everything()]
+    sensing = {keys.sensor_targets(i) for i in range(n_followers)}
+    out = [key for name in hosts[k] for key in own_keys(keys, name, n_followers)
+           if key not in sensing]
+    return [*out, keys.clock("router", k)]
+
+
 def own_keys(keys: SwarmKeys, name: str, n_followers: int) -> list[str]:
-    """The keys process `name` may publish on (put, liveliness token)."""
+    """The keys process `name` may publish on (put, liveliness token); a router's are its
+    host's (`relayed_keys`)."""
     role, _, idx = name.rpartition("-")
-    if role == "router":  # relays everybody's puts and tokens: trusted like the network
+    if role == "router":  # without hosts: relays everybody's, trusted like the network
         return [keys.everything()]
     if name in ("launcher", "sim", "recorder"):
         role, i = name, 0
@@ -68,19 +96,25 @@ def _rule(rule_id: str, messages: list[str], flows: list[str], key_exprs: list[s
             "key_exprs": key_exprs}
 
 
-def access_control(keys: SwarmKeys, n_followers: int, n_targets: int,
-                   n_routers: int = 0) -> dict[str, object]:
+def access_control(keys: SwarmKeys, n_followers: int, n_targets: int, n_routers: int = 0,
+                   hosts: Sequence[Sequence[str]] | None = None,
+                   here: int | None = None) -> dict[str, object]:
     """The `access_control` config section for a swarm of n followers and m targets
-    (and its hosts' routers: each checks its own clients' puts on ingress, and the
-    clients and other routers accept what a router relays)."""
+    (and its hosts' routers: each checks its own clients' puts on ingress).  `hosts`: the
+    processes of each host k (router-k's), for the ACL of host `here`'s processes: what
+    another host's router relays to them is only its own host's (`relayed_keys`)."""
+    if hosts is not None and len(hosts) != n_routers:
+        raise ValueError(f"{len(hosts)} hosts for {n_routers} routers")
     names = process_names(n_followers, n_targets, n_routers)
     rules = [_rule("read", READ_MESSAGES, ["ingress", "egress"], [keys.everything()]),
              _rule("send", WRITE_MESSAGES, ["egress"], [keys.everything()])]
     subjects: list[dict[str, object]] = [{"id": "swarm", "cert_common_names": names}]
     policies: list[dict[str, object]] = [{"rules": ["read", "send"], "subjects": ["swarm"]}]
     for name in names:
-        rules.append(_rule(f"own-{name}", WRITE_MESSAGES, ["ingress"],
-                           own_keys(keys, name, n_followers)))
+        role, _, idx = name.rpartition("-")
+        mine = (relayed_keys(keys, int(idx), hosts, here, n_followers) if role == "router"
+                else own_keys(keys, name, n_followers))
+        rules.append(_rule(f"own-{name}", WRITE_MESSAGES, ["ingress"], mine))
         subjects.append({"id": f"is-{name}", "cert_common_names": [name]})
         policies.append({"rules": [f"own-{name}"], "subjects": [f"is-{name}"]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,

@@ -102,6 +102,8 @@ class ZenohConfig:
     # A peer's or client's lease (scenario `[network] zenoh_lease_s`); None: Zenoh's 10 s.
     # A router keeps ROUTER_LEASE_MS whatever this says.
     lease_s: float | None = None
+    # A client's wait at open for its router (Zenoh's `connect/timeout_ms`): -1 forever.
+    connect_timeout_ms: int = -1
 
     def __post_init__(self) -> None:
         lo, hi = ZENOH_LEASE_RANGE_S
@@ -169,7 +171,7 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
         _put(config, "connect/retry", {"period_init_ms": 250, "period_max_ms": 1000,
                                        "period_increase_factor": 2})
     if cfg.mode == "client":
-        _put(config, "connect/timeout_ms", -1)
+        _put(config, "connect/timeout_ms", cfg.connect_timeout_ms)
     if cfg.mode != "router" and cfg.lease_s is not None \
             and not (user and _is_set(config, default, LEASE_KEY)):
         _put(config, LEASE_KEY, round(cfg.lease_s * 1000.0))

@@ -18,6 +18,13 @@ summed on the verdict's processes line, blamed on follower 2.
 
 Where the ACL lets any token through (an --insecure run), the same tokens reach every
 receiver: each is ignored and counted, none crashes, the flapping is held back.
+
+Over two hosts started as docs/multihost.md says (tests.integration.two_hosts), a process
+holding exactly the companion's folder, its router's key included
+(tests.integration.host_insider), puts on the ground's processes' keys, the control, the
+truth and the sensing, and declares tokens in the ground's processes' names, as its
+router, as a router of its own and as each of its processes: a witness on the ground
+sees none of it, only what the companion's own processes may put; the swarm flies on.
 """
 
 from __future__ import annotations
@@ -35,13 +42,17 @@ from typing import Any
 import pytest
 
 from deploy.host_keys import CA_KEY, needed_files
+from deploy.netns.hosts import unavailable
 from deploy.run_secrets import MAVLINK_SECRET_FILE, signing_key_file
+from tests.integration import host_insider
 from tests.integration.real_time import judged
 from tests.integration.rogue import BAD_TOKENS
 from tests.integration.runs import spawned_run, wait_for
 from tests.integration.test_attack import STARTED
+from tests.integration.two_hosts import COMPANION, GROUND, TwoHosts, two_hosts
 from transport.access import sender_ids
 from transport.credentials import identity_file
+from transport.keys import SwarmKeys
 
 pytestmark = pytest.mark.integration
 DURATION_S, ATTACK_S = 40.0, 30.0
@@ -239,3 +250,64 @@ def test_tokens_the_acl_would_refuse_are_ignored_when_nothing_refuses_them(
     flying = [c for n, c in launch["status_at_stop"].items() if n.startswith("follower-")]
     assert not [c for c in flying if c.get("membership_changes", 0)], flying
     assert "tokens" in output and "token changes held" in output, output[-2000:]
+
+
+HOST_ATTACK_S = 20.0
+NO_NETNS = unavailable()
+
+
+def _in_flight(hosts: TwoHosts) -> None:
+    """The companion, the ground, and a witness on the ground, linked and flying."""
+    hosts.start_host(COMPANION)
+    wait_for(lambda: "linked 0/" in hosts.output(COMPANION), 60.0, "the companion")
+    hosts.start_host(GROUND, "--duration", str(DURATION_S), "--out", "runs/field")
+    hosts.start(GROUND, [sys.executable, "-m", "tests.integration.host_insider", "witness",
+                         "--identity", "creds/ground/router-0.json", "--hub",
+                         "tls/10.77.0.1:7447", "--swarm", "field-test", "--stop", "stop",
+                         "--out", "witness.json"], "witness")
+    wait_for(lambda: "ready" in hosts.output("witness"), 60.0, "the witness")
+    wait_for(lambda: "processes linked in" in hosts.output(GROUND), 150.0, "the swarm")
+
+
+@pytest.mark.skipif(NO_NETNS is not None, reason=f"two hosts: {NO_NETNS}")
+@pytest.mark.timeout(360)
+@pytest.mark.serial  # a swarm over two namespaced hosts, as test_hosts_run
+def test_a_stolen_host_folder_puts_nothing_on_the_other_host(tmp_path: Path) -> None:
+    with two_hosts(tmp_path) as hosts:
+        _in_flight(hosts)
+        attacker = hosts.start(COMPANION, [
+            sys.executable, "-m", "tests.integration.host_insider", "attack",
+            "--folder", f"creds/{COMPANION}", "--own", "tls/10.77.0.2:7447",
+            "--hub", "tls/10.77.0.1:7447", "--swarm", "field-test",
+            "--seconds", str(HOST_ATTACK_S), "--out", "attack.json"], "attacker")
+        wait_for(lambda: attacker.poll() is not None, HOST_ATTACK_S + 60.0, "the attacker")
+        (tmp_path / "stop").touch()
+        hosts.wait_all(DURATION_S + 150.0)
+        codes = {name: p.returncode for name, p in hosts.procs.items()}
+        outputs = {name: hosts.output(name)[-3000:] for name in hosts.procs}
+        assert hosts.tracebacks() == [], outputs
+    assert set(codes.values()) == {0}, (codes, outputs)
+    sent = json.loads((tmp_path / "attack.json").read_text())
+    seen = json.loads((tmp_path / "witness.json").read_text())
+    keys = SwarmKeys("field-test")
+    forged = host_insider.forged_keys(keys)
+    # Every identity of the folder, four ways, put on every forged key for the whole attack.
+    assert len(sent["sessions"]) == 7 and sent["tokens"] == 7 * 3
+    assert all(sent["sent"][k] >= 7 * 0.8 * HOST_ATTACK_S / host_insider.PERIOD_S
+               for k in forged), sent
+    # Only the companion's own process's key arrived (the four identities it belongs to:
+    # its router three ways, follower 0 itself); nothing else, and no token.
+    own = host_insider.own_key(keys)
+    assert set(seen["marked"]) == {own}, seen
+    assert seen["marked"][own] >= 0.8 * 4 * HOST_ATTACK_S / host_insider.PERIOD_S, seen
+    assert seen["tokens"] == [], seen
+    # The swarm flew on: the paper's bounds, no restart, every follower done.
+    run = tmp_path / "runs" / "field"
+    metrics = json.loads((run / "metrics.json").read_text())
+    launch = json.loads((run / "launch.json").read_text())
+    assert launch["events"] == [], launch["events"]
+    assert set(launch["status"]) <= sender_ids(N, M)
+    with judged(run):
+        assert metrics["estimator_error_m"] < BOUNDS["est"]
+        assert metrics["radius_error_m"] < BOUNDS["e_rho"]
+        assert metrics["angle_error"] < BOUNDS["e_delta"]

@@ -61,3 +61,32 @@ def test_secure_config_is_mtls_with_the_acl(tmp_path: Path) -> None:
         ZenohConfig(identity=ident, link="udp")
     with pytest.raises(ConfigError, match="credentials"):
         Identity.load(tmp_path / "missing.json")
+
+
+HOSTS = [["launcher", "sim", "recorder", "target-0"], ["follower-0"], ["follower-1"]]
+
+
+def _own(acl: dict[str, object], name: str) -> list[str]:
+    rules = {r["id"]: r for r in acl["rules"]}  # type: ignore[attr-defined]
+    return list(rules[f"own-{name}"]["key_exprs"])
+
+
+def test_another_hosts_router_relays_only_its_own_processes_keys() -> None:
+    # The ACL of host 1's processes: the link from router-2 carries host 2's keys only
+    # (a stolen host folder's router key puts nothing else past it), not the sensing the
+    # simulator sends to host 2 straight; its own router and the hub relay everything.
+    acl = access_control(KEYS, 2, 1, n_routers=3, hosts=HOSTS, here=1)
+    assert _own(acl, "router-1") == _own(acl, "router-0") == [KEYS.everything()]
+    assert set(_own(acl, "router-2")) == {
+        KEYS.follower_state(1), KEYS.follower_estimate(1), KEYS.status("follower", 1),
+        KEYS.alive("follower", 1), KEYS.clock("router", 2)}
+    # At the hub, every other router brings its own host's keys only.
+    hub = access_control(KEYS, 2, 1, n_routers=3, hosts=HOSTS, here=0)
+    assert _own(hub, "router-0") == [KEYS.everything()]
+    assert KEYS.follower_state(0) in _own(hub, "router-1")
+    for forged in (KEYS.control(), KEYS.truth(), KEYS.sensor_targets(0),
+                   KEYS.sensor_targets(1), KEYS.follower_state(1), KEYS.status("sim", 0),
+                   KEYS.alive("target", 0), KEYS.clock("router", 2)):
+        assert forged not in _own(hub, "router-1"), forged
+    with pytest.raises(ValueError, match="3 hosts for 2 routers"):
+        access_control(KEYS, 2, 1, n_routers=2, hosts=HOSTS, here=0)

@@ -4,6 +4,7 @@ file (deploy.host_keys)."""
 
 from __future__ import annotations
 
+import json
 import shutil
 import stat
 from pathlib import Path
@@ -13,10 +14,12 @@ import pytest
 from deploy.cli import main
 from deploy.deployment import Deployment, HostSpec, dump_deployment
 from deploy.host_keys import (
+    ACL_FILE,
     CA_KEY,
     OPERATOR,
     HostSecrets,
     check_folder,
+    host_acl,
     host_names,
     needed_files,
     write_swarm_keys,
@@ -56,8 +59,10 @@ def test_each_host_holds_exactly_what_its_processes_are_given(keys: Path) -> Non
         assert not held & (theirs - ours), host.name
         assert stat.S_IMODE(folder.stat().st_mode) == 0o700
         assert all(stat.S_IMODE((folder / f).stat().st_mode) == 0o600 for f in held)
-        for f in held:  # copies of the operator's files, not new ones
+        for f in held - {ACL_FILE}:  # copies of the operator's files, not new ones
             assert (folder / f).read_bytes() == (operator / f).read_bytes()
+        # but the ACL, the host's own (transport.access.relayed_keys)
+        assert json.loads((folder / ACL_FILE).read_text()) == host_acl(DEP, k, 4, 2)
     drone_a = {p.name for p in (keys / "drone-a").iterdir()}
     assert {"follower-0.key", "follower-1.json", "router-1.key", "ca.pem", "acl.json"} <= drone_a
     assert not {"follower-2.key", "sim.json", "target-0.key", "router-0.key"} & drone_a

@@ -1,14 +1,18 @@
 """The simulator's sensing of followers on other hosts goes over a link to their host
 (deploy.sensor_links): the flag, the deployment's sensing endpoints, and the observations
-of a linked follower published on its link's bus only."""
+of a linked follower published on its link's bus only; the link's session opened in the
+background, so the simulator never waits for another host."""
 
 from __future__ import annotations
+
+import time
 
 import pytest
 
 from agents.scenario.file import load_scenario
 from deploy.deployment import Deployment, HostSpec
-from deploy.sensor_links import SensorLink, check_disjoint, parse_sensor_link
+from deploy.ports import free_tcp_port
+from deploy.sensor_links import LinkBus, SensorLink, check_disjoint, parse_sensor_link
 from deploy.swarm_sim import SensorPublisher
 from sim_backend.model import FleetState
 from sim_backend.runtime import spawn_points_ned
@@ -17,6 +21,8 @@ from transport.errors import ConfigError
 from transport.keys import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import TargetObservation
+from transport.zenoh_bus import ZenohBus
+from transport.zenoh_config import ZenohConfig
 
 GROUND = ("launcher", "sim", "recorder", "target-0", "target-1")
 
@@ -66,3 +72,28 @@ def test_a_linked_followers_observations_go_on_its_links_bus_only() -> None:
     observers = {i for t in scenario.targets for i in t.observed_by}
     assert got[1] == observers & {2, 3} and got[1]
     assert got[0] == observers - {2, 3} and got[0]
+
+
+@pytest.mark.realtime  # a Zenoh session and the link's opening thread
+@pytest.mark.timeout(60)
+def test_a_sensing_link_opens_in_the_background_and_drops_until_it_is_up() -> None:
+    port = free_tcp_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    link = LinkBus(ZenohConfig(mode="client", connect=(endpoint,)))
+    try:
+        pub = link.declare_publisher("s/sensor/2/targets")  # nothing listens there yet
+        pub.put(b"early")
+        assert link.dropped == 1 and not link.wait_open(0.2)
+        with ZenohBus(ZenohConfig(mode="peer", listen=(endpoint,))) as far:
+            sub = far.subscribe("s/sensor/**")
+            assert link.wait_open(30.0)
+            got: list[bytes] = []
+            deadline = time.monotonic() + 20.0
+            while not got and time.monotonic() < deadline:
+                pub.put(b"late")
+                got += [r.payload for r in sub.drain()]
+                time.sleep(0.05)
+            assert got and set(got) == {b"late"}
+    finally:
+        link.close()
+    assert not link._thread.is_alive()
