@@ -11,6 +11,7 @@ another host is given them over a link to that host (`--sensor-link`, deploy.sen
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import logging
 import math
 import sys
@@ -40,6 +41,7 @@ from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from transport.bus import Bus
 from transport.codec import encode
+from transport.errors import ConfigError
 from transport.keys import SwarmKeys
 from transport.messages import Stamper, TargetObservation, TruthSnapshot, vec2, vec3
 
@@ -174,12 +176,14 @@ class SwarmSimOptions:
     send_base_port: int = 14540
     signing_secret: str | None = None  # the run's MAVLink secret: a key per vehicle
     sensor_links: tuple[str, ...] = ()  # --sensor-link ENDPOINT=I,J (deploy.sensor_links)
+    mav_peers: tuple[str, ...] = ()  # --mav-peers: each vehicle's agent's address
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SwarmSimOptions:
         return cls(BusOptions.from_namespace(args), args.rate_hz, args.telemetry_hz,
                    args.sensor_hz, args.noise_std_m, args.seed, args.base_port, args.mav_host,
-                   args.send_base_port, args.signing_secret, tuple(args.sensor_link))
+                   args.send_base_port, args.signing_secret, tuple(args.sensor_link),
+                   _addresses(args.mav_peers))
 
 
 def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> SimConfig:
@@ -192,7 +196,21 @@ def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> Sim
         listen_base_port=opts.base_port,
         send_base_port=opts.send_base_port,
         signing_secret=None if opts.signing_secret is None else load_key(opts.signing_secret),
+        peer_hosts=opts.mav_peers,
     )
+
+
+def _addresses(text: str | None) -> tuple[str, ...]:
+    """`--mav-peers`' comma-separated IPv4 addresses; ConfigError names a bad one."""
+    if not text:
+        return ()
+    out = []
+    for item in text.split(","):
+        try:
+            out.append(str(ipaddress.IPv4Address(item.strip())))
+        except ValueError:
+            raise ConfigError("mav_peers", f"{item!r} is not an IPv4 address") from None
+    return tuple(out)
 
 
 def run(opts: SwarmSimOptions) -> int:
@@ -272,6 +290,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="address the vehicles listen on (another host's agents: its "
                         "own address, or 0.0.0.0); telemetry also goes to whoever sends")
     parser.add_argument("--send-base-port", type=int, default=14540)
+    parser.add_argument("--mav-peers", default=None, metavar="ADDR,ADDR,...",
+                        help="the address of each vehicle's agent, in vehicle order: vehicle i "
+                        "then hears (ADDR_i, send base + i) alone and sends its telemetry "
+                        "there (default: anyone, as PX4 SITL)")
     parser.add_argument("--signing-secret", default=None, metavar="FILE",
                         help="the run's 32-byte MAVLink secret: each vehicle enforces signing "
                         "with its own key derived from it (agents.mavlink.signing)")

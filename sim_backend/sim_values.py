@@ -31,6 +31,12 @@ class SimConfig:
     # secret (agents.mavlink.signing.vehicle_key), or all with one key.  At most one of them.
     signing_secret: bytes | None = None
     signing_key: bytes | None = None
+    # The address each vehicle's agent sends from, one per vehicle, where the deployment
+    # knows it: vehicle i then takes datagrams from (peer_hosts[i], send_base+i) alone (a
+    # connected socket: the kernel drops anyone else's before they count against the
+    # vehicle's receive budget) and streams its telemetry there.  Empty: any sender, as PX4
+    # SITL (third-party ground stations: `enclose sim`).
+    peer_hosts: tuple[str, ...] = ()
 
     def vehicle_key(self, sysid: int) -> bytes | None:
         """The key vehicle `sysid` signs and verifies with; None: unsigned."""
