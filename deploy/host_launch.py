@@ -138,7 +138,8 @@ class HostLaunch(Launch):
         if name == "sim":
             self.sup.start(name, "deploy.swarm_sim", [
                 *argv, "--mav-host", "0.0.0.0", "--base-port", str(self.vehicle_base),
-                "--send-base-port", str(self.adapter_base), "--mav-peers", self.mav_peers(),
+                "--send-base-port", str(self.adapter_base), "--mav-peers",
+                ",".join(self.dep.mav_peers(self.scenario.n, self.scenario.m)),
                 "--noise-std-m", str(self.opts.noise_std_m), *self.sensor_link_argv()],
                 prefix=pre)
         elif name == "recorder":
@@ -151,17 +152,6 @@ class HostLaunch(Launch):
             extra += self.journal_argv() if role == "follower" else []
             self.sup.start(name, AGENT_MODULES[role], [*argv, *mav, *extra, "--index", idx],
                            prefix=pre)
-
-    def mav_peers(self) -> str:
-        """Each vehicle's agent's address as the simulator sees it (`--mav-peers`): the
-        loopback for an agent on the simulator's host, else its host's address in the
-        deployment file, so that no other sender counts against a vehicle's budget."""
-        sim_host, n = self.dep.host_of("sim"), self.scenario.n
-        agents = [f"follower-{i}" for i in range(n)] + [
-            f"target-{j}" for j in range(self.scenario.m)]
-        hosts = [self.dep.host_of(name) for name in agents]
-        return ",".join("127.0.0.1" if k == sim_host else self.dep.hosts[k].address
-                        for k in hosts)
 
     def sensor_link_argv(self) -> list[str]:
         """The simulator's sensing of each other host's followers, over a link to that
