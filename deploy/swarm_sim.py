@@ -11,7 +11,6 @@ another host is given them over a link to that host (`--sensor-link`, deploy.sen
 from __future__ import annotations
 
 import argparse
-import ipaddress
 import logging
 import math
 import sys
@@ -39,9 +38,9 @@ from deploy.run_secrets import agent_of_vehicle
 from deploy.sensor_links import parse_sensor_link, sensor_buses
 from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
+from sim_backend.sim_values import parse_peer_hosts
 from transport.bus import Bus
 from transport.codec import encode
-from transport.errors import ConfigError
 from transport.keys import SwarmKeys
 from transport.messages import Stamper, TargetObservation, TruthSnapshot, vec2, vec3
 
@@ -183,7 +182,7 @@ class SwarmSimOptions:
         return cls(BusOptions.from_namespace(args), args.rate_hz, args.telemetry_hz,
                    args.sensor_hz, args.noise_std_m, args.seed, args.base_port, args.mav_host,
                    args.send_base_port, args.signing_secret, tuple(args.sensor_link),
-                   _addresses(args.mav_peers))
+                   parse_peer_hosts(args.mav_peers))
 
 
 def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> SimConfig:
@@ -199,18 +198,6 @@ def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> Sim
         peer_hosts=opts.mav_peers,
     )
 
-
-def _addresses(text: str | None) -> tuple[str, ...]:
-    """`--mav-peers`' comma-separated IPv4 addresses; ConfigError names a bad one."""
-    if not text:
-        return ()
-    out = []
-    for item in text.split(","):
-        try:
-            out.append(str(ipaddress.IPv4Address(item.strip())))
-        except ValueError:
-            raise ConfigError("mav_peers", f"{item!r} is not an IPv4 address") from None
-    return tuple(out)
 
 
 def run(opts: SwarmSimOptions) -> int:

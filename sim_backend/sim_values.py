@@ -8,6 +8,7 @@ the launchers, tests and benchmarks import them from.
 
 from __future__ import annotations
 
+import ipaddress
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,6 +16,7 @@ import numpy as np
 from agents.frames import enu_to_ned
 from agents.mavlink.signing import vehicle_key
 from agents.scenario.model import Scenario
+from transport.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -43,6 +45,20 @@ class SimConfig:
         if self.signing_secret is not None:
             return vehicle_key(self.signing_secret, sysid)
         return self.signing_key
+
+
+def parse_peer_hosts(text: str | None) -> tuple[str, ...]:
+    """`--mav-peers`: comma-separated IPv4 addresses, one per vehicle (SimConfig.peer_hosts);
+    ConfigError names a bad one."""
+    if not text:
+        return ()
+    out = []
+    for item in text.split(","):
+        try:
+            out.append(str(ipaddress.IPv4Address(item.strip())))
+        except ValueError:
+            raise ConfigError("mav_peers", f"{item!r} is not an IPv4 address") from None
+    return tuple(out)
 
 
 @dataclass(frozen=True)
