@@ -24,6 +24,7 @@ from agents.mavlink.startup import StartupTimeouts, start_offboard
 from tests.integration.sim_process import start_sim
 
 FLOOD_FROM = "127.0.0.2"
+TICK_S = 0.02
 
 
 @dataclass(frozen=True)
@@ -71,12 +72,16 @@ def fly_flooded(seconds: float, rate_dps: float, size_b: int, closed: bool = Tru
                  str(sim.send_base), "--flood-dps", str(rate_dps), "--flood-size", str(size_b)])
             flying = True
             deadline = time.monotonic() + seconds + 20.0
-            while flooder.poll() is None:
+            next_tick = time.monotonic()
+            while flooder.poll() is None:  # a 50-Hz loop, as a follower's
                 assert time.monotonic() < deadline, "the flooder did not finish"
-                ad.send_velocity_enu((0.5, 0.0, 0.0))
-                state = ad.poll()
-                flying &= (state.armed, state.mode, state.link_ok) == (True, "OFFBOARD", True)
-                ad.wait_readable(0.02)
+                if time.monotonic() >= next_tick:
+                    next_tick += TICK_S
+                    ad.send_velocity_enu((0.5, 0.0, 0.0))
+                    state = ad.poll()
+                    flying &= (state.armed, state.mode, state.link_ok) == (
+                        True, "OFFBOARD", True)
+                time.sleep(max(0.0, min(next_tick - time.monotonic(), TICK_S)))
             assert flooder.returncode == 0
             sent = ad.counters["setpoints_sent"] - sent_before
         finally:
