@@ -32,6 +32,7 @@ class FloodResult:
     seconds: float
     flood_sent: int  # datagrams the flooder sent (both ports)
     setpoints_sent: int  # by the agent while flooded
+    setpoints_sent_all: int  # by the agent, the whole run (its start-up's too)
     setpoints_handled: int  # by the vehicle, the whole run
     failsafes: int  # the vehicle's
     sim_rx_datagrams: int  # what reached the vehicle's socket, the whole run
@@ -83,7 +84,8 @@ def fly_flooded(seconds: float, rate_dps: float, size_b: int, closed: bool = Tru
                         True, "OFFBOARD", True)
                 time.sleep(max(0.0, min(next_tick - time.monotonic(), TICK_S)))
             assert flooder.returncode == 0
-            sent = ad.counters["setpoints_sent"] - sent_before
+            sent_all = ad.counters["setpoints_sent"]
+            sent = sent_all - sent_before
         finally:
             if flooder is not None and flooder.poll() is None:
                 flooder.kill()
@@ -92,6 +94,7 @@ def fly_flooded(seconds: float, rate_dps: float, size_b: int, closed: bool = Tru
             sim.stop()
         flood = json.loads(report.read_text())
         c = sim_counters(sim.output())
-        return FloodResult(seconds, int(flood["flood_sent"]), sent, c.get("setpoints", 0),
+        return FloodResult(seconds, int(flood["flood_sent"]), sent, sent_all,
+                           c.get("setpoints", 0),
                            c.get("failsafes", 0), c.get("rx_datagrams", 0), flying,
                            dict(ad.counters))

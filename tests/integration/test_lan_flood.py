@@ -21,7 +21,8 @@ def test_a_flood_from_another_address_stops_no_setpoint() -> None:
     assert r.flood_sent >= 0.5 * FLOOD_DPS * FLOOD_S, r  # the flood was real
     assert r.flying and r.failsafes == 0, r
     assert r.setpoints_sent >= 0.8 * FLOOD_S / 0.02, r
-    # Every setpoint reached the vehicle (and the start-up's); nothing of the flood did.
-    assert r.setpoints_handled >= r.setpoints_sent, r
+    # Every setpoint reached the vehicle (one may be in flight at the stop); nothing of
+    # the flood did.  Without the connected sockets, 42 % were lost (bench_lan_flood.py).
+    assert r.setpoints_handled >= r.setpoints_sent_all - 2, r
     assert r.sim_rx_datagrams < 2 * r.setpoints_handled + 2_000, r
     assert r.agent_counters.get("bad_packets", 0) == 0, r

@@ -7,12 +7,14 @@ SIGKILLed meanwhile is restarted and rejoins the membership within 10 s: Zenoh's
 from __future__ import annotations
 
 import json
+import math
 import re
 import selectors
 import signal
 import socket
 import sys
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -91,11 +93,20 @@ def rendezvous(proc: object) -> tuple[tuple[str, int], list[str]]:
     raise AssertionError("".join(lines[-20:]))
 
 
-@pytest.mark.serial  # kill-and-rejoin timing beside a swarm
-def test_a_killed_follower_rejoins_past_200_idle_connections(tmp_path: Path) -> None:
-    out = tmp_path / "run"
+@dataclass(frozen=True)
+class Rejoin:
+    left_s: float  # experiment time the membership lost the killed follower
+    back_s: float  # ... and had it again (inf: not by the run's end)
+    held: int  # idle connections still held at the end
+    reopened: int  # idle connections Zenoh dropped and the holder opened again
+    phases: list[dict[str, object]]
+
+
+def kill_under_idle_connections(out: Path, *extra: str) -> Rejoin:
+    """A run whose rendezvous is held by IDLE idle connections while follower-0 is
+    SIGKILLed at KILL_AT_S; when the membership lost it, and when it had it again."""
     argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--no-live",
-            "--link-timeout", "60", "--duration", str(DURATION_S), "--no-figures"]
+            "--link-timeout", "60", "--duration", str(DURATION_S), "--no-figures", *extra]
     with spawned_run(argv, out) as proc:
         addr, lines = rendezvous(proc)
         wait_for(lambda: experiment_t_s(out) >= KILL_AT_S - 4.0, 150.0, "the run's start")
@@ -104,11 +115,17 @@ def test_a_killed_follower_rejoins_past_200_idle_connections(tmp_path: Path) -> 
             assert signal_same(read_pids(out / "logs")["follower-0"], signal.SIGKILL)
             proc.wait(timeout=DURATION_S + 120.0)
             held = len(holder.sel.get_map())
-    assert held >= IDLE * 0.95, held  # the connections were there all along
     metrics = json.loads((out / "metrics.json").read_text())
     marks = [t for t in metrics["membership"]["changes_s"] if t >= KILL_AT_S - 1.0]
     phases = metrics["membership"]["phases"]
-    assert len(marks) >= 2, (marks, phases, "".join(lines[-30:]))
-    left, back = marks[0], marks[1]
-    assert back - left <= REJOIN_S, (marks, phases)
-    assert phases[-1]["members"] == [0, 1, 2, 3], phases
+    assert marks, (phases, "".join(lines[-30:]))  # the kill was seen
+    back = marks[1] if len(marks) > 1 else math.inf  # inf: not back by the run's end
+    return Rejoin(marks[0], back, held, holder.reopened, phases)
+
+
+@pytest.mark.serial  # kill-and-rejoin timing beside a swarm
+def test_a_killed_follower_rejoins_past_200_idle_connections(tmp_path: Path) -> None:
+    r = kill_under_idle_connections(tmp_path / "run")
+    assert r.held >= IDLE * 0.95, r  # the connections were there all along
+    assert r.back_s - r.left_s <= REJOIN_S, r
+    assert r.phases[-1]["members"] == [0, 1, 2, 3], r
