@@ -55,23 +55,26 @@ def paper(args: argparse.Namespace) -> None:
             sim_addr = re.search(r'address = "([\d.]+)"', dep).group(1)  # type: ignore[union-attr]
             subprocess.run(["ip", "-n", hub, "addr", "add", f"{LAN_SOURCE}/24", "dev", "br0"],
                            check=True)
-            report = Path(tmp) / "flood.json"
             ports = [a for v in range(6) for a in ("--flood-port", str(base + v))]
+            reports = [Path(tmp) / f"flood-{k}.json" for k in range(args.flooders)]
             t0 = time.monotonic()
-            subprocess.run(["ip", "netns", "exec", hub, sys.executable, "-m",
-                            "tests.integration.mav_insider", "--seconds", str(args.seconds),
-                            "--out", str(report), "--flood-kind", "lan", "--flood-from",
-                            LAN_SOURCE, "--flood-host", sim_addr, *ports, "--flood-dps",
-                            str(args.dps), "--flood-size", str(args.size)], check=True)
+            flooders = [subprocess.Popen(
+                ["ip", "netns", "exec", hub, sys.executable, "-m",
+                 "tests.integration.mav_insider", "--seconds", str(args.seconds), "--out",
+                 str(report), "--flood-kind", "lan", "--flood-from", LAN_SOURCE, "--flood-host",
+                 sim_addr, *ports, "--flood-dps", str(args.dps / args.flooders), "--flood-size",
+                 str(args.size)]) for report in reports]
+            for flooder in flooders:  # each exits after its seconds
+                flooder.wait(args.seconds + 60.0)
             flood_s = time.monotonic() - t0
             proc.wait(timeout=args.seconds + 120.0)
             output = "".join(lines)
         launch = json.loads((out / "launch.json").read_text())
         sim = launch["status_at_stop"]["sim-0"]
-        flood = json.loads(report.read_text())
+        sent = sum(json.loads(r.read_text())["flood_sent"] for r in reports)
         verdict = [line for line in output.splitlines() if "bounds" in line][-1:]
-        print(json.dumps({"flood_s": round(flood_s, 1), "flood_sent": flood["flood_sent"],
-                          "flood_dps": round(flood["flood_sent"] / flood_s),
+        print(json.dumps({"flood_s": round(flood_s, 1), "flood_sent": sent,
+                          "flood_dps": round(sent / flood_s),
                           "failsafes": sim.get("failsafes", 0), "setpoints": sim.get("setpoints"),
                           "sim_rx_datagrams": sim.get("rx_datagrams"),
                           "sim_budget_spent": sim.get("mav_budget_spent", 0),
@@ -105,6 +108,7 @@ def main() -> None:
     p.add_argument("--size", type=int, default=1_000)
     p.add_argument("--repeat", type=int, default=2)
     p.add_argument("--paper", action="store_true")
+    p.add_argument("--flooders", type=int, default=2, help="processes sharing the flood")
     args = p.parse_args()
     (paper if args.paper else component)(args)
 
