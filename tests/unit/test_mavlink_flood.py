@@ -19,7 +19,8 @@ from agents.mavlink.wire import encode, new_codec, sign_outgoing
 from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.endpoint import MAX_PEERS
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
-from transport.errors import SimulatorError
+from sim_backend.sim_values import parse_peer_hosts
+from transport.errors import ConfigError, SimulatorError
 
 SECRET = bytes(range(7, 39))
 
@@ -284,3 +285,10 @@ def test_peer_addresses_are_one_per_vehicle() -> None:
     with pytest.raises(SimulatorError, match="peer_hosts"):
         Simulator(grid_spawn_ned(2), VehicleConfig(), HomeConfig(),
                   SimConfig(listen_base_port=0, peer_hosts=("127.0.0.1",)))
+
+
+def test_peer_addresses_are_parsed_and_a_bad_one_named() -> None:
+    assert parse_peer_hosts(None) == () and parse_peer_hosts("") == ()
+    assert parse_peer_hosts("127.0.0.1, 10.77.0.2") == ("127.0.0.1", "10.77.0.2")
+    with pytest.raises(ConfigError, match=r"mav_peers.*'ground'"):
+        parse_peer_hosts("127.0.0.1,ground")
