@@ -74,7 +74,7 @@ def paper(args: argparse.Namespace) -> None:
         sent = sum(json.loads(r.read_text())["flood_sent"] for r in reports)
         verdict = [line for line in output.splitlines() if "bounds" in line][-1:]
         print(json.dumps({"flood_s": round(flood_s, 1), "flood_sent": sent,
-                          "flood_dps": round(sent / flood_s),
+                          "flood_dps": round(sent / args.seconds),
                           "failsafes": sim.get("failsafes", 0), "setpoints": sim.get("setpoints"),
                           "sim_rx_datagrams": sim.get("rx_datagrams"),
                           "sim_budget_spent": sim.get("mav_budget_spent", 0),
