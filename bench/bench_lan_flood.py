@@ -108,7 +108,7 @@ def main() -> None:
     p.add_argument("--size", type=int, default=1_000)
     p.add_argument("--repeat", type=int, default=2)
     p.add_argument("--paper", action="store_true")
-    p.add_argument("--flooders", type=int, default=2, help="processes sharing the flood")
+    p.add_argument("--flooders", type=int, default=3, help="processes sharing the flood")
     args = p.parse_args()
     (paper if args.paper else component)(args)
 
