@@ -1,8 +1,12 @@
 """Issue 51, item 7: the rendezvous port held by 200 idle TCP connections (no credentials:
-a bare connect that never speaks TLS), re-opened as soon as Zenoh drops one.  A follower
-SIGKILLed meanwhile is restarted and rejoins the membership within 10 s: Zenoh's defaults
-(100 handshake slots, each held 10 s) made its first sample wait ~11 s behind 200 of them
-(transport.zenoh_config: ACCEPT_PENDING, ACCEPT_TIMEOUT_MS)."""
+a bare connect that never speaks), each re-opened as soon as Zenoh drops it.  A follower
+SIGKILLed meanwhile is restarted and rejoins the membership within 10 s.  With Zenoh's
+defaults (100 handshake slots, each held 10 s) it took 16.4 s on a plain-TCP rendezvous
+(`--insecure`, as sweeps and `link = "udp"` runs are); with ours, 3.7 s
+(transport.zenoh_config: ACCEPT_PENDING, ACCEPT_TIMEOUT_MS; bench/bench_rendezvous_flood.py).
+The TLS rendezvous of a secure run let the follower in within 2.8 s even with Zenoh's
+defaults (its idle connections wait in TLS's handshake, not in those slots), so the
+plain-TCP one is the case tested."""
 
 from __future__ import annotations
 
@@ -125,7 +129,7 @@ def kill_under_idle_connections(out: Path, *extra: str) -> Rejoin:
 
 @pytest.mark.serial  # kill-and-rejoin timing beside a swarm
 def test_a_killed_follower_rejoins_past_200_idle_connections(tmp_path: Path) -> None:
-    r = kill_under_idle_connections(tmp_path / "run")
+    r = kill_under_idle_connections(tmp_path / "run", "--insecure")
     assert r.held >= IDLE * 0.95, r  # the connections were there all along
     assert r.back_s - r.left_s <= REJOIN_S, r
     assert r.phases[-1]["members"] == [0, 1, 2, 3], r
