@@ -84,8 +84,10 @@ LEASE_KEY = ROUTER_LEASE_KEY
 # Every listener (a router, the rendezvous peer) holds a link whose handshake has not
 # finished in one of `accept_pending` slots (Zenoh: 100) for up to `accept_timeout` (Zenoh:
 # 10 s).  Anyone who reaches the port fills them with bare TCP connections, no credentials
-# needed: with 200 held open, a peer's first sample got through after 11.1 s, once Zenoh
-# had timed them out (0.06 s with 500 slots; tests/integration/test_rendezvous_flood.py).
+# needed: with 200 held open on a plain-TCP listener, a new peer's first sample got through
+# after 11.1 s, once Zenoh had timed them out, and never while they were re-opened as they
+# dropped (0.06 s with 500 slots); a follower killed in a run took 16.4 s to rejoin, 3.7 s
+# with ours (bench/bench_rendezvous_flood.py, tests/integration/test_rendezvous_flood.py).
 # 500 slots outnumber such a flood while staying under the usual 1024 descriptors a process
 # may open; 3 s is still far past an mTLS handshake on a loaded machine, and frees a slot
 # held by a silent connection three times sooner.
