@@ -120,8 +120,10 @@ def adapter_config(opts: AgentOptions, vehicle: int) -> AdapterConfig:
     """The MAVLink link to vehicle `vehicle` as the command line sets it."""
     mav_opts = opts.vehicle
     cfg = AdapterConfig.px4_sitl(vehicle, mav_opts.mav_local_base, mav_opts.mav_vehicle_base)
-    if mav_opts.mav_vehicle_host:  # a companion computer off the vehicle's host
-        cfg = replace(cfg, remote_host=mav_opts.mav_vehicle_host, local_host="0.0.0.0")
+    if mav_opts.mav_vehicle_host:  # a companion computer off the vehicle's host: it listens
+        # on every address, so it hears its vehicle's alone (AdapterConfig.connect)
+        cfg = replace(cfg, remote_host=mav_opts.mav_vehicle_host, local_host="0.0.0.0",
+                      connect=True)
     if mav_opts.signing_key is not None:  # link id: the vehicle's number, one stream per agent
         cfg = replace(cfg, signing_key=load_key(mav_opts.signing_key),
                       signing_link_id=vehicle & 0xFF)

@@ -81,6 +81,17 @@ class Deployment:
                 return k
         raise ConfigError("deployment.hosts", f"{process} is placed on no host")
 
+    def mav_peers(self, n: int, m: int) -> tuple[str, ...]:
+        """Each vehicle's agent's address as the simulator sees it (followers, then targets):
+        the loopback for an agent on the simulator's host (it talks to 127.0.0.1), else its
+        host's address in this file, so that no other sender reaches a vehicle
+        (sim_backend.sim_values.SimConfig.peer_hosts).  A host that reaches the simulator's
+        from another of its addresses must be given that one here."""
+        sim = self.host_of("sim")
+        agents = [f"follower-{i}" for i in range(n)] + [f"target-{j}" for j in range(m)]
+        return tuple("127.0.0.1" if k == sim else self.hosts[k].address
+                     for k in map(self.host_of, agents))
+
     def router_endpoint(self, k: int, secure: bool) -> str:
         host = self.hosts[k]
         return f"{'tls' if secure else 'tcp'}/{host.address}:{host.router_port}"

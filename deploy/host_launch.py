@@ -138,7 +138,8 @@ class HostLaunch(Launch):
         if name == "sim":
             self.sup.start(name, "deploy.swarm_sim", [
                 *argv, "--mav-host", "0.0.0.0", "--base-port", str(self.vehicle_base),
-                "--send-base-port", str(self.adapter_base),
+                "--send-base-port", str(self.adapter_base), "--mav-peers",
+                ",".join(self.dep.mav_peers(self.scenario.n, self.scenario.m)),
                 "--noise-std-m", str(self.opts.noise_std_m), *self.sensor_link_argv()],
                 prefix=pre)
         elif name == "recorder":

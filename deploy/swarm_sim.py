@@ -38,6 +38,7 @@ from deploy.run_secrets import agent_of_vehicle
 from deploy.sensor_links import LinkBus, parse_sensor_link, sensor_buses
 from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
+from sim_backend.sim_values import parse_peer_hosts
 from transport.bus import Bus
 from transport.codec import encode
 from transport.keys import SwarmKeys
@@ -174,12 +175,14 @@ class SwarmSimOptions:
     send_base_port: int = 14540
     signing_secret: str | None = None  # the run's MAVLink secret: a key per vehicle
     sensor_links: tuple[str, ...] = ()  # --sensor-link ENDPOINT=I,J (deploy.sensor_links)
+    mav_peers: tuple[str, ...] = ()  # --mav-peers: each vehicle's agent's address
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SwarmSimOptions:
         return cls(BusOptions.from_namespace(args), args.rate_hz, args.telemetry_hz,
                    args.sensor_hz, args.noise_std_m, args.seed, args.base_port, args.mav_host,
-                   args.send_base_port, args.signing_secret, tuple(args.sensor_link))
+                   args.send_base_port, args.signing_secret, tuple(args.sensor_link),
+                   parse_peer_hosts(args.mav_peers))
 
 
 def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> SimConfig:
@@ -192,7 +195,9 @@ def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> Sim
         listen_base_port=opts.base_port,
         send_base_port=opts.send_base_port,
         signing_secret=None if opts.signing_secret is None else load_key(opts.signing_secret),
+        peer_hosts=opts.mav_peers,
     )
+
 
 
 def run(opts: SwarmSimOptions) -> int:
@@ -273,6 +278,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="address the vehicles listen on (another host's agents: its "
                         "own address, or 0.0.0.0); telemetry also goes to whoever sends")
     parser.add_argument("--send-base-port", type=int, default=14540)
+    parser.add_argument("--mav-peers", default=None, metavar="ADDR,ADDR,...",
+                        help="the address of each vehicle's agent, in vehicle order: vehicle i "
+                        "then hears (ADDR_i, send base + i) alone and sends its telemetry "
+                        "there (default: anyone, as PX4 SITL)")
     parser.add_argument("--signing-secret", default=None, metavar="FILE",
                         help="the run's 32-byte MAVLink secret: each vehicle enforces signing "
                         "with its own key derived from it (agents.mavlink.signing)")

@@ -258,6 +258,8 @@ class VehicleEndpoint:
         try:
             self.sock.sendto(data, addr)
             self.counters["tx_datagrams"] += 1
+        except ConnectionRefusedError:  # a connected vehicle's agent not (yet) listening
+            self.counters["peer_unreachable"] += 1
         except OSError:
             self.counters["tx_errors"] += 1
 

@@ -44,6 +44,14 @@ MAX_VEHICLES = 255
 QUEUED_ROUNDS = 16  # rounds over the ready sockets when taking what is queued
 
 
+def _reachable(host: str) -> str:
+    """Where telemetry to `host`'s own machine goes: a wildcard bind address names no peer
+    (0.0.0.0 reaches this machine as 127.0.0.1 does), so that a local agent sending from
+    127.0.0.1 is one destination, not two, and never gets each datagram twice (the second
+    a replay to its verifier)."""
+    return "127.0.0.1" if host in ("0.0.0.0", "") else host
+
+
 class Simulator:
     """N vehicles (sysid i+1) stepped together, each behind its own UDP socket."""
 
@@ -55,6 +63,9 @@ class Simulator:
             raise SimulatorError(f"flavour must be one of {FLAVOURS}, got {cfg.flavour!r}")
         if not 1 <= len(spawn_ned_m) <= MAX_VEHICLES:
             raise SimulatorError(f"1..{MAX_VEHICLES} vehicles per process (sysid i+1 is one byte)")
+        if cfg.peer_hosts and len(cfg.peer_hosts) != len(spawn_ned_m):
+            raise SimulatorError(f"peer_hosts: one address per vehicle ({len(spawn_ned_m)}), "
+                                 f"got {len(cfg.peer_hosts)}")
         if not 0 < cfg.telemetry_hz <= cfg.rate_hz:
             raise SimulatorError("telemetry rate must be > 0 and not above the tick rate")
         self.cfg = cfg
@@ -87,9 +98,13 @@ class Simulator:
 
     def _open_endpoint(self, i: int, vehicle: VehicleConfig, home: HomeConfig) -> VehicleEndpoint:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        dest = (self.cfg.peer_hosts[i] if self.cfg.peer_hosts else _reachable(self.cfg.host),
+                self.cfg.send_base_port + i)
         try:
             port = self.cfg.listen_base_port + i if self.cfg.listen_base_port else 0
             sock.bind((self.cfg.host, port))
+            if self.cfg.peer_hosts:  # its agent's datagrams alone (SimConfig.peer_hosts)
+                sock.connect(dest)
             sock.setblocking(False)
         except OSError:
             sock.close()
@@ -98,7 +113,6 @@ class Simulator:
         store = ParamStore(flavour, default_params(flavour, sysid, vehicle))
         spawn = tuple(float(v) for v in self.state.pos_ned_m[i])
         autopilot = Autopilot(flavour, home.alt_m, home_ned_m=(spawn[0], spawn[1], spawn[2]))
-        dest = (self.cfg.host, self.cfg.send_base_port + i)
         endpoint = VehicleEndpoint(sysid, sock, dest, autopilot, store, home,
                                    self.cfg.telemetry_hz, self.counters, index=i, tick_s=self.dt_s,
                                    messages=self.messages)
@@ -235,6 +249,9 @@ class Simulator:
         try:
             data, addr = ep.sock.recvfrom(65535)
         except (BlockingIOError, InterruptedError):
+            return False
+        except ConnectionRefusedError:  # a connected vehicle's agent not (yet) listening
+            self.counters["peer_unreachable"] += 1
             return False
         except OSError:
             self.counters["rx_errors"] += 1

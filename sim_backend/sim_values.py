@@ -8,6 +8,7 @@ the launchers, tests and benchmarks import them from.
 
 from __future__ import annotations
 
+import ipaddress
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,6 +16,7 @@ import numpy as np
 from agents.frames import enu_to_ned
 from agents.mavlink.signing import vehicle_key
 from agents.scenario.model import Scenario
+from transport.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -31,12 +33,32 @@ class SimConfig:
     # secret (agents.mavlink.signing.vehicle_key), or all with one key.  At most one of them.
     signing_secret: bytes | None = None
     signing_key: bytes | None = None
+    # The address each vehicle's agent sends from, one per vehicle, where the deployment
+    # knows it: vehicle i then takes datagrams from (peer_hosts[i], send_base+i) alone (a
+    # connected socket: the kernel drops anyone else's before they count against the
+    # vehicle's receive budget) and streams its telemetry there.  Empty: any sender, as PX4
+    # SITL (third-party ground stations: `enclose sim`).
+    peer_hosts: tuple[str, ...] = ()
 
     def vehicle_key(self, sysid: int) -> bytes | None:
         """The key vehicle `sysid` signs and verifies with; None: unsigned."""
         if self.signing_secret is not None:
             return vehicle_key(self.signing_secret, sysid)
         return self.signing_key
+
+
+def parse_peer_hosts(text: str | None) -> tuple[str, ...]:
+    """`--mav-peers`: comma-separated IPv4 addresses, one per vehicle (SimConfig.peer_hosts);
+    ConfigError names a bad one."""
+    if not text:
+        return ()
+    out = []
+    for item in text.split(","):
+        try:
+            out.append(str(ipaddress.IPv4Address(item.strip())))
+        except ValueError:
+            raise ConfigError("mav_peers", f"{item!r} is not an IPv4 address") from None
+    return tuple(out)
 
 
 @dataclass(frozen=True)

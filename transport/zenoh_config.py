@@ -81,6 +81,20 @@ ROUTER_LEASE_MS = 2000
 # cost 0.48 % of a core each with 10 s, 0.16 % with 30 s (`bench/bench_mesh_cost.py
 # --status-hz 0`); the lease is also how long a frozen (SIGSTOPped) process stays a member.
 LEASE_KEY = ROUTER_LEASE_KEY
+# Every listener (a router, the rendezvous peer) holds a link whose handshake has not
+# finished in one of `accept_pending` slots (Zenoh: 100) for up to `accept_timeout` (Zenoh:
+# 10 s).  Anyone who reaches the port fills them with bare TCP connections, no credentials
+# needed: with 200 held open on a plain-TCP listener, a new peer's first sample got through
+# after 11.1 s, once Zenoh had timed them out, and never while they were re-opened as they
+# dropped (0.06 s with 500 slots); a follower killed in a run took 16.4 s to rejoin, 3.7 s
+# with ours (bench/bench_rendezvous_flood.py, tests/integration/test_rendezvous_flood.py).
+# 500 slots outnumber such a flood while staying under the usual 1024 descriptors a process
+# may open; 3 s is still far past an mTLS handshake on a loaded machine, and frees a slot
+# held by a silent connection three times sooner.
+ACCEPT_PENDING_KEY = "transport/unicast/accept_pending"
+ACCEPT_PENDING = 500
+ACCEPT_TIMEOUT_KEY = "transport/unicast/accept_timeout"
+ACCEPT_TIMEOUT_MS = 3000
 _MODES = ("peer", "client", "router")
 
 
@@ -181,6 +195,10 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
                            (ROUTER_LEASE_KEY, ROUTER_LEASE_MS)):
             if not (user and _is_set(config, default, key)):
                 _put(config, key, value)
+    for key, value in ((ACCEPT_PENDING_KEY, ACCEPT_PENDING),
+                       (ACCEPT_TIMEOUT_KEY, ACCEPT_TIMEOUT_MS)):
+        if not (user and _is_set(config, default, key)):
+            _put(config, key, value)
     if not (user and _is_set(config, default, "scouting/multicast/enabled")):
         _put(config, "scouting/multicast/enabled", False)
     for key in ("transport/link/tx/batch_size", "transport/link/rx/buffer_size"):

@@ -101,7 +101,8 @@ class MavlinkAdapter:
 
     # ---- lifecycle ----------------------------------------------------------------------
     def open(self) -> MavlinkAdapter:
-        self.sock = bind_udp(self.cfg.local_host, self.cfg.local_port)
+        self.sock = bind_udp(self.cfg.local_host, self.cfg.local_port,
+                             self.remote if self.cfg.connect else None)
         self._selector = selectors.DefaultSelector()
         self._selector.register(self.sock, selectors.EVENT_READ)
         return self
@@ -143,6 +144,9 @@ class MavlinkAdapter:
             try:
                 data, anc, _flags, addr = self.sock.recvmsg(65535, ANCILLARY_BYTES)
             except (BlockingIOError, InterruptedError):
+                break
+            except ConnectionRefusedError:  # connected, and the vehicle is not (yet) there
+                self.counters["peer_unreachable"] += 1
                 break
             except OSError:
                 self.counters["rx_errors"] += 1
@@ -326,6 +330,8 @@ class MavlinkAdapter:
             return
         try:
             self.sock.sendto(data, self.remote)
+        except ConnectionRefusedError:
+            self.counters["peer_unreachable"] += 1
         except OSError:
             self.counters["tx_errors"] += 1
 

@@ -12,6 +12,10 @@ signed datagrams costs a read and a hash each.  A datagram that would take the t
 its parse budget is kept whole for the next tick (`RxGate.new_tick` hands it back), so a
 burst of good datagrams is delayed, never lost; only one larger than a whole tick's budget
 is cut there, its tail dropped and counted (`mav_flood_drops`, `mav_flood_bytes`).
+A datagram whose first frame passes only because its type may travel unsigned (an unsigned
+HEARTBEAT: 8 or 12 bytes, no CRC checked by the screen) is cut after that frame
+(`unsigned_tails`): the prefix vouches for itself alone, not for the kilobytes behind it,
+which would otherwise all be parsed (ground stations and SDKs send one message a datagram).
 Refusals are logged at most once per LOG_EVERY_S per receiver, with their count, reasons
 and the last sender.
 """
@@ -24,7 +28,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from agents.mavlink.signing import SignatureVerifier
+from agents.mavlink.signing import IFLAG_SIGNED, STX_V1, STX_V2, SignatureVerifier
 
 log = logging.getLogger(__name__)
 LOG_EVERY_S = 10.0
@@ -113,6 +117,10 @@ class RxGate:
                 self.verifier.count_rejection(reason, self.counters)
                 self.refusals.note(reason, sender)
                 return None
+            head = unsigned_head(data)
+            if head is not None and head < len(data):
+                self.counters["unsigned_tails"] += 1
+                data = data[:head]
         room = self.budget.parse_bytes - self.parsed_bytes
         if len(data) > room and self.parsed_bytes > 0:
             self.carried = (data, sender, stamp)
@@ -125,3 +133,15 @@ class RxGate:
             data = data[:max(0, room)]
         self.parsed_bytes += len(data)
         return data
+
+
+def unsigned_head(data: bytes) -> int | None:
+    """The length of the datagram's first frame if that frame is unsigned (MAVLink 1, or 2
+    without the signed flag), else None; `data` passed the screen, so the frame is whole."""
+    if len(data) < 2:
+        return None
+    if data[0] == STX_V1:
+        return 8 + data[1]
+    if data[0] == STX_V2 and len(data) > 2 and not data[2] & IFLAG_SIGNED:
+        return 12 + data[1]
+    return None

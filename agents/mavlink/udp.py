@@ -15,19 +15,24 @@ _U32 = struct.Struct("I")
 ANCILLARY_BYTES = socket.CMSG_SPACE(16) + socket.CMSG_SPACE(4)
 
 
-def bind_udp(host: str, port: int) -> socket.socket:
-    """A non-blocking UDP socket bound to host:port; MavlinkError names the address when
-    it cannot be bound.  Kernel receive stamps (SO_TIMESTAMPNS) are asked for: a datagram
-    that waited in the buffer is then stamped with its arrival, not with when it was read
-    (agents.mavlink.timemap.kernel_arrival_s); without them the read time stands in.  So is
+def bind_udp(host: str, port: int, peer: tuple[str, int] | None = None) -> socket.socket:
+    """A non-blocking UDP socket bound to host:port, connected to `peer` if given (the
+    kernel then drops every other sender's datagram unread); MavlinkError names the address
+    when it cannot be bound or connected.  Kernel receive stamps (SO_TIMESTAMPNS) are
+    asked for: a datagram that waited in the buffer is then stamped with its arrival, not
+    with when it was read (agents.mavlink.timemap.kernel_arrival_s); without them the read
+    time stands in.  So is
     the kernel's count of datagrams it dropped on a full buffer (SO_RXQ_OVFL, `kernel_drops`):
     a flood the receiver does not read to the end still shows."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         sock.bind((host, port))
+        if peer is not None:
+            sock.connect(peer)
     except OSError as exc:
         sock.close()
-        raise MavlinkError(f"cannot bind {host}:{port}: {exc.strerror}") from exc
+        where = f"{host}:{port}" if peer is None else f"{host}:{port} to {peer[0]}:{peer[1]}"
+        raise MavlinkError(f"cannot bind {where}: {exc.strerror}") from exc
     sock.setblocking(False)
     with contextlib.suppress(OSError):
         sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)

@@ -37,6 +37,11 @@ class AdapterConfig:
     # (a vehicle with a key signs all it sends): forged telemetry is dropped and counted.
     signing_key: bytes | None = None
     signing_link_id: int = 0
+    # Hear the vehicle's address and port alone (a connected socket: the kernel drops
+    # anyone else's datagrams before they count against the receive budget).  For a
+    # vehicle that answers from the port it listens on (PX4 SITL, the simulator), not
+    # one that answers from another (a MAVProxy or mavlink-router output).
+    connect: bool = False
 
     @classmethod
     def px4_sitl(cls, index: int, local_base: int = 14540, vehicle_base: int = 14580,

@@ -20,6 +20,7 @@ from agents.mavlink.signing import load_key
 from agents.scenario.file import load_scenario
 from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned, spawn_points_ned
+from sim_backend.sim_values import parse_peer_hosts
 from transport.errors import EncloseError
 
 log = logging.getLogger("enclose.sim")
@@ -56,6 +57,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     keys.add_argument("--signing-secret", default=None, metavar="FILE",
                       help="32-byte run secret: each vehicle enforces signing with its own "
                       "key derived from it (`enclose vehicle-key FILE SYSID` prints one)")
+    parser.add_argument("--mav-peers", default=None, metavar="ADDR,ADDR,...",
+                        help="the one client address of each vehicle, in order: vehicle i "
+                        "then hears (ADDR_i, send base + i) alone (default: anyone, as PX4 "
+                        "SITL: a ground station you start later)")
     parser.add_argument("--duration-s", type=float, default=None,
                         help="stop after this much simulated time (default: until Ctrl-C)")
 
@@ -75,12 +80,13 @@ class SimOptions:
     signing_key: str | None = None  # key file: one key for every vehicle
     duration_s: float | None = None  # simulated time; None: until Ctrl-C
     signing_secret: str | None = None  # run secret file: a key per vehicle
+    mav_peers: tuple[str, ...] = ()  # each vehicle's one client address; (): anyone
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SimOptions:
         return cls(args.scenario, args.vehicles, args.flavour, args.rate_hz, args.telemetry_hz,
                    args.host, args.base_port, args.send_base_port, args.signing_key,
-                   args.duration_s, args.signing_secret)
+                   args.duration_s, args.signing_secret, parse_peer_hosts(args.mav_peers))
 
 
 def build_simulator(opts: SimOptions) -> Simulator:
@@ -96,7 +102,7 @@ def build_simulator(opts: SimOptions) -> Simulator:
                     listen_base_port=opts.base_port, send_base_port=opts.send_base_port,
                     signing_key=None if opts.signing_key is None else load_key(opts.signing_key),
                     signing_secret=None if opts.signing_secret is None
-                    else load_key(opts.signing_secret))
+                    else load_key(opts.signing_secret), peer_hosts=opts.mav_peers)
     return Simulator(spawn, vehicle, home, cfg)
 
 

@@ -10,8 +10,11 @@ agent holds), for the insider test and the flood benchmark.
   COMMAND_ACK it gets back, by the vehicle that sent it.  Once, a frame to its own vehicle
   stamped an hour ahead; at the end a command to its own vehicle with a true stamp (is its
   stream still open?).
-- Flood (`--flood-port`): R datagrams a second of B bytes each, of MAVLink frames signed
-  with a key nobody holds, in the vehicle's name (sysid 1, component 1), at each port.
+- Flood (`--flood-port`): R datagrams a second of B bytes each at each port (of
+  `--flood-host`, from `--flood-from`, e.g. 127.0.0.2: another address).  `--flood-kind`
+  `signed`: MAVLink frames signed with a key nobody holds, in the vehicle's name (sysid 1,
+  component 1); `lan`: what anyone on the LAN can send, no key needed: garbage, and
+  garbage behind an 8-byte MAVLink 1 HEARTBEAT prefix (id 0, accepted unsigned), alternated.
 - `--progress`: a run's progress.json; nothing is sent before the run's experiment starts.
 """
 
@@ -57,14 +60,30 @@ def flood_datagrams(size_b: int, count: int = 8) -> list[bytes]:
     return out
 
 
+HEARTBEAT_PREFIX_V1 = b"\xfe\x09\x00\x01\x01\x00\x00\x00"  # 8 bytes: len 9, id 0
+
+
+def lan_datagrams(size_b: int, count: int = 8) -> list[bytes]:
+    """`count` datagrams of `size_b` bytes: garbage, and garbage behind a HEARTBEAT prefix."""
+    out = []
+    for k in range(count):
+        body = os.urandom(max(1, size_b))
+        out.append(HEARTBEAT_PREFIX_V1 + body[len(HEARTBEAT_PREFIX_V1):] if k % 2 else body)
+    return out
+
+
 class Flooder:
     """Paced sends of `datagrams` round-robin to `ports`, at `rate_dps` in total."""
 
-    def __init__(self, ports: Sequence[int], rate_dps: float, size_b: int) -> None:
-        self.targets = [("127.0.0.1", p) for p in ports]
+    def __init__(self, ports: Sequence[int], rate_dps: float, size_b: int, kind: str = "signed",
+                 host: str = "127.0.0.1", source: str | None = None) -> None:
+        self.targets = [(host, p) for p in ports]
         self.rate_dps = rate_dps
-        self.datagrams = flood_datagrams(size_b) if ports and rate_dps > 0 else []
+        make = lan_datagrams if kind == "lan" else flood_datagrams
+        self.datagrams = make(size_b) if ports and rate_dps > 0 else []
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        if source is not None:
+            self.sock.bind((source, 0))
         self.sock.setblocking(False)
         self.sent = self.bytes = self.errors = 0
         self.t0 = time.monotonic()
@@ -144,7 +163,8 @@ class Insider:
 def run(args: argparse.Namespace) -> dict[str, float]:
     if args.progress is not None:
         wait_running(Path(args.progress))
-    flooder = Flooder(args.flood_port, args.flood_dps, args.flood_size)
+    flooder = Flooder(args.flood_port, args.flood_dps, args.flood_size, args.flood_kind,
+                      args.flood_host, args.flood_from)
     insider = None if args.key is None else Insider(load_key(args.key), args.own_sysid,
                                                     args.vehicle_port, args.vehicles)
     if insider is not None:
@@ -179,6 +199,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--flood-port", type=int, action="append", default=[])
     p.add_argument("--flood-dps", type=float, default=0.0, help="datagrams a second, in all")
     p.add_argument("--flood-size", type=int, default=65000, help="bytes per datagram")
+    p.add_argument("--flood-kind", choices=("signed", "lan"), default="signed")
+    p.add_argument("--flood-host", default="127.0.0.1", help="the address flooded")
+    p.add_argument("--flood-from", default=None, help="the address flooded from")
     p.add_argument("--progress", default=None, help="a run's progress.json: wait for its start")
     args = p.parse_args(argv)
     report = run(args)

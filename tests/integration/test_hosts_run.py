@@ -53,6 +53,12 @@ def test_paper_case_over_three_hosts_with_clock_offsets_and_a_router_restart(
     # The routers' probes moved no clock by more than the bound: none dropped for it.
     assert status.get("clock_probes_dropped_step", 0) == 0, status
     assert status.get("clock_probes_dropped_sender", 0) == 0, status
+    # No signed MAVLink frame took a second route (issue 50): the simulator listening on
+    # every address once sent each telemetry datagram both to 0.0.0.0 and to the targets'
+    # 127.0.0.1, and each target refused the copy as a replay (~56 a second).
+    replays = {name: s.get("signing_rejected_replay", 0)
+               for name, s in launch["status_at_stop"].items()}
+    assert not any(replays.values()), replays
     # Every host ran on its own folder of credentials (deploy.host_keys): no CA key
     # anywhere, no host holding a key of another host's process.
     creds = out / "credentials"

@@ -29,6 +29,13 @@ def test_a_deployment_places_every_process_once_and_round_trips() -> None:
     assert parse_deployment(tomllib.loads(dump_deployment(dep))) == dep
 
 
+def test_each_vehicle_hears_its_agents_host_alone() -> None:
+    """The simulator's host's agents talk to it over the loopback; the others from their
+    host's address (issue 51: a vehicle's port under a flood from another address)."""
+    dep = parse_deployment(DOC)
+    assert dep.mav_peers(4, 2) == ("192.168.1.11",) * 4 + ("127.0.0.1",) * 2
+
+
 @pytest.mark.parametrize("change, field", [
     (lambda d: d["hosts"][0].update(address="ground.local"), "hosts[0].address"),
     (lambda d: d["hosts"][1].update(router_port=0), "hosts[1].router_port"),

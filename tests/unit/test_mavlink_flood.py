@@ -19,6 +19,8 @@ from agents.mavlink.wire import encode, new_codec, sign_outgoing
 from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.endpoint import MAX_PEERS
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
+from sim_backend.sim_values import parse_peer_hosts
+from transport.errors import ConfigError, SimulatorError
 
 SECRET = bytes(range(7, 39))
 
@@ -210,3 +212,83 @@ def test_a_flooded_vehicle_costs_one_budget_a_tick_and_the_others_are_served(
         signed_sim.step_once()  # the tick ends; the next one's budget takes the rest
         signed_sim.receive_until(time.monotonic() + 0.3)
         assert c["signing_rejected_wrong_key"] == 2 * VEHICLE_BUDGET.datagrams
+
+
+def test_an_unsigned_heartbeat_prefix_vouches_for_itself_alone() -> None:
+    """8 or 12 bytes claiming HEARTBEAT (no CRC checked by the screen) in front of a
+    datagram of garbage: the gate hands the parser that one frame, not the kilobytes."""
+    counters: Counter[str] = Counter()
+    gate = RxGate("t", VEHICLE_BUDGET, counters, SignatureVerifier(vehicle_key(SECRET, 1)))
+    v2 = b"\xfd\x00\x00\x00\x01\x01\x00\x00\x00" + b"\x00" * 3  # 12 bytes, id 0, no payload
+    v1 = b"\xfe\x00\x00\x01\x01\x00" + b"\x00" * 2  # 8 bytes, id 0
+    for prefix in (v2, v1):
+        assert gate.admit(prefix + b"\xfd\x01" * 4000, None) == prefix
+    real = heartbeat(gcs(None))
+    assert gate.admit(real, None) == real  # a whole unsigned HEARTBEAT passes as before
+    signed = signed_position(vehicle_key(SECRET, 1), pad_to=300)
+    assert gate.admit(signed, None) == signed  # signed datagrams are not cut
+    assert counters["unsigned_tails"] == 2
+
+
+def connected_sim(peer: str, host: str = "0.0.0.0") -> Simulator:
+    return Simulator(grid_spawn_ned(1), VehicleConfig(), HomeConfig(),
+                     SimConfig(host=host, listen_base_port=0, send_base_port=14940,
+                               peer_hosts=(peer,)))
+
+
+@pytest.mark.realtime
+def test_a_vehicle_that_knows_its_agent_hears_no_one_else() -> None:
+    sim = connected_sim("127.0.0.1")
+    port = sim.listen_ports()[0]
+    agent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        agent.bind(("127.0.0.1", 14940))
+        other.bind(("127.0.0.2", 0))  # another address (all of 127/8 is loopback)
+        for _ in range(50):
+            other.sendto(b"\xfd\x00" + b"\x00" * 40, ("127.0.0.1", port))
+        agent.sendto(heartbeat(gcs(None)), ("127.0.0.1", port))
+        deadline = time.monotonic() + 2.0
+        while sim.messages["HEARTBEAT:handled"] == 0 and time.monotonic() < deadline:
+            sim.receive_until(time.monotonic() + 0.05)
+        assert sim.messages["HEARTBEAT:handled"] == 1
+        assert sim.counters["rx_datagrams"] == 1  # the kernel dropped the 50 unread
+        assert sim.endpoints[0].default_dest == ("127.0.0.1", 14940)
+    finally:
+        agent.close()
+        other.close()
+        sim.close()
+
+
+@pytest.mark.realtime
+def test_a_wildcard_vehicle_sends_each_datagram_to_a_local_agent_once() -> None:
+    """Bound to 0.0.0.0 with no peer known: the default destination is the loopback, the
+    address a local agent sends from, so the two are one (issue 50: every frame twice)."""
+    sim = Simulator(grid_spawn_ned(1), VehicleConfig(), HomeConfig(),
+                    SimConfig(host="0.0.0.0", listen_base_port=0, send_base_port=14941))
+    agent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        agent.bind(("127.0.0.1", 14941))
+        agent.sendto(heartbeat(gcs(None)), ("127.0.0.1", sim.listen_ports()[0]))
+        deadline = time.monotonic() + 2.0
+        while not sim.endpoints[0].peers and time.monotonic() < deadline:
+            sim.receive_until(time.monotonic() + 0.05)
+        before = sim.counters["tx_datagrams"]
+        sim.endpoints[0].broadcast(b"x", 0.0)
+        assert sim.counters["tx_datagrams"] - before == 1
+    finally:
+        agent.close()
+        sim.close()
+
+
+def test_peer_addresses_are_one_per_vehicle() -> None:
+    with pytest.raises(SimulatorError, match="peer_hosts"):
+        Simulator(grid_spawn_ned(2), VehicleConfig(), HomeConfig(),
+                  SimConfig(listen_base_port=0, peer_hosts=("127.0.0.1",)))
+
+
+def test_peer_addresses_are_parsed_and_a_bad_one_named() -> None:
+    assert parse_peer_hosts(None) == () and parse_peer_hosts("") == ()
+    assert parse_peer_hosts("127.0.0.1, 10.77.0.2") == ("127.0.0.1", "10.77.0.2")
+    with pytest.raises(ConfigError, match=r"mav_peers.*'ground'"):
+        parse_peer_hosts("127.0.0.1,ground")

@@ -14,6 +14,10 @@ import pytest
 from transport.errors import ConfigError
 from transport.network_schema import ZENOH_RUNTIMES
 from transport.zenoh_config import (
+    ACCEPT_PENDING,
+    ACCEPT_PENDING_KEY,
+    ACCEPT_TIMEOUT_KEY,
+    ACCEPT_TIMEOUT_MS,
     LEASE_KEY,
     LINK_BUFFER_BYTES,
     ROUTER_BLOCK_CLOSE_KEY,
@@ -53,6 +57,22 @@ def test_routers_close_a_stuck_link_and_reopen_a_healed_one_sooner_than_zenohs_d
     assert get(router, ROUTER_OPEN_TIMEOUT_KEY) == ROUTER_OPEN_TIMEOUT_MS < 10_000
     assert get(ZenohConfig(), ROUTER_BLOCK_CLOSE_KEY) == 5_000_000  # peers: Zenoh's own
     assert get(ZenohConfig(), ROUTER_OPEN_TIMEOUT_KEY) == 10_000
+
+
+@pytest.mark.parametrize("mode", ["peer", "client", "router"])
+def test_every_listener_outlasts_a_flood_of_idle_connections(mode: str) -> None:
+    """More handshake slots than Zenoh's 100, each held for less than its 10 s
+    (tests/integration/test_rendezvous_flood.py: 200 idle connections)."""
+    cfg = ZenohConfig(mode=mode, connect=(loopback_endpoint(17005),))
+    assert get(cfg, ACCEPT_PENDING_KEY) == ACCEPT_PENDING >= 200
+    assert get(cfg, ACCEPT_TIMEOUT_KEY) == ACCEPT_TIMEOUT_MS < 10_000
+
+
+def test_a_user_file_sets_its_own_accept_limits(tmp_path: Path) -> None:
+    path = tmp_path / "zenoh.json5"
+    path.write_text("{ transport: { unicast: { accept_pending: 50, accept_timeout: 9000 } } }")
+    cfg = ZenohConfig(user_config_path=str(path))
+    assert (get(cfg, ACCEPT_PENDING_KEY), get(cfg, ACCEPT_TIMEOUT_KEY)) == (50, 9000)
 
 
 def test_routers_show_a_lost_link_within_their_lease_clients_keep_zenohs() -> None:
