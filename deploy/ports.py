@@ -57,6 +57,23 @@ def udp_block_free(base: int, count: int, host: str = HOST) -> bool:
             sock.close()
 
 
+def ports_held(ports: range, tcp: bool = False, host: str = HOST) -> list[str]:
+    """The ports of `ports` some process holds, as "UDP 15000" (and "TCP ..." with `tcp`,
+    probed as a Zenoh listener binds: a connection in TIME_WAIT does not count)."""
+    held = []
+    kinds = [("UDP", socket.SOCK_DGRAM)] + ([("TCP", socket.SOCK_STREAM)] if tcp else [])
+    for name, kind in kinds:
+        for port in ports:
+            with socket.socket(socket.AF_INET, kind) as sock:
+                if kind == socket.SOCK_STREAM:
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                try:
+                    sock.bind((host, port))
+                except OSError:
+                    held.append(f"{name} {port}")
+    return held
+
+
 def mavlink_bases(count: int, preferred: tuple[int, int] = PX4_SITL_BASES) -> tuple[int, int]:
     """(vehicle listen base, adapter base): PX4 SITL's when free, else the first free pair."""
     candidates = [preferred] + [(b, b + 500) for b in range(20000, 60000, 1000)]

@@ -2,7 +2,8 @@
 process on ports of its own, for a client's tests; stopped by its PID when the block ends.
 
 Its ports come from a port slot (deploy.port_slots), the lock parallel sweep cells take,
-so that simulators and runs started side by side never share a port.
+so that simulators and runs started side by side never share a port; a slot a port of
+which some other process holds (a client's socket a failed test left open) is passed over.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from pathlib import Path
 from agents.mavlink.modes import FLAVOURS
 from agents.mavlink.signing import write_key
 from deploy.port_slots import port_slot
+from deploy.ports import ports_held
 from transport.errors import ConfigError, SimulatorError
 
 HOST = "127.0.0.1"
@@ -83,7 +85,9 @@ def running_sim(vehicles: int = 1, flavour: str = "px4", signing: bool = False,
     folder.mkdir(parents=True, exist_ok=True)
     key_file = folder / "signing.key" if signing else None
     key = write_key(key_file) if key_file is not None else None
-    with port_slot() as slot:
+    # The ports it binds, and the ones a client binds: a slot some process holds one of
+    # anyway (a test's connection left open) is passed over for the next.
+    with port_slot(held=lambda ports: ports_held(ports[:2 * vehicles])) as slot:
         listen, send = slot.ports.start, slot.ports.start + vehicles
         argv = [sys.executable, "-m", "deploy.commands.sim", "--vehicles", str(vehicles),
                 "--flavour", flavour, "--host", HOST, "--base-port", str(listen),

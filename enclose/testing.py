@@ -8,6 +8,11 @@
   as its `enclose.Run`. Configure with
   `@pytest.mark.enclose_swarm(scenario="paper", duration_s=10.0, **run_overrides)`.
 
+Both take the next free port block (deploy.port_slots) when a port of one is held, by any
+process, the test's own included (a connection a failed test's traceback keeps open): one
+failure does not fail every later test.  DeployError names the ports only when no block
+is free.
+
 An installed enclose loads it by its entry point; from a source tree, `-p enclose.testing`.
 """
 
@@ -52,6 +57,7 @@ def enclose_sim(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[SimE
 def enclose_swarm(request: pytest.FixtureRequest, tmp_path: Path) -> Run:
     """A networked run of the marker's scenario (default: the paper's case, 10 s)."""
     from deploy.port_slots import port_slot
+    from deploy.ports import ports_held
     from enclose.api import run
 
     kwargs = _marker_kwargs(request, "enclose_swarm")
@@ -59,6 +65,8 @@ def enclose_swarm(request: pytest.FixtureRequest, tmp_path: Path) -> Run:
     kwargs.setdefault("duration_s", SWARM_DURATION_S)
     kwargs.setdefault("out", tmp_path / "enclose-run")
     kwargs.setdefault("swarm", f"pytest-{secrets.token_hex(4)}")
-    with port_slot() as slot:  # the ports no other run or simulator on this machine takes
+    # The ports no other run or simulator on this machine takes, and no process holds: a
+    # socket an earlier test left open sends this run to the next block.
+    with port_slot(held=lambda ports: ports_held(ports, tcp=True)) as slot:
         kwargs.setdefault("port_range", slot.flag)
         return run(scenario, **kwargs)

@@ -4,7 +4,7 @@ The follower's `LawRunner` writes one record per call that changes it: a step (`
 the clock, control tick or estimator step, its vehicle's sample, its targets and peers as
 handed to the law, and what came out), a change of members (`"g"`), a join (`"j"`),
 and the experiment's start and stop as the follower heard them (`"w"`: the replay's
-time axis).
+time axis, and the origin of the law's `Inputs.t_s`, which a replay derives from it).
 Targets and peers are written as changes: the keys in the order the law iterates them,
 and only the entries that are not the very objects of the last record (agents.follower.inputs
 makes a new one per newer message), so a record costs about the messages that arrived.

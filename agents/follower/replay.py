@@ -122,6 +122,7 @@ def replay(path: Path, scenario: Scenario, law: Law[Any], check: bool = True) ->
             runner.continue_estimate()
         elif kind == WINDOW:
             found.start_s, found.stop_s = rec[1], rec[2]
+            runner.window(rec[1], rec[2])  # the origin of the law's t_s, as in the run
         elif kind == STEP:
             now_s, command, own, tdelta, pdelta, done = rec[1:]
             mine, tmap, pmap = read_sample(own), targets.apply(tdelta), peers.apply(pdelta)

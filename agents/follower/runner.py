@@ -33,7 +33,7 @@ NO_COST = NoCost()
 class LawRunner:
     """Law `law` flown by follower `setup.index`."""
 
-    def __init__(self, law: Law[Any], setup: Setup) -> None:
+    def __init__(self, law: Law[Any], setup: Setup, start_s: float = 0.0) -> None:
         self.law = law
         self.declared: dict[str, FieldSpec] = law.declared()
         self._kinds = {name: spec.kind for name, spec in self.declared.items()}
@@ -41,6 +41,9 @@ class LawRunner:
         self.state: Any = law.start(setup)
         self.last_r: Sample | None = None  # the estimate of its last good step
         self.last_step_s: float | None = None
+        # The run's start on now_s's clock (`Inputs.t_s` is counted from it): lock-step's
+        # 0; a follower's start word sets it (`window`), and so does the journal's replay.
+        self.start_s = start_s
         self.rebase = False  # continue from last_r (a change of members, a join)
         self.failures = 0
         self._next_log_s = -math.inf
@@ -79,7 +82,8 @@ class LawRunner:
         rebase_to = None
         if self.rebase and self.last_r is not None:
             rebase_to = self.last_r.held(now_s, setup.hold_s)
-        inputs = _new(Inputs, (now_s, dt, command, setup, own, targets, peers, rebase_to))
+        inputs = _new(Inputs, (now_s, dt, command, setup, own, targets, peers, rebase_to,
+                               now_s - self.start_s))
         try:
             state, out = self.law.step(self.state, inputs)
             wire = self._wire(out)
@@ -162,7 +166,9 @@ class LawRunner:
             self._journal(self.journal.regroup, new.members)
 
     def window(self, start_s: float, stop_s: float) -> None:
-        """The experiment's start and stop (the run's control words): journaled only."""
+        """The experiment's start and stop (the run's control words): the origin of the
+        law's `t_s`, journaled (a replay derives `t_s` from it and the steps' `now_s`)."""
+        self.start_s = start_s
         if self.journal is not None:
             self._journal(self.journal.window, start_s, stop_s)
 

@@ -11,8 +11,15 @@ Plane vectors are complex numbers x + iy (ENU metres, m/s): cheap, and `abs`, `*
 `1j` (a quarter turn) and `.conjugate()` are the geometry a planar law needs.
 
 A step reads (`Inputs`):
-- `now_s`, `dt_s`: the follower's clock, and the time since this law's last step
-  (0 at the first, at most `setup.max_gap_s`: a paused process does not integrate a jump);
+- `now_s`: the follower's clock, the one every stamp it is handed is on (`Sample.stamp_s`):
+  compare stamps with it, extrapolate with it (`sample.held(now_s, ...)`).  Its origin is
+  the engine's: 0 at the start lock-step, but networked the follower's bus clock, whose 0
+  is not the run's start;
+- `t_s`: the time since the run's start (its start word), on the same clock: 0 at the
+  start lock-step and networked, and in a replay what the run had.  Schedule with it
+  (gain schedules, finite-time references, anything "20 s into the run");
+- `dt_s`: the time since this law's last step (0 at the first, at most
+  `setup.max_gap_s`: a paused process does not integrate a jump);
 - `command`: True on a control tick (its `u_m_s` is flown); False on an estimator step
   between control ticks (the scenario's `estimator_rate_hz`), whose command is ignored;
 - `setup` (`Setup`): this follower's place in the swarm formed by the current members:
@@ -147,6 +154,8 @@ class Inputs(NamedTuple):
     targets: Mapping[int, Sample]
     peers: Mapping[int, Peer]
     rebase_to: complex | None
+    # Last: a law that builds or unpacks Inputs positionally keeps working.
+    t_s: float = 0.0
 
 
 class Output(NamedTuple):

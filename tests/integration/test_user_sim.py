@@ -3,10 +3,16 @@ and MAVSDK fly `enclose_sim` (the enclose.testing plugin's fixture), nothing els
 
 from __future__ import annotations
 
+import contextlib
+import socket
 import time
+from collections.abc import Iterator
 
 import pytest
 from pymavlink import mavutil
+
+import enclose
+from deploy.port_slots import slot_ports
 
 # An installed enclose loads the plugin by its entry point; this line serves a source tree.
 pytest_plugins = ("enclose.testing",)
@@ -75,6 +81,38 @@ def test_mavsdk_takes_off(enclose_sim) -> None:
             time.sleep(0.05)
     finally:
         drone.destroy()
+
+
+FIRST_BLOCK = slot_ports(0)
+
+
+@pytest.fixture
+def first_block_held() -> Iterator[int]:
+    """A UDP socket on the first port block, as a connection a failed test's traceback
+    keeps open holds one; the port (already held by some other process: as good)."""
+    port = FIRST_BLOCK.start
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        with contextlib.suppress(OSError):  # held already: as good
+            sock.bind(("127.0.0.1", port))
+        yield port
+
+
+@pytest.mark.enclose_swarm(duration_s=5.0)
+def test_both_fixtures_take_the_next_block_when_a_port_is_held(
+        first_block_held: int, enclose_sim, enclose_swarm: enclose.Run) -> None:
+    vehicle = enclose_sim[0]
+    assert first_block_held not in (vehicle.listen_port, vehicle.send_port)
+    conn = mavutil.mavlink_connection(vehicle.pymavlink_address, source_system=255)
+    try:
+        assert conn.wait_heartbeat(timeout=10) is not None
+    finally:
+        conn.close()
+    run = enclose_swarm
+    assert run.exit_code == 0 and run.verdict.error is None, run.verdict.processes
+    assert run.launch["vehicle_base_port"] not in FIRST_BLOCK
+    # each in a block of its own: the simulator's slot stays held while the run flies
+    flown = range(run.launch["vehicle_base_port"], run.launch["adapter_base_port"] + 6)
+    assert vehicle.listen_port not in flown and vehicle.send_port not in flown
 
 
 USER_TEST = '''

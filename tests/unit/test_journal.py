@@ -16,7 +16,7 @@ from agents.follower.journal_file import JOURNAL_VERSION, Frames, FrameWriter, e
 from agents.follower.membership import setup_for
 from agents.follower.replay import replay
 from agents.follower.runner import LawRunner
-from agents.law.interface import Peer, Sample
+from agents.law.interface import Inputs, Law, Output, Peer, Sample, Setup
 from agents.law.loader import make_law
 from agents.scenario.file import load_scenario
 from transport.errors import JournalError
@@ -175,3 +175,34 @@ def test_enclose_replay_names_a_damaged_or_cut_journal(
     assert main(["replay", str(tmp_path), "follower-0"]) == 2
     out = capsys.readouterr().out
     assert "damaged" in out and str(path) in out and "byte" in out
+
+
+class Clocked(Law[tuple[float, ...]]):
+    """Flies east at t_s m/s (a command that is the run's time), keeping every t_s seen."""
+
+    name = "clocked"
+
+    def start(self, setup: Setup) -> tuple[float, ...]:
+        return ()
+
+    def step(self, state: tuple[float, ...], inputs: Inputs,
+             ) -> tuple[tuple[float, ...], Output]:
+        return (*state, inputs.t_s), Output(complex(inputs.t_s, 0.0), 0j, 0j, {})
+
+
+def test_the_laws_run_time_counts_from_the_start_word_and_replays(tmp_path: Path) -> None:
+    scenario = load_scenario("paper", whole_run=False)
+    runner = LawRunner(Clocked(), setup_for(scenario, 0))
+    runner.journal = JournalWriter(tmp_path / "f.journal", HEADER, runner.declared)
+    runner.window(1000.0, 1060.0)  # the start word, on the follower's (bus) clock
+    for k in range(5):
+        now = 1000.0 + 0.25 * k
+        runner.step(now, True, Sample(0j, 0j, now), {}, {})
+    runner.window(1000.0, 1000.5)  # the stop word: the origin stays
+    runner.step(1001.25, True, Sample(0j, 0j, 1001.25), {}, {})
+    runner.journal.close()
+    assert runner.state == (0.0, 0.25, 0.5, 0.75, 1.0, 1.25)
+    # The replay's t_s is the run's (its commands are t_s: compared bit for bit)
+    found = replay(tmp_path / "f.journal", scenario, Clocked())
+    assert found.reproduced and found.steps == 6
+    assert found.series.u_m_s == [0j, 0.25, 0.5, 0.75, 1.0, 1.25]

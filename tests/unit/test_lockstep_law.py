@@ -24,7 +24,8 @@ from agents.core.lockstep import simulate_lockstep
 from agents.core.lockstep_law import simulate_law
 from agents.core.metrics import compute_metrics, error_series
 from agents.core.timeseries import RunSeries
-from agents.law.interface import Inputs, Law, Output, Setup
+from agents.follower.membership import setup_for
+from agents.law.interface import Inputs, Law, Output, Sample, Setup
 from agents.law.loader import make_law
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
@@ -130,3 +131,28 @@ def test_simulate_runs_the_papers_law_compiled_unless_asked_through_the_interfac
     assert runs["compiled"]["law_path"] == "compiled" and "law_failures" not in runs["compiled"]
     assert runs["interface"]["law_path"] == "interface"
     assert runs["interface"]["law_failures"] == 0 and runs["interface"]["law"] == "paper"
+
+
+class Scheduled(Flaky):
+    """Raises on the control steps of 2.0 <= t_s < 2.5 (the run's time, not the clock)."""
+
+    def step(self, state: int, inputs: Inputs) -> tuple[int, Output]:
+        assert inputs.t_s == inputs.now_s  # lock-step's clock starts at the start
+        if inputs.command and 2.0 <= inputs.t_s < 2.5:
+            raise RuntimeError("scheduled")
+        return state + 1, Output(1 + 0j, 0j, 0j, {})
+
+
+def test_lock_step_runs_the_laws_time_from_zero() -> None:
+    run = simulate_law(load_scenario("paper"), Scheduled(), 0.1, 4.0, estimator_dt_s=0.05)
+    assert run.law_failures == 4 * 5
+    held = np.all(run.series.command_m_s == 0.0, axis=(1, 2))
+    assert list(run.series.t_s[held]) == pytest.approx([2.0, 2.1, 2.2, 2.3, 2.4])
+
+
+def test_a_law_that_builds_inputs_as_before_still_can() -> None:
+    setup = setup_for(load_scenario("paper"), 0)
+    own = Sample(0j, 0j, 0.0)
+    old = Inputs(5.0, 0.0, True, setup, own, {}, {}, None)  # today's eight, positionally
+    assert (old.now_s, old.t_s, old.rebase_to) == (5.0, 0.0, None)
+    assert old._replace(t_s=2.0)[-1] == 2.0 and len(old) == 9
