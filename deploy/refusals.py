@@ -38,6 +38,7 @@ ROWS = (
     ("MAVLink datagrams cut (each over a whole tick's budget)", "mav_flood_drops"),
     ("MAVLink datagrams the kernel dropped", "mav_kernel_drops"),
     ("MAVLink peers (table full)", "peers_refused"),
+    ("MAVLink signing streams forgotten (table full)", "signing_streams_evicted"),
     ("clock probes from no router", "clock_probes_dropped_sender"),
     ("clock probes with impossible times", "clock_probes_dropped_times"),
     ("clock probes too close together", "clock_probes_dropped_rate"),
