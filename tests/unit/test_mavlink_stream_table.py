@@ -4,6 +4,7 @@ forgotten, counted, and none of its frames can be replayed as a new stream after
 from __future__ import annotations
 
 import hashlib
+import time
 import tracemalloc
 from collections import Counter
 
@@ -110,3 +111,28 @@ def test_no_stream_ever_goes_back_whatever_is_evicted(ops: list[tuple[int, int]]
             assert stamp > highest.get(stream, -1)
             highest[stream] = stamp
         assert len(v.streams) <= bound
+
+
+@pytest.mark.realtime
+def test_a_vehicle_counts_its_evictions_with_its_signing_counters() -> None:
+    from agents.mavlink.signing import vehicle_key
+    from agents.scenario.model import HomeConfig, VehicleConfig
+    from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
+    from tests.unit.test_mavlink_vehicle_keys import SECRET, disarm, signer
+
+    sim = Simulator(grid_spawn_ned(1), VehicleConfig(), HomeConfig(),
+                    SimConfig(listen_base_port=0, send_base_port=9, signing_secret=SECRET))
+    try:
+        ep, row = sim.endpoints[0], sim._rows[0]
+        now = time.time()
+        # 266 streams, each stamped from a clock that moves on (as a real sender's): a new
+        # stream stamped at or below the newest evicted one would be refused.
+        for link in range(MAX_STREAMS + 10):
+            stamp_s = now + 0.001 * link
+            ep.parse_datagram(disarm(signer(vehicle_key(SECRET, 1), stamp_s, link_id=link % 256,
+                                            sysid=245 if link < 256 else 246)),
+                              ("127.0.0.1", 9), 0.0, row)
+        assert sim.counters["commands"] == MAX_STREAMS + 10
+        assert sim.counters["signing_streams_evicted"] == 10
+    finally:
+        sim.close()
