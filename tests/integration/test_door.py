@@ -99,9 +99,11 @@ def test_a_consumer_that_stops_reading_stalls_no_publisher(tmp_path: Path) -> No
     assert all(v <= LATE_MAX_PCT for v in late.values()), (late, launch["load"])
     assert status["sim-0"]["failsafes"] == 0, status["sim-0"]
     # The simulator puts truth and every follower's sensing each tick: with BLOCK it was
-    # the publisher held most (10 % of its ticks late in one run, its followers' 0.17 %).
+    # the publisher held most (~10 % of its ticks late: one 5-s stall, Zenoh's close
+    # timeout).  Judged: a loaded machine makes it late without any stall.
     sim_late = launch["load"]["ticks"].get("sim_overrun_pct", 0.0)
-    assert sim_late <= SIM_LATE_MAX_PCT, launch["load"]
+    with judged(out):
+        assert sim_late <= SIM_LATE_MAX_PCT, launch["load"]
     assert launch["events"] == []
     assert all(p["exit_code"] == 0 for p in launch["processes"].values())
     metrics = json.loads((out / "metrics.json").read_text())
