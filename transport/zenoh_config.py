@@ -60,11 +60,13 @@ SHM_KEY = "transport/shared_memory/enabled"
 # Headroom over the payload cap for what Zenoh adds: key, timestamp, encoding.
 MAX_MESSAGE_KEY = "transport/link/rx/max_message_size"
 MAX_MESSAGE_BYTES = MAX_PAYLOAD_BYTES + 1024
-# A router closes a link whose send queue stayed full this long (Zenoh: 5 s).  Samples go
-# with BLOCK congestion control, so a link that carries nothing (a partition between
-# hosts) would hold the router's forwarding, and behind it every publisher on its host,
-# until then: the simulator's sensing and the near side's own states stalled for seconds
-# (deploy.netns.cut, BENCHMARKS.md).  1 s: far past any queue on a link that still moves.
+# A router closes a link whose send queue stayed full this long (Zenoh: 5 s).  Samples
+# went with BLOCK congestion control, so a link that carries nothing (a partition between
+# hosts) held the router's forwarding, and behind it every publisher on its host, until
+# then: the simulator's sensing and the near side's own states stalled for seconds
+# (deploy.netns.cut, BENCHMARKS.md).  Real-time data now goes with DROP (transport.bus.
+# Congestion); the words sent once still block.  1 s: far past any queue on a link that
+# still moves.
 ROUTER_BLOCK_CLOSE_KEY = "transport/link/tx/queue/congestion_control/block/wait_before_close"
 ROUTER_BLOCK_CLOSE_US = 1_000_000
 # How long a router's attempt to open a link may take once its TCP connection is up
