@@ -27,7 +27,7 @@ from agents.phases import mark
 from agents.process_options import BusOptions
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
-from transport.bus import Bus
+from transport.bus import Bus, Congestion, Publisher
 from transport.clock_sync import clock_hosts_count, parse_clock_hosts
 from transport.codec import encode
 from transport.credentials import Identity
@@ -239,7 +239,8 @@ class Ticker:
 
 @dataclass
 class StatusReporter:
-    """Publishes ProcessStatus at about 1 Hz, or at once on a state change."""
+    """Publishes ProcessStatus at about 1 Hz (DROP: the next replaces a lost one), or at
+    once on a state change (BLOCK: sent once, outside the flight)."""
 
     bus: Bus
     keys: SwarmKeys
@@ -251,6 +252,7 @@ class StatusReporter:
     clocks: ClockBook = PROCESS_BOOK
     _stamper: Stamper | None = None
     _last_s: float = -1e18
+    _periodic: Publisher | None = None  # the 1-Hz statuses: replaced by the next, DROP
 
     def set(self, state: str, detail: str = "", extra: Mapping[str, int] | None = None) -> None:
         changed = state != self.state
@@ -280,4 +282,10 @@ class StatusReporter:
             {k: int(v) for k, v in counters.items()},
             detail,
         )
-        self.bus.publish(self.keys.status(self.role, self.index), encode(msg))
+        key = self.keys.status(self.role, self.index)
+        if force:  # a state change, sent once: it must not be lost (Congestion)
+            self.bus.publish(key, encode(msg))
+            return
+        if self._periodic is None:
+            self._periodic = self.bus.declare_publisher(key, Congestion.DROP)
+        self._periodic.put(encode(msg))

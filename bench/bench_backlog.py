@@ -33,7 +33,7 @@ from tests.integration.test_recorder_process import (
 )
 from tests.integration.test_transport_zenoh import free_port
 from tests.recorder_synth import SynthRun
-from transport.bus import wait_until_alive
+from transport.bus import Congestion, wait_until_alive
 from transport.codec import encode
 from transport.keys import SwarmKeys
 from transport.messages import Stamper
@@ -52,7 +52,8 @@ def stalled_run(out: Path) -> tuple[float, float, float]:
     try:
         with ZenohBus(ZenohConfig(connect=(endpoint,))) as bus:
             wait_until_alive(bus.watch_alive(keys.all_alive()), {keys.alive("recorder", 0)}, 20)
-            pubs = [bus.declare_publisher(k) for k in pubs_keys(keys)]
+            # BLOCK: a lossless feed (the recorder's backlog is measured, not the transport's).
+            pubs = [bus.declare_publisher(k, Congestion.BLOCK) for k in pubs_keys(keys)]
             wait_for(lambda: all(p.matched() for p in pubs), 10, "the subscription")
             run = SynthRun(scenario, keys, time.time() + 0.5, duration_s=RUN_S,
                            rate_hz=RATE_HZ, pre_s=0.0, post_s=0.0)

@@ -31,7 +31,7 @@ from deploy.run_monitor import StatusBoard, launch_view
 from deploy.run_secrets import RunSecrets
 from deploy.supervisor import Child, Supervisor
 from transport.access import sender_ids
-from transport.bus import Bus
+from transport.bus import Bus, Congestion
 from transport.codec import encode
 from transport.errors import DeployError
 from transport.keys import SwarmKeys
@@ -277,7 +277,10 @@ class Launch:
             self._before_restart,
         )
         next_word = start
-        bus.publish(self.keys.control(), word())
+        bus.publish(self.keys.control(), word())  # BLOCK: the first must not be lost
+        # The repeats are replaced a second later: a consumer that stops reading must not
+        # hold the launcher's loop (its faults, its watchdog) for Zenoh's close timeout.
+        repeat = bus.declare_publisher(self.keys.control(), Congestion.DROP)
         with LiveBoard(self.view, PROGRESS_PERIOD_S) as board:
             while bus.now_s() < start + self.duration_s:
                 self.injector.check()
@@ -286,7 +289,7 @@ class Launch:
                 self.board.collect()
                 if bus.now_s() >= next_word:  # same start stamp: a repeat changes nothing
                     next_word += START_REPEAT_S
-                    bus.publish(self.keys.control(), word())
+                    repeat.put(word())
                     self._sample_cpu()
                 board.tick()
                 time.sleep(0.05)

@@ -114,7 +114,7 @@ class LinkBus(BusBase):
         return self._bus is not None
 
     def declare_publisher(self, key: str,
-                          congestion: Congestion = Congestion.BLOCK) -> Publisher:
+                          congestion: Congestion = Congestion.DROP) -> Publisher:
         return _LinkPublisher(self, key, congestion)
 
     def put(self, key: str, payload: bytes, congestion: Congestion) -> None:

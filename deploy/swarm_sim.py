@@ -39,7 +39,7 @@ from deploy.sensor_links import LinkBus, parse_sensor_link, sensor_buses
 from sim_backend.model import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from sim_backend.sim_values import parse_peer_hosts
-from transport.bus import Bus
+from transport.bus import Bus, Congestion
 from transport.codec import encode
 from transport.keys import SwarmKeys
 from transport.messages import Stamper, TargetObservation, TruthSnapshot, vec2, vec3
@@ -74,9 +74,10 @@ class SensorPublisher:
         self.rng = np.random.default_rng(seed)
         self.truth_stamper = Stamper("sim-0", bus.now_s)
         self.sensor_stampers = [Stamper("sim-0", bus.now_s) for _ in range(self.n)]
-        self.truth_out = bus.declare_publisher(keys.truth())
+        self.truth_out = bus.declare_publisher(keys.truth(), Congestion.DROP)
         links = sensor_buses or {}  # follower -> the bus of its host's sensor link
-        self.sensor_out = [links.get(i, bus).declare_publisher(keys.sensor_targets(i))
+        self.sensor_out = [links.get(i, bus).declare_publisher(keys.sensor_targets(i),
+                                                                 Congestion.DROP)
                            for i in range(self.n)]
         self.ticks = 0
         # How far the real clock is past the state's boot time when the hook runs: the

@@ -112,7 +112,8 @@ class VehicleEndpoint:
         sign everything sent, so that forged telemetry is told apart at the agent too.
         `key_of_vehicle`: the other vehicles' keys, to name the key of a frame signed with
         one of them (agents.mavlink.signing.SignatureVerifier)."""
-        self.verifier = SignatureVerifier(key, key_of_vehicle=key_of_vehicle)
+        self.verifier = SignatureVerifier(key, key_of_vehicle=key_of_vehicle,
+                                          evictions=self.counters)
         self.gate.verifier = self.verifier
         sign_outgoing(self.mav, key, link_id, self.verifier.now_ticks())
 

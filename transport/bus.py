@@ -38,10 +38,19 @@ MAX_ALIVE_KEYS = 4096
 
 
 class Congestion(enum.Enum):
-    """What a publisher does when the link is saturated."""
+    """What a publisher does when a link's send queue is full.
 
-    BLOCK = "block"  # wait: no loss on TCP; the default for state messages
-    DROP = "drop"  # drop the sample: never stalls the sender's loop
+    DROP is the default: real-time data (states, estimates, truth, sensing, statuses) is
+    replaced by the next tick's, and a consumer that stops reading (a slow or hostile
+    subscriber on the swarm's keys) must not hold a publisher's tick: with BLOCK a put
+    waits for that consumer's queue, up to Zenoh's close timeout (5 s for peers).  DROP
+    loses a sample only on a link whose queue is full; on loopback TCP at our rates none
+    is (BENCHMARKS.md).  BLOCK is for words sent once that must not be lost: `publish`
+    (the run-control words, a process's state changes).
+    """
+
+    BLOCK = "block"  # wait: no loss on TCP; a consumer that stops reading stalls the put
+    DROP = "drop"  # drop the sample on a full link: never stalls the sender's loop
 
 
 @dataclass(frozen=True)
@@ -116,11 +125,12 @@ class Bus(Protocol):
         ...
 
     def declare_publisher(
-        self, key: str, congestion: Congestion = Congestion.BLOCK
+        self, key: str, congestion: Congestion = Congestion.DROP
     ) -> Publisher: ...
 
     def publish(self, key: str, payload: bytes) -> None:
-        """Put on `key` through a publisher declared once per key (BLOCK)."""
+        """Put on `key` through a publisher declared once per key, with BLOCK: for words
+        sent once that must not be lost, never for a tick's data (`Congestion`)."""
         ...
 
     def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY,
@@ -207,7 +217,7 @@ class BusBase(ClosingContext):
         self._publishers: dict[str, Publisher] = {}
 
     def declare_publisher(
-        self, key: str, congestion: Congestion = Congestion.BLOCK
+        self, key: str, congestion: Congestion = Congestion.DROP
     ) -> Publisher:
         raise NotImplementedError
 
@@ -217,5 +227,5 @@ class BusBase(ClosingContext):
     def publish(self, key: str, payload: bytes) -> None:
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._publishers[key] = self.declare_publisher(key)
+            pub = self._publishers[key] = self.declare_publisher(key, Congestion.BLOCK)
         pub.put(payload)

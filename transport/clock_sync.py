@@ -37,7 +37,7 @@ import logging
 import threading
 from collections.abc import Callable, Collection
 
-from transport.bus import Bus
+from transport.bus import Bus, Congestion
 from transport.codec import decode, encode
 from transport.errors import CodecError, ConfigError, TransportError
 from transport.keys import SwarmKeys
@@ -153,7 +153,8 @@ class ClockSync:
                          else ClockListener(clock_id, book, routers))
         self.period_s = period_s
         self._bus = bus
-        self._out = bus.declare_publisher(keys.clock(role, int(index))) if probe else None
+        self._out = (bus.declare_publisher(keys.clock(role, int(index)), Congestion.DROP)
+                     if probe else None)
         self._sub = bus.subscribe(keys.role_clocks(role), QUEUE, stamp_arrival=True)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="clock-sync", daemon=True)

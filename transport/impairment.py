@@ -318,7 +318,7 @@ class ImpairedBus(ClosingContext):
         return self.inner.now_s()
 
     def declare_publisher(
-        self, key: str, congestion: Congestion = Congestion.BLOCK
+        self, key: str, congestion: Congestion = Congestion.DROP
     ) -> Publisher:
         return self.inner.declare_publisher(key, congestion)
 

@@ -165,7 +165,7 @@ class MemoryBus(BusBase):
             raise TransportError(f"bus {self.name} is closed")
 
     def declare_publisher(
-        self, key: str, congestion: Congestion = Congestion.BLOCK
+        self, key: str, congestion: Congestion = Congestion.DROP
     ) -> MemoryPublisher:
         self._check_open()
         return MemoryPublisher(self, key, congestion)

@@ -224,7 +224,7 @@ class ZenohBus(BusBase):
             raise TransportError("Zenoh bus is closed")
 
     def declare_publisher(
-        self, key: str, congestion: Congestion = Congestion.BLOCK
+        self, key: str, congestion: Congestion = Congestion.DROP
     ) -> ZenohPublisher:
         self._check_open()
         return self._own(ZenohPublisher(self, key, congestion))

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import zenoh
 
+from transport.codec import MAX_PAYLOAD_BYTES
 from transport.credentials import Identity
 from transport.errors import ConfigError
 from transport.network_schema import LINK_PROTOCOLS, ZENOH_LEASE_RANGE_S, ZENOH_RUNTIMES
@@ -52,11 +53,20 @@ ENDPOINT_PROTOCOLS = (*LINK_PROTOCOLS, "tls")
 # fragmented, not lost.  Both sides of a link agree on the smaller batch size.
 LINK_BUFFER_BYTES = 8192
 SHM_KEY = "transport/shared_memory/enabled"
-# A router closes a link whose send queue stayed full this long (Zenoh: 5 s).  Samples go
-# with BLOCK congestion control, so a link that carries nothing (a partition between
-# hosts) would hold the router's forwarding, and behind it every publisher on its host,
-# until then: the simulator's sensing and the near side's own states stalled for seconds
-# (deploy.netns.cut, BENCHMARKS.md).  1 s: far past any queue on a link that still moves.
+# The largest message a session takes in (Zenoh: 1 GiB).  A larger one arrives in
+# fragments that Zenoh holds until the whole is there, only for the codec to refuse it
+# (MAX_PAYLOAD_BYTES): a 20-MB put held 20 MB in every subscriber first.  Past this
+# size Zenoh drops the reassembly and keeps the link (measured: the next put arrives).
+# Headroom over the payload cap for what Zenoh adds: key, timestamp, encoding.
+MAX_MESSAGE_KEY = "transport/link/rx/max_message_size"
+MAX_MESSAGE_BYTES = MAX_PAYLOAD_BYTES + 1024
+# A router closes a link whose send queue stayed full this long (Zenoh: 5 s).  Samples
+# went with BLOCK congestion control, so a link that carries nothing (a partition between
+# hosts) held the router's forwarding, and behind it every publisher on its host, until
+# then: the simulator's sensing and the near side's own states stalled for seconds
+# (deploy.netns.cut, BENCHMARKS.md).  Real-time data now goes with DROP (transport.bus.
+# Congestion); the words sent once still block.  1 s: far past any queue on a link that
+# still moves.
 ROUTER_BLOCK_CLOSE_KEY = "transport/link/tx/queue/congestion_control/block/wait_before_close"
 ROUTER_BLOCK_CLOSE_US = 1_000_000
 # How long a router's attempt to open a link may take once its TCP connection is up
@@ -201,9 +211,11 @@ def build_zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
             _put(config, key, value)
     if not (user and _is_set(config, default, "scouting/multicast/enabled")):
         _put(config, "scouting/multicast/enabled", False)
-    for key in ("transport/link/tx/batch_size", "transport/link/rx/buffer_size"):
+    for key, value in (("transport/link/tx/batch_size", LINK_BUFFER_BYTES),
+                       ("transport/link/rx/buffer_size", LINK_BUFFER_BYTES),
+                       (MAX_MESSAGE_KEY, MAX_MESSAGE_BYTES)):
         if not (user and _is_set(config, default, key)):
-            _put(config, key, LINK_BUFFER_BYTES)
+            _put(config, key, value)
     # Nothing here sends through shared memory (no SHM provider; samples < 1 KB), but with
     # it on every session runs two watchdog threads, one at SCHED_FIFO, ~35 wake-ups a
     # second: a 64-process mesh idles at 0.40 % of a core each instead of 0.46 %.

@@ -27,7 +27,7 @@ from agents.process import StatusReporter
 from agents.scenario.model import Scenario
 from agents.tick_cost import NoCost, TickCost
 from transport.access import sender_ids
-from transport.bus import Bus, Subscription
+from transport.bus import Bus, Congestion, Subscription
 from transport.checks import DEFAULT_LIMITS
 from transport.codec import encode
 from transport.decoder import Decoder
@@ -81,9 +81,10 @@ class FollowerNode:
         # on a second key so that an update crosses a link in an estimator period.
         self.est_steps = scenario.run.estimator_substeps > 1
         self._follow(set(self.runner.setup.peers))
-        self.out = bus.declare_publisher(self.keys.follower_state(index))
+        self.out = bus.declare_publisher(self.keys.follower_state(index), Congestion.DROP)
         self.stamper = Stamper(f"follower-{index}", bus.now_s)
-        self.est_out = bus.declare_publisher(self.keys.follower_estimate(index))
+        self.est_out = bus.declare_publisher(self.keys.follower_estimate(index),
+                                             Congestion.DROP)
         self.est_stamper = Stamper(f"follower-{index}", bus.now_s)
         self.est_phase_s = self.runner.setup.est_period_s * scenario.tick_phase(index)
         self.last_state: VehicleState | None = None

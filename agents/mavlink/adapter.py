@@ -69,7 +69,8 @@ class MavlinkAdapter:
         self.tx = self.mav  # the codec that packs what we send: a signing one when keyed
         self.verifier: SignatureVerifier | None = None
         if cfg.signing_key is not None:
-            self.verifier = SignatureVerifier(cfg.signing_key, allowed_unsigned=frozenset())
+            self.verifier = SignatureVerifier(cfg.signing_key, allowed_unsigned=frozenset(),
+                                              evictions=self.counters)
             self.tx = new_codec(cfg.own_sysid, cfg.own_compid, lean_common)
             sign_outgoing(self.tx, cfg.signing_key, cfg.signing_link_id,
                           signing_timestamp(time.time()))

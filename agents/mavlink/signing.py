@@ -50,6 +50,11 @@ TICKS_PER_S = 100_000  # timestamp unit: 10 µs
 NEW_STREAM_WINDOW = 60 * TICKS_PER_S
 # Clocks of signing hosts agree to well under a second (NTP); a few seconds of slack.
 FUTURE_LIMIT = 5 * TICKS_PER_S
+# Streams a verifier remembers.  A vehicle hears a handful (its agent, a ground station, a
+# MAVProxy); the (link id, sysid, compid) triple is the sender's choice, so a key holder
+# could otherwise grow the table by one entry per frame.  The least recently accepted
+# stream is forgotten beyond this (SignatureVerifier: why that lets no replay through).
+MAX_STREAMS = 256
 VEHICLE_KEY_LABEL = "enclose-mavlink-vehicle-{sysid}"
 # PX4 accepts these unsigned on a signing link (message_signing docs).
 ALLOWED_UNSIGNED = frozenset({0, 109, 246, 247})  # HEARTBEAT, RADIO_STATUS, ADSB, COLLISION
@@ -134,18 +139,40 @@ class SignatureVerifier:
     receiver that holds them all (the simulator).  A frame on link k that fails our key is
     tried against vehicle k+1's key alone (the agent of vehicle index k signs on link k):
     one more hash, and a match names whose key signed it (`wrong_key_sysid`).
+
+    `streams` holds at most `max_streams` entries, least recently accepted first; beyond
+    it the first is evicted, counted in `counters["streams_evicted"]` and, if given, in the
+    receiver's `evictions` counters as `signing_streams_evicted`.  Why no replay gets
+    through: `evicted_floor` keeps the highest timestamp ever evicted, and a stream not in
+    the table must be stamped above it.  Every frame an evicted stream ever sent is stamped
+    at or below its last accepted one, so at or below the floor: none is taken back as a
+    "new stream", which the spec alone would allow for a minute.  The price falls on new
+    streams stamped at or below the floor, i.e. not past the newest frame evicted: a
+    restarted sender stamps from its wall clock, past it, unless the evicted frame was
+    stamped ahead, which only a key holder can do and at most FUTURE_LIMIT ahead (the same
+    few seconds it can already hold any stream of that key back by).  Only a key holder
+    can fill the table (a stream enters on a good signature only), and the stream it
+    pushes out was one it could speak for anyway.
     """
 
     def __init__(self, key: bytes, clock: Callable[[], float] = time.time,
                  allowed_unsigned: frozenset[int] = ALLOWED_UNSIGNED,
-                 key_of_vehicle: Callable[[int], bytes | None] | None = None) -> None:
+                 key_of_vehicle: Callable[[int], bytes | None] | None = None,
+                 evictions: Counter[str] | None = None,
+                 max_streams: int = MAX_STREAMS) -> None:
         if len(key) != KEY_LEN:
             raise ConfigError("signing_key", f"a key is {KEY_LEN} bytes")
         self.key = key
         self.clock = clock
         self.allowed_unsigned = allowed_unsigned
         self.key_of_vehicle = key_of_vehicle
+        if max_streams < 1:
+            raise ConfigError("max_streams", f"must be at least 1, got {max_streams}")
+        # Insertion order is recency: an accepted frame moves its stream to the end.
         self.streams: dict[tuple[int, int, int], int] = {}
+        self.max_streams = max_streams
+        self.evicted_floor = 0  # highest timestamp of a stream evicted (class docstring)
+        self.evictions = evictions
         self.latest = 0  # highest timestamp seen in a good signature
         self.wrong_key_sysid = 0  # the vehicle whose key signed the last `wrong_key` frame
         self.counters: Counter[str] = Counter()
@@ -214,12 +241,26 @@ class SignatureVerifier:
         last = self.streams.get(stream)
         if last is not None and stamp <= last:
             return "replay"
-        if last is None and stamp + NEW_STREAM_WINDOW < max(self.latest, wall):
+        if last is None and (stamp + NEW_STREAM_WINDOW < max(self.latest, wall)
+                             or stamp <= self.evicted_floor):
             return "replay"
         if commit:
-            self.streams[stream] = stamp
-            self.latest = max(self.latest, stamp)
+            self._remember(stream, stamp, last is None)
         return None
+
+    def _remember(self, stream: tuple[int, int, int], stamp: int, new: bool) -> None:
+        streams = self.streams
+        if new:
+            if len(streams) >= self.max_streams:
+                oldest = next(iter(streams))
+                self.evicted_floor = max(self.evicted_floor, streams.pop(oldest))
+                self.counters["streams_evicted"] += 1
+                if self.evictions is not None:
+                    self.evictions["signing_streams_evicted"] += 1
+        else:
+            del streams[stream]  # re-inserted below: the most recently accepted is last
+        streams[stream] = stamp
+        self.latest = max(self.latest, stamp)
 
     def _other_vehicles_key(self, signed_part: bytes, sig: bytes, link_id: int) -> bool:
         if self.key_of_vehicle is None:

@@ -205,7 +205,7 @@ class LiveView:
                 _json(LINKS_TOPIC, {"links": [k.as_json() for k in self.links.links()]}, ns),
                 _json(STATUS_TOPIC, {"processes": procs,
                                      "members": sorted(self._members or ()),
-                                     "refused": refusals(s.counters
-                                                         for s in self.processes.values())},
+                                     "refused": refusals({k: s.counters for k, s
+                                                          in self.processes.items()})},
                       ns)]
 

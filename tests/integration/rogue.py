@@ -39,6 +39,7 @@ from pathlib import Path
 import msgpack
 
 from agents.mavlink.wire import decode_datagram, new_codec
+from transport.bus import Congestion
 from transport.codec import encode
 from transport.credentials import Identity
 from transport.keys import SwarmKeys
@@ -155,7 +156,7 @@ class IdentityAttack:
 
     def __init__(self, bus: ZenohBus, keys: SwarmKeys, j: int, report: dict[str, int]) -> None:
         self.bus, self.keys, self.j, self.report = bus, keys, j, report
-        self.own = bus.declare_publisher(keys.status("follower", j))
+        self.own = bus.declare_publisher(keys.status("follower", j), Congestion.BLOCK)
         self.tokens = TokenAttack(bus, keys, j, report)
         self.seq = 0
 
@@ -200,7 +201,8 @@ def run(args: argparse.Namespace) -> dict[str, int]:
     j = args.follower if ident is None else int(ident.name.rsplit("-", 1)[1])
     with ZenohBus(ZenohConfig(connect=(args.endpoint,))) as plain, \
             ZenohBus(ZenohConfig(connect=(args.endpoint,), identity=ident)) as insider:
-        fuzz_pub = insider.declare_publisher(keys.follower_state(j))
+        # BLOCK: every payload leaves (an attacker picks what suits it, not the default).
+        fuzz_pub = insider.declare_publisher(keys.follower_state(j), Congestion.BLOCK)
         wait_running(Path(args.progress))
         identity: IdentityAttack | TokenAttack | None = None
         if "identity" in PARTS:

@@ -19,7 +19,7 @@ from deploy.verdict import read_verdict
 from tests.integration import runs
 from tests.integration.test_transport_zenoh import free_port
 from tests.recorder_synth import SynthRun
-from transport.bus import wait_until_alive
+from transport.bus import Congestion, wait_until_alive
 from transport.codec import decode, encode
 from transport.keys import SwarmKeys
 from transport.messages import ProcessStatus, Stamper
@@ -80,7 +80,8 @@ def test_recorder_process_records_a_run_and_writes_outputs(
         with ZenohBus(ZenohConfig(connect=(endpoint,))) as bus:
             status = bus.subscribe(keys.status("recorder", 0))
             wait_until_alive(bus.watch_alive(keys.all_alive()), {keys.alive("recorder", 0)}, 20)
-            pubs = [bus.declare_publisher(k) for k in
+            # BLOCK: a lossless feed, every message counted below.
+            pubs = [bus.declare_publisher(k, Congestion.BLOCK) for k in
                     (keys.control(), keys.truth(), *map(keys.follower_state, range(scenario.n)))]
             wait_for(lambda: all(p.matched() for p in pubs), 10, "recorder subscription")
             states: list[str] = []

@@ -10,6 +10,7 @@ import pytest
 
 from deploy.ports import free_tcp_port
 from tests.integration.runs import wait_for
+from transport.bus import Congestion
 from transport.credentials import Identity, identity_file, make_credentials
 from transport.keys import SwarmKeys
 from transport.zenoh_bus import ZenohBus
@@ -49,7 +50,7 @@ def test_rights_per_process_and_no_join_without_a_swarm_certificate(tmp_path: Pa
             bus(None, "-", connect=(endpoint.replace("tls/", "tcp/"),)) as plain, \
             bus(other_ca, "follower-0", connect=(endpoint,)) as foreign:
         sub = rec.subscribe(KEYS.everything())
-        own = rogue.declare_publisher(KEYS.follower_state(1))
+        own = rogue.declare_publisher(KEYS.follower_state(1), Congestion.BLOCK)
         wait_for(lambda: bool(own.put(b"hello") or payloads(sub, seen)), 20, "follower-1 linked")
         # follower-1's certificate on follower 0's key, on the control key, on sim's truth:
         for key in (KEYS.follower_state(0), KEYS.control(), KEYS.truth()):

@@ -192,10 +192,12 @@ def test_refusals_sum_over_processes_and_name_the_senders() -> None:
         "launcher": {"statuses_rejected": 4, "rejected_from_follower-2": 4}}
     summed = launch_refusals(launch)
     assert summed == {"statuses": 12, "observations": 1, "tokens": 2,
-                      "from": {"follower-2": 12, "sim-0": 1}}
+                      "from": {"follower-2": 12, "sim-0": 1},
+                      "seen_by": {"follower-2": 3, "sim-0": 1}}
     assert refusal_text(summed) == ("refused 12 statuses, 1 observations, 2 tokens "
-                                    "(from follower-2 12, sim-0 1)")
-    assert refusals([{"state": "done"}, {"x": True}]) == {} and refusal_text({}) is None
+                                    "(from follower-2 12 seen by 3, sim-0 1 seen by 1)")
+    assert refusals({"a": {"state": "done"}, "b": {"x": True}}) == {}
+    assert refusal_text({}) is None
 
 
 def test_a_follower_state_index_must_be_its_keys() -> None:

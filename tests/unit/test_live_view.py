@@ -163,7 +163,8 @@ def test_view_throttles_the_scene_and_logs_state_changes(paper: Scenario) -> Non
                             "rejected_from_follower-2": 7}), START_S)
     frames = view.tick_frames(START_S + 2.0, frozenset({0, 2, 3}))
     status = json.loads(next(f.data for f in frames if f.topic == STATUS_TOPIC))
-    assert status["refused"] == {"statuses": 7, "tokens": 2, "from": {"follower-2": 7}}
+    assert status["refused"] == {"statuses": 7, "tokens": 2, "from": {"follower-2": 7},
+                                 "seen_by": {"follower-2": 1}}
 
 
 def status(i: int, counters: dict[str, int], seq: int = 0) -> ProcessStatus:

@@ -43,11 +43,12 @@ def test_the_verdict_sums_mavlink_refusals_and_names_the_sender(tmp_path: Path) 
     assert summed == {"unsigned MAVLink frames": 2500, "badly signed MAVLink frames": 91000,
                       "MAVLink frames signed with another vehicle's key": 20,
                       "MAVLink datagrams cut (each over a whole tick's budget)": 2,
-                      "MAVLink datagrams the kernel dropped": 17, "from": {"follower-2": 20}}
+                      "MAVLink datagrams the kernel dropped": 17, "from": {"follower-2": 20},
+                      "seen_by": {"follower-2": 1}}
     buf = io.StringIO()
     print_verdict(Console(file=buf, width=600), read_verdict(run, "enclose run paper"))
     assert refusal_text(summed) in buf.getvalue()
-    assert "(from follower-2 20)" in buf.getvalue()
+    assert "(from follower-2 20 seen by 1)" in buf.getvalue()
 
 
 def test_dropped_clock_probes_are_summed_and_shown() -> None:
@@ -62,3 +63,50 @@ def test_dropped_clock_probes_are_summed_and_shown() -> None:
                       "clock probes over the offset step": 2}
     text = refusal_text(summed)
     assert text is not None and "8 clock probes from no router" in text
+
+
+# The paper case's ring: follower-2 lies, its neighbours follower-1 and follower-3 and the
+# recorder refuse what it puts, and it reports inflated refusals "from" others in its own
+# status, to push itself out of the senders shown.
+HONEST = {
+    "follower-1": {"state": "done", "states_rejected": 40, "rejected_from_follower-2": 40},
+    "follower-3": {"state": "done", "states_rejected": 38, "rejected_from_follower-2": 38},
+    "recorder-0": {"state": "done", "states_rejected": 41, "rejected_from_follower-2": 41},
+    "follower-0": {"state": "done"},
+}
+BLAME = {"state": "done", "states_rejected": 10**9, "rejected_from_follower-0": 10**9,
+         "rejected_from_follower-1": 10**9, "rejected_from_follower-3": 10**9,
+         "rejected_from_sim-0": 10**9, "rejected_from_follower-2": 10**9}
+
+
+def test_a_process_inflating_its_own_counters_cannot_shift_the_blame() -> None:
+    before = launch_refusals({"status": HONEST})
+    assert before["from"] == {"follower-2": 119} and before["seen_by"] == {"follower-2": 3}
+    after = launch_refusals({"status": {**HONEST, "follower-2": BLAME}})
+    # Still first, with what the three who refused it saw; its claim about itself is not
+    # counted, and each process it blames has it alone as a witness.
+    assert next(iter(after["from"])) == "follower-2" and after["from"]["follower-2"] == 119
+    assert after["seen_by"]["follower-2"] == 3
+    assert all(n == 1 for s, n in after["seen_by"].items() if s != "follower-2")
+    text = refusal_text(after)
+    assert text is not None and "(from follower-2 119 seen by 3, " in text
+
+
+def test_one_process_cannot_outweigh_the_others_who_refused_a_sender() -> None:
+    """Two senders each refused by two processes: the one with the larger count from the
+    honest witness ranks first, however much a single other witness claims."""
+    status = {
+        "follower-1": {"rejected_from_follower-2": 50},
+        "recorder-0": {"rejected_from_follower-2": 60, "rejected_from_follower-0": 1},
+        "follower-2": {"rejected_from_follower-0": 10**9},
+    }
+    summed = launch_refusals({"status": status})
+    assert list(summed["from"]) == ["follower-2", "follower-0"]
+    assert summed["seen_by"] == {"follower-2": 2, "follower-0": 2}
+
+
+def test_a_status_naming_no_process_or_holding_garbage_is_skipped() -> None:
+    summed = launch_refusals({"status": {"follower-1": "garbage", "follower-3": {
+        "rejected_from_": 5, "rejected_from_follower-2": -3, "rejected_from_sim-0": True}},
+        "launcher": {"rejected_from_follower-2": 2}})
+    assert summed == {"from": {"follower-2": 2}, "seen_by": {"follower-2": 1}}

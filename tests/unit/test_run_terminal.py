@@ -153,9 +153,10 @@ def test_the_processes_line_sums_what_the_processes_refused(tmp_path: Path) -> N
     v = read_verdict(run, "enclose run paper")
     print_verdict(console, v)
     assert ("processes    none died, restarted or failed; refused 42 statuses, 3 tokens "
-            "(from follower-2 42)") in buf.getvalue()
+            "(from follower-2 42 seen by 2)") in buf.getvalue()
     assert verdict_json(v)["verdict"]["refused"] == {"statuses": 42, "tokens": 3,
-                                                     "from": {"follower-2": 42}}
+                                                     "from": {"follower-2": 42},
+                                                     "seen_by": {"follower-2": 2}}
 
 
 def test_a_metric_over_its_bound_or_no_metrics_says_so(tmp_path: Path) -> None:

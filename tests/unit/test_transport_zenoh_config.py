@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from transport.codec import MAX_PAYLOAD_BYTES
 from transport.errors import ConfigError
 from transport.network_schema import ZENOH_RUNTIMES
 from transport.zenoh_config import (
@@ -20,6 +21,8 @@ from transport.zenoh_config import (
     ACCEPT_TIMEOUT_MS,
     LEASE_KEY,
     LINK_BUFFER_BYTES,
+    MAX_MESSAGE_BYTES,
+    MAX_MESSAGE_KEY,
     ROUTER_BLOCK_CLOSE_KEY,
     ROUTER_BLOCK_CLOSE_US,
     ROUTER_LEASE_KEY,
@@ -48,6 +51,14 @@ def test_defaults_are_safe_peer_on_loopback() -> None:
     assert get(cfg, "transport/link/tx/batch_size") == LINK_BUFFER_BYTES
     assert get(cfg, "transport/link/rx/buffer_size") == LINK_BUFFER_BYTES
     assert get(cfg, "transport/shared_memory/enabled") is False  # no watchdog threads
+
+
+def test_every_session_refuses_messages_over_the_codecs_cap() -> None:
+    """A larger message would be reassembled in full before the codec refuses it."""
+    assert MAX_MESSAGE_BYTES - MAX_PAYLOAD_BYTES == 1024
+    for cfg in (ZenohConfig(), ZenohConfig(mode="client", connect=("tcp/127.0.0.1:1",)),
+                ZenohConfig(mode="router", listen=(loopback_endpoint(17002),))):
+        assert get(cfg, MAX_MESSAGE_KEY) == MAX_MESSAGE_BYTES
 
 
 def test_routers_close_a_stuck_link_and_reopen_a_healed_one_sooner_than_zenohs_defaults(
