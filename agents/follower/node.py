@@ -65,7 +65,7 @@ class FollowerNode:
         self.members = frozenset(range(scenario.n))
         self.runner = LawRunner(law or make_law(scenario), setup_for(scenario, index))
         self.latest = Latest(index, self.runner.declared,
-                             gate_limits(scenario.pattern.rho_d_m, scenario.beta_m_s))
+                             gate_limits(scenario.pattern.rho_d_m))
         self.index, self.bus, self.vehicle = index, bus, vehicle
         self.altitude_m = scenario.vehicle.altitude_m
         self.keys = SwarmKeys(swarm)

@@ -5,31 +5,42 @@ owner) can still be a lie by that owner (issue 51: the `lie` fault, agents.follo
 A follower holds each neighbour j's message against what the swarm's physics and the
 law's own dynamics allow, and against what it knows itself, before its law sees it:
 
-- jump:     r_j against j's last accepted r extrapolated by its own rate: an honest
-            estimate is continuous (agents.law.carry keeps it so across every change),
-            so it lands within `jump_m`, plus `slack_m_s` per second since that message
-            (the targets' centre moves at most beta; an excluded neighbour comes back);
-- agree:    r_j against this follower's own estimate: past the settling time, honest
-            estimates agree to the paper's eps; `agree_m` is well above that;
+- rate:     a value against its own declared rate (r_j and dr_j/dt; a link sum and its
+            rate): between two consecutive messages an honest value moves by its rate
+            times the time between them, up to the integration's small error.  The
+            differences are summed, leaking with `rate_tau_s`, each clipped at twice the
+            limit: past `rate_m`, refused.  A jump (an offset, a sum set at the bound),
+            a frozen value whose rate says it moves, a random walk: all are caught
+            within a few messages, and a liar back to the truth is taken back within
+            `rate_tau_s * ln 2`;
+- link:     for a field a law declares `odd` (the robust estimator's link sums), a
+            link's two ends cancel (S_ij + S_ji ~ 0, agents.law.consensus.link_balance):
+            the change of their sum d between consecutive messages is summed the same
+            way (`link_tau_s`, `link_m`): a neighbour cannot move our Phi_i faster than
+            link_m / link_tau_s / 2;
+- agree:    r_j against this follower's own estimate and the other neighbours' accepted
+            ones: past the settling time, honest estimates agree to the paper's eps, so
+            r_j within `agree_m` of any one of them passes (a follower that drifted
+            itself still takes two neighbours that agree with each other: no deadlock);
+            a track (re)started after a silence or a change of members gets
+            `arm_after_s` to converge first;
 - geometry: r_j against this follower's own target observation: its weighted target
             position p~_i over its weight sum is a convex combination of targets, so it
             lies within the targets' spread of their centre, and the scenario is admitted
             only if that spread is below rho_d (agents.scenario.checks): an honest r_j is
-            within rho_d + eps of it, whatever the other neighbours say;
-- link:     for a field a law declares `odd` (the robust estimator's link sums), a
-            link's two ends cancel (S_ij + S_ji ~ 0, agents.law.consensus.link_balance):
-            their sum d may move by `link_m`, plus `link_slack_m_s` per second since j's
-            last accepted message (its end integrates while ours is cut off from it).
+            within rho_d + eps of it, whatever the other neighbours say.
 
 A message that fails one is dropped before the law sees it, and counted per sender and
 reason; the neighbour's last accepted message then ages, and past `Setup.stale_s` the law
 treats the link as missing (no flow on it, its link sums held, no spacing to it): the
-neighbour is excluded until its messages are plausible again.  The first two checks arm
-`arm_after_s` after the start (the estimators converge from p~ before).
+neighbour is excluded until its messages are plausible again.  Agreement and geometry
+arm `arm_after_s` after the start (the estimators converge from p~ before).
 """
 
 from __future__ import annotations
 
+import logging
+import math
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -37,36 +48,39 @@ from dataclasses import dataclass, field
 from agents.law.interface import Peer, Sample, Setup, reference
 from transport.law_fields import FieldSpec, LawFields
 
-REASONS = ("jump", "agree", "geometry", "link")
+log = logging.getLogger("enclose.follower")
+REASONS = ("rate", "link", "agree", "geometry")
 
 
 @dataclass(frozen=True)
 class GateLimits:
-    """The thresholds, metres and m/s (chosen by measurement: docs/security.md)."""
+    """The thresholds, metres and seconds (chosen by measurement: docs/security.md)."""
 
-    jump_m: float = 2.0
-    slack_m_s: float = 2.5
+    rate_m: float = 0.5
+    rate_tau_s: float = 1.0
+    link_m: float = 2.0
+    link_tau_s: float = 2.0
     agree_m: float = 3.0
     geometry_m: float = 9.0
-    link_m: float = 2.0
-    link_slack_m_s: float = 2.5
     arm_after_s: float = 10.0
 
 
-def gate_limits(rho_d_m: float, beta_m_s: float) -> GateLimits:
-    """The paper case's measured margins, scaled to a scenario's radius and speed bound."""
-    return GateLimits(slack_m_s=2.0 * beta_m_s + 0.25, geometry_m=rho_d_m + 1.0,
-                      link_slack_m_s=2.0 * beta_m_s + 0.25)
+def gate_limits(rho_d_m: float) -> GateLimits:
+    """The paper case's measured margins; the geometry bound is the scenario's radius."""
+    return GateLimits(geometry_m=rho_d_m + 1.0)
 
 
 @dataclass
 class _Track:
-    """What one neighbour was last believed: its message and its links' sums d."""
+    """One neighbour: its last accepted estimate, its last message, the leaky sums."""
 
-    r: Sample
-    sums: dict[str, complex]  # odd field -> S_ij + S_ji at the message
+    r: Sample  # last accepted
     accepted_s: float
     heard_s: float  # its last message, plausible or not: a silence is not a lie
+    since_s: float  # the track's (re)start: `agree` waits arm_after_s from it
+    last: dict[str, Sample]  # "r" and each odd field, as last heard
+    d: dict[str, complex]  # each odd field's S_ij + S_ji, as last heard
+    residual: dict[str, complex] = field(default_factory=dict)
 
 
 @dataclass
@@ -89,21 +103,28 @@ class Plausibility:
         self.origin_s: float | None = None  # the experiment's start: detection times
         self._tracks: dict[int, _Track] = {}
         self.counters: Counter[str] = Counter()
+        self._excess = 0.0  # of the last check failed, for the log
 
     def check(self, sender: int, peer: Peer, now_s: float) -> str | None:
         """None if `peer` (sender's newest message) is plausible, else why not (counted)."""
         track = self._tracks.get(sender)
         if track is not None and now_s - track.heard_s > self.hold_s:
             track = None  # silent for a while (a restart, a cut): a fresh start
-        sums = self._sums(sender, peer, now_s)
-        why = self._reason(track, peer, sums, now_s)
+        heard = {"r": peer.r, **{n: v for n in self.odd
+                                 if isinstance(v := peer.fields.get(n), Sample)}}
+        d = self._sums(sender, peer, now_s)
+        if track is None:
+            track = _Track(peer.r, -1e18, now_s, now_s, heard, d)
+            self._tracks[sender] = track
+        why = self._consistent(track, heard, d) or self._agrees(sender, track, peer, now_s)
+        episode = track.heard_s <= track.accepted_s
+        track.heard_s, track.last, track.d = now_s, heard, d
         if why is None:
-            self._tracks[sender] = _Track(peer.r, sums, now_s, now_s)
+            track.r, track.accepted_s = peer.r, now_s
             return None
-        if track is not None:
-            track.heard_s = now_s
-        else:  # never believed: judged against no history, and the silence rule holds
-            self._tracks[sender] = _Track(peer.r, sums, -1e18, now_s)
+        if episode:  # the first refusal after an accepted message: say why
+            log.warning("follower %d's state refused as implausible: %s, %.3g m over its "
+                        "limit", sender, why, self._excess)
         self._count(sender, why, now_s)
         return why
 
@@ -111,34 +132,65 @@ class Plausibility:
         """A change of members: links are new (their sums restart), history goes."""
         self._tracks = {}
 
-    def _reason(self, track: _Track | None, peer: Peer, sums: Mapping[str, complex],
-                now_s: float) -> str | None:
+    def _consistent(self, track: _Track, heard: Mapping[str, Sample],
+                    d: Mapping[str, complex]) -> str | None:
+        """The rate and link checks: each value against its own rate since the last
+        message, and each odd field's two ends against their last sum."""
+        lim, why = self.limits, None
+        for name, new in heard.items():
+            old = track.last.get(name)
+            if old is None or new.stamp_s <= old.stamp_s:
+                continue
+            dt = new.stamp_s - old.stamp_s
+            miss = new.value - old.value - old.rate * dt
+            if self._leak(track, name, miss, dt, lim.rate_tau_s, "rate", lim.rate_m):
+                why = why or "rate"
+        dt = max(heard["r"].stamp_s - track.last["r"].stamp_s, 0.0)
+        for name, now_d in d.items():
+            was = track.d.get(name)
+            if was is not None and self._leak(track, "d_" + name, now_d - was, dt,
+                                              lim.link_tau_s, "link", lim.link_m):
+                why = why or "link"
+        return why
+
+    def _leak(self, track: _Track, key: str, miss: complex, dt: float, tau_s: float,
+              check: str, limit: float) -> bool:
+        """Add `miss` (clipped at twice the limit) to the track's leaky sum `key`: True
+        if `miss` alone or that sum is past `limit`."""
+        size = abs(miss)
+        if size > 2.0 * limit:
+            miss *= 2.0 * limit / size
+        total = track.residual.get(key, 0j) * math.exp(-dt / tau_s) + miss
+        track.residual[key] = total
+        return self._over(check, max(abs(total), size), limit)
+
+    def _agrees(self, sender: int, track: _Track, peer: Peer, now_s: float) -> str | None:
+        """The agreement and geometry checks, once armed."""
         lim, own = self.limits, self.own
-        r = peer.r.value
-        if track is not None and track.accepted_s > -1e17:
-            age = max(peer.r.stamp_s - track.r.stamp_s, 0.0)
-            jump = abs(r - track.r.at(peer.r.stamp_s)) - lim.slack_m_s * age
-            if self._over("jump", jump, lim.jump_m):
-                return "jump"
-            allowed = lim.link_slack_m_s * max(now_s - track.accepted_s, 0.0)
-            for name, d in sums.items():
-                ref = track.sums.get(name)
-                if ref is not None and self._over("link", abs(d - ref) - allowed, lim.link_m):
-                    return "link"
         if not own.armed:
             return None
         at = peer.r.at(now_s)
-        if own.r is not None and self._over("agree", abs(at - own.r.at(now_s)), lim.agree_m):
+        settled = now_s - track.since_s >= lim.arm_after_s
+        if settled and self._over("agree", self._nearest(sender, at, now_s), lim.agree_m):
             return "agree"
         if own.centre is not None and self._over("geometry", abs(at - own.centre),
                                                  lim.geometry_m):
             return "geometry"
         return None
 
+    def _nearest(self, sender: int, at: complex, now_s: float) -> float:
+        """The distance from `at` to the nearest of this follower's own estimate and its
+        other neighbours' accepted ones (those heard within the hold)."""
+        refs = [] if self.own.r is None else [self.own.r.at(now_s)]
+        refs += [t.r.at(now_s) for j, t in self._tracks.items()
+                 if j != sender and now_s - t.accepted_s <= self.hold_s]
+        return min((abs(at - ref) for ref in refs), default=0.0)
+
     def _over(self, check: str, value: float, limit: float) -> bool:
         """True past `limit`; the largest value passed is kept (`plausible_max_mm_<check>`:
         the honest margin the thresholds were chosen on)."""
         if value > limit:
+            self._excess = value - limit
             return True
         key = f"plausible_max_mm_{check}"
         mm = round(value * 1000.0)
