@@ -49,7 +49,7 @@ from agents.law.interface import Peer, Sample, Setup, reference
 from transport.law_fields import FieldSpec, LawFields
 
 log = logging.getLogger("enclose.follower")
-REASONS = ("rate", "link", "agree", "geometry")
+REASONS = ("rate", "jump", "link", "agree", "geometry")
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,8 @@ class GateLimits:
 
     rate_m: float = 0.5
     rate_tau_s: float = 1.0
+    jump_m: float = 2.0
+    slack_m_s: float = 2.5
     link_m: float = 2.0
     link_tau_s: float = 2.0
     agree_m: float = 3.0
@@ -80,6 +82,7 @@ class _Track:
     since_s: float  # the track's (re)start: `agree` waits arm_after_s from it
     last: dict[str, Sample]  # "r" and each odd field, as last heard
     d: dict[str, complex]  # each odd field's S_ij + S_ji, as last heard
+    d_accepted: dict[str, complex]  # ... and as last accepted
     residual: dict[str, complex] = field(default_factory=dict)
 
 
@@ -108,19 +111,23 @@ class Plausibility:
     def check(self, sender: int, peer: Peer, now_s: float) -> str | None:
         """None if `peer` (sender's newest message) is plausible, else why not (counted)."""
         track = self._tracks.get(sender)
-        if track is not None and now_s - track.heard_s > self.hold_s:
-            track = None  # silent for a while (a restart, a cut): a fresh start
         heard = {"r": peer.r, **{n: v for n in self.odd
                                  if isinstance(v := peer.fields.get(n), Sample)}}
         d = self._sums(sender, peer, now_s)
         if track is None:
-            track = _Track(peer.r, -1e18, now_s, now_s, heard, d)
+            track = _Track(peer.r, -1e18, now_s, now_s, heard, d, {})
             self._tracks[sender] = track
-        why = self._consistent(track, heard, d) or self._agrees(sender, track, peer, now_s)
+        elif now_s - track.heard_s > self.hold_s:
+            # Silent for a while (a restart, a cut): its last message is too old to hold
+            # this one to, and agreement waits for it to converge; what it was last
+            # believed still bounds where it can be now (`jump`, `link`).
+            track.last, track.d, track.residual, track.since_s = heard, d, {}, now_s
+        why = (self._consistent(track, heard, d) or self._level(track, peer, d, now_s)
+               or self._agrees(sender, track, peer, now_s))
         episode = track.heard_s <= track.accepted_s
         track.heard_s, track.last, track.d = now_s, heard, d
         if why is None:
-            track.r, track.accepted_s = peer.r, now_s
+            track.r, track.accepted_s, track.d_accepted = peer.r, now_s, d
             return None
         if episode:  # the first refusal after an accepted message: say why
             log.warning("follower %d's state refused as implausible: %s, %.3g m over its "
@@ -129,7 +136,8 @@ class Plausibility:
         return why
 
     def forget(self) -> None:
-        """A change of members: links are new (their sums restart), history goes."""
+        """A change of members: links are new (their sums restart, at both ends), and
+        history goes."""
         self._tracks = {}
 
     def _consistent(self, track: _Track, heard: Mapping[str, Sample],
@@ -152,6 +160,25 @@ class Plausibility:
                                               lim.link_tau_s, "link", lim.link_m):
                 why = why or "link"
         return why
+
+    def _level(self, track: _Track, peer: Peer, d: Mapping[str, complex],
+               now_s: float) -> str | None:
+        """Where it was last believed bounds where it can be: r_j by `jump_m` plus
+        `slack_m_s` per second since (the centre moves at most beta; an excluded
+        neighbour's estimate follows it), each odd field's two ends likewise."""
+        if track.accepted_s < -1e17:
+            return None
+        lim = self.limits
+        allowed = lim.jump_m + lim.slack_m_s * max(now_s - track.accepted_s, 0.0)
+        moved = abs(peer.r.value - track.r.at(peer.r.stamp_s))
+        if self._over("jump", moved - allowed + lim.jump_m, lim.jump_m):
+            return "jump"
+        for name, now_d in d.items():
+            was = track.d_accepted.get(name)
+            if was is not None and self._over("link", abs(now_d - was) - allowed + lim.jump_m,
+                                              lim.jump_m):
+                return "link"
+        return None
 
     def _leak(self, track: _Track, key: str, miss: complex, dt: float, tau_s: float,
               check: str, limit: float) -> bool:

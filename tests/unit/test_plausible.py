@@ -111,6 +111,14 @@ def test_link_sums_must_keep_cancelling() -> None:
     assert g.check(1, peer(0j, 0.04, sum_m=1e5 + 0j), 0.04) == "rate"  # its rate said 0
 
 
+def test_link_sums_set_far_off_stay_refused_once_their_rate_agrees() -> None:
+    g = gate(own_sum=3 + 0j, armed=False)
+    for k in range(50):
+        assert g.check(1, peer(0j, 0.02 * k, sum_m=-3 + 0j), 0.02 * k) is None
+    why = [g.check(1, peer(0j, 0.02 * k, sum_m=1e5 + 0j), 0.02 * k) for k in range(50, 500)]
+    assert all(w is not None for w in why) and why[-1] == "link"
+
+
 def test_link_sums_ramped_with_their_rate_said_still_do_not_cancel() -> None:
     g = gate(own_sum=3 + 0j)
     v = 5.0  # m/s, declared: the rate check passes, the link's two ends drift apart
@@ -123,10 +131,11 @@ def test_link_sums_ramped_with_their_rate_said_still_do_not_cancel() -> None:
 def test_a_silence_is_not_a_lie_but_refusals_are_not_silence() -> None:
     g = gate(armed=False)
     assert g.check(1, peer(0j, 0.0), 0.0) is None
-    assert g.check(1, peer(30 + 0j, 5.0), 5.0) is None  # back after a restart: fresh
+    assert g.check(1, peer(10 + 0j, 5.0), 5.0) is None  # back after a silence
+    assert g.check(1, peer(900 + 0j, 15.0), 15.0) == "jump"  # but not from anywhere
     for k in range(1, 200):  # a liar refused for 4 s stays refused: it was never silent
-        t = 5.0 + 0.02 * k
-        assert g.check(1, peer((-1) ** k * 90 + 0j, t), t) == "rate"
+        t = 15.0 + 0.02 * k
+        assert g.check(1, peer((-1) ** k * 90 + 0j, t), t) in ("rate", "jump")
 
 
 @settings(max_examples=300)
