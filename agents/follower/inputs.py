@@ -15,7 +15,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from agents.follower.membership import HOLD_AFTER_S, TARGET_ACCEL_TAU_S, TARGET_VEL_TAU_S
+from agents.follower.membership import (
+    HOLD_AFTER_S,
+    MAX_GAP_S,
+    TARGET_ACCEL_TAU_S,
+    TARGET_VEL_TAU_S,
+)
 from agents.follower.plausible import GateLimits, Plausibility
 from agents.law.interface import Peer, Sample, Setup
 from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
@@ -37,7 +42,8 @@ class Latest:
                  limits: GateLimits | None = None) -> None:
         self.index = index
         odd = tuple(name for name, s in specs.items() if s.odd)
-        self.gate = Plausibility(index, limits or GateLimits(), odd, HOLD_AFTER_S)
+        self.gate = Plausibility(index, limits or GateLimits(), odd, HOLD_AFTER_S,
+                                 MAX_GAP_S)
         self.targets: dict[int, Sample] = {}
         # Per target heard twice or more, its velocity filter's state: the low-passed
         # velocity and acceleration of lag_free_velocity.

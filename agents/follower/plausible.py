@@ -33,8 +33,8 @@ law's own dynamics allow, and against what it knows itself, before its law sees 
 A message that fails one is dropped before the law sees it, and counted per sender and
 reason; the neighbour's last accepted message then ages, and past `Setup.stale_s` the law
 treats the link as missing (no flow on it, its link sums held, no spacing to it): the
-neighbour is excluded until its messages are plausible again.  Agreement and geometry
-arm `arm_after_s` after the start (the estimators converge from p~ before).
+neighbour is excluded until its messages are plausible again.  The checks arm
+`arm_after_s` after the start: the estimators converge from p~ before, at tens of m/s.
 """
 
 from __future__ import annotations
@@ -56,11 +56,11 @@ REASONS = ("rate", "jump", "link", "agree", "geometry")
 class GateLimits:
     """The thresholds, metres and seconds (chosen by measurement: docs/security.md)."""
 
-    rate_m: float = 0.5
+    rate_m: float = 1.0
     rate_tau_s: float = 1.0
     jump_m: float = 2.0
     slack_m_s: float = 2.5
-    link_m: float = 2.0
+    link_m: float = 4.0
     link_tau_s: float = 2.0
     agree_m: float = 3.0
     geometry_m: float = 9.0
@@ -100,8 +100,9 @@ class Plausibility:
     """The checks of follower `index` on its neighbours' states (module docstring)."""
 
     def __init__(self, index: int, limits: GateLimits, odd: tuple[str, ...],
-                 hold_s: float) -> None:
+                 hold_s: float, max_gap_s: float = 0.25) -> None:
         self.index, self.limits, self.odd, self.hold_s = index, limits, odd, hold_s
+        self.max_gap_s = max_gap_s  # the longest step a law integrates (Setup.max_gap_s)
         self.own = Own()
         self.origin_s: float | None = None  # the experiment's start: detection times
         self._tracks: dict[int, _Track] = {}
@@ -122,8 +123,12 @@ class Plausibility:
             # this one to, and agreement waits for it to converge; what it was last
             # believed still bounds where it can be now (`jump`, `link`).
             track.last, track.d, track.residual, track.since_s = heard, d, {}, now_s
-        why = (self._consistent(track, heard, d) or self._level(track, peer, d, now_s)
-               or self._agrees(sender, track, peer, now_s))
+        # Armed after the start's transient (estimates converging from p~ at tens of m/s,
+        # a standing estimate handing over to the law's): before, nothing is refused.
+        why = None
+        if self.own.armed:
+            why = (self._consistent(track, heard, d) or self._level(track, peer, d, now_s)
+                   or self._agrees(sender, track, peer, now_s))
         episode = track.heard_s <= track.accepted_s
         track.heard_s, track.last, track.d = now_s, heard, d
         if why is None:
@@ -150,6 +155,8 @@ class Plausibility:
             if old is None or new.stamp_s <= old.stamp_s:
                 continue
             dt = new.stamp_s - old.stamp_s
+            if dt > self.max_gap_s:  # the sender stalled: it integrated less than this
+                continue
             miss = new.value - old.value - old.rate * dt
             if self._leak(track, name, miss, dt, lim.rate_tau_s, "rate", lim.rate_m):
                 why = why or "rate"
@@ -192,10 +199,8 @@ class Plausibility:
         return self._over(check, max(abs(total), size), limit)
 
     def _agrees(self, sender: int, track: _Track, peer: Peer, now_s: float) -> str | None:
-        """The agreement and geometry checks, once armed."""
+        """The agreement and geometry checks."""
         lim, own = self.limits, self.own
-        if not own.armed:
-            return None
         at = peer.r.at(now_s)
         settled = now_s - track.since_s >= lim.arm_after_s
         if settled and self._over("agree", self._nearest(sender, at, now_s), lim.agree_m):

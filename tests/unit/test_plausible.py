@@ -48,14 +48,14 @@ def test_a_continuous_estimate_passes_and_a_jump_is_refused_and_counted() -> Non
 
 
 def test_a_frozen_value_whose_rate_says_it_moves_is_refused() -> None:
-    g = gate(armed=False)
-    refused = [g.check(1, peer(5 + 0j, 0.02 * k, 1.1 + 0j), 0.02 * k) for k in range(100)]
+    g = gate(centre=None)
+    refused = [g.check(1, peer(5 + 0j, 0.02 * k, 1.1 + 0j), 0.02 * k) for k in range(200)]
     first = refused.index("rate")
-    assert 0.2 < 0.02 * first < 1.0 and all(w == "rate" for w in refused[first:])
+    assert 1.0 < 0.02 * first < 3.0 and all(w == "rate" for w in refused[first:])
 
 
 def test_a_liar_back_to_the_truth_is_taken_back_within_a_second() -> None:
-    g = gate(armed=False)
+    g = gate(centre=None)
     for k in range(50):
         assert g.check(1, peer(0j, 0.02 * k), 0.02 * k) is None
     # 25 m off for a second: the jump is refused (what stays off is agreement's to catch)
@@ -73,7 +73,7 @@ def settle(g: Plausibility, senders: tuple[int, ...] = (1,), r: complex = 0j,
         for j in senders:
             assert g.check(j, peer(r, t), t) is None
         t += 0.5
-    return t
+    return t - 0.5  # the last message's time
 
 
 def test_agreement_once_armed_and_settled() -> None:
@@ -91,7 +91,7 @@ def test_agreement_once_armed_and_settled() -> None:
 
 def test_a_follower_that_drifted_itself_still_takes_neighbours_that_agree() -> None:
     g = gate(own_r=6 + 0j, centre=0j)
-    t = settle(g, (1, 2))
+    t = settle(g, (1, 2)) + 0.5
     assert g.check(1, peer(0j, t), t) is None
     g.own = Own(Sample(6 + 0j, 0j, t), 0j, {}, True)
     g._tracks.pop(2)  # with no other neighbour, our own estimate is the one reference
@@ -112,7 +112,7 @@ def test_link_sums_must_keep_cancelling() -> None:
 
 
 def test_link_sums_set_far_off_stay_refused_once_their_rate_agrees() -> None:
-    g = gate(own_sum=3 + 0j, armed=False)
+    g = gate(own_sum=3 + 0j, centre=None)
     for k in range(50):
         assert g.check(1, peer(0j, 0.02 * k, sum_m=-3 + 0j), 0.02 * k) is None
     why = [g.check(1, peer(0j, 0.02 * k, sum_m=1e5 + 0j), 0.02 * k) for k in range(50, 500)]
@@ -125,11 +125,11 @@ def test_link_sums_ramped_with_their_rate_said_still_do_not_cancel() -> None:
     why = [g.check(1, Peer(Sample(0j, 0j, 0.02 * k), Sample(0j, 0j, 0.02 * k),
                            {"link_sums_m": Sample(-3 + v * 0.02 * k + 0j, v + 0j, 0.02 * k)}),
                    0.02 * k) for k in range(60)]
-    assert "link" in why and "rate" not in why and why.index("link") * 0.02 * v < 3.0
+    assert "link" in why and "rate" not in why and why.index("link") * 0.02 * v < 6.0
 
 
 def test_a_silence_is_not_a_lie_but_refusals_are_not_silence() -> None:
-    g = gate(armed=False)
+    g = gate(centre=None)
     assert g.check(1, peer(0j, 0.0), 0.0) is None
     assert g.check(1, peer(10 + 0j, 5.0), 5.0) is None  # back after a silence
     assert g.check(1, peer(900 + 0j, 15.0), 15.0) == "jump"  # but not from anywhere
