@@ -18,7 +18,7 @@ law's own dynamics allow, and against what it knows itself, before its law sees 
             the change of their sum d between consecutive messages is summed the same
             way (`link_tau_s`, `link_m`): a neighbour cannot move our Phi_i faster than
             link_m / link_tau_s / 2;
-- agree:    r_j against this follower's own estimate and the other neighbours' accepted
+- agree:    r_j against this follower's own estimate and the other neighbours' latest
             ones: past the settling time, honest estimates agree to the paper's eps, so
             r_j within `agree_m` of any one of them passes (a follower that drifted
             itself still takes two neighbours that agree with each other: no deadlock);
@@ -57,7 +57,7 @@ class GateLimits:
     """The thresholds, metres and seconds (chosen by measurement: docs/security.md)."""
 
     rate_m: float = 1.0
-    rate_tau_s: float = 1.0
+    rate_tau_s: float = 3.0
     jump_m: float = 2.0
     slack_m_s: float = 2.5
     link_m: float = 4.0
@@ -212,10 +212,12 @@ class Plausibility:
 
     def _nearest(self, sender: int, at: complex, now_s: float) -> float:
         """The distance from `at` to the nearest of this follower's own estimate and its
-        other neighbours' accepted ones (those heard within the hold)."""
+        other neighbours' latest ones, refused or not (heard within the hold): one liar
+        cannot make two honest neighbours refuse each other; two liars around one
+        follower can vouch for each other."""
         refs = [] if self.own.r is None else [self.own.r.at(now_s)]
-        refs += [t.r.at(now_s) for j, t in self._tracks.items()
-                 if j != sender and now_s - t.accepted_s <= self.hold_s]
+        refs += [t.last["r"].at(now_s) for j, t in self._tracks.items()
+                 if j != sender and now_s - t.heard_s <= self.hold_s]
         return min((abs(at - ref) for ref in refs), default=0.0)
 
     def _over(self, check: str, value: float, limit: float) -> bool:
