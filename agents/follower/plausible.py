@@ -177,7 +177,9 @@ class Plausibility:
             return None
         lim = self.limits
         allowed = lim.jump_m + lim.slack_m_s * max(now_s - track.accepted_s, 0.0)
-        moved = abs(peer.r.value - track.r.at(peer.r.stamp_s))
+        # Held, not extrapolated, past the hold: a rate taken at one instant (the
+        # estimator's flows swing by m/s) would carry the reference off over a long gap.
+        moved = abs(peer.r.value - track.r.held(peer.r.stamp_s, self.hold_s))
         if self._over("jump", moved - allowed + lim.jump_m, lim.jump_m):
             return "jump"
         for name, now_d in d.items():
