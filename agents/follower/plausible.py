@@ -56,8 +56,8 @@ REASONS = ("rate", "jump", "link", "agree", "geometry")
 class GateLimits:
     """The thresholds, metres and seconds (chosen by measurement: docs/security.md)."""
 
-    rate_m: float = 1.0
-    rate_tau_s: float = 3.0
+    rate_m: float = 0.7
+    rate_tau_s: float = 1.0
     jump_m: float = 2.0
     slack_m_s: float = 2.5
     link_m: float = 4.0
@@ -139,6 +139,12 @@ class Plausibility:
                         "limit", sender, why, self._excess)
         self._count(sender, why, now_s)
         return why
+
+    def refused(self, sender: int, now_s: float) -> bool:
+        """True while `sender` is heard but its states are refused: excluded, not silent."""
+        track = self._tracks.get(sender)
+        return (track is not None and now_s - track.heard_s <= self.hold_s
+                and track.accepted_s < track.heard_s)
 
     def forget(self) -> None:
         """A change of members: links are new (their sums restart, at both ends), and
