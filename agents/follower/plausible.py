@@ -13,11 +13,15 @@ law's own dynamics allow, and against what it knows itself, before its law sees 
             a frozen value whose rate says it moves, a random walk: all are caught
             within a few messages, and a liar back to the truth is taken back within
             `rate_tau_s * ln 2`;
+- jump:     r_j against where it was last believed, held there, plus `slack_m_s` per
+            second since (the targets' centre moves at most beta): a silence does not
+            reset it, so going quiet buys a liar no fresh start;
 - link:     for a field a law declares `odd` (the robust estimator's link sums), a
             link's two ends cancel (S_ij + S_ji ~ 0, agents.law.consensus.link_balance):
-            the change of their sum d between consecutive messages is summed the same
-            way (`link_tau_s`, `link_m`): a neighbour cannot move our Phi_i faster than
-            link_m / link_tau_s / 2;
+            their sum d may move as `jump` allows since it was last believed, and its
+            change between consecutive messages is summed the same way (`link_tau_s`,
+            `link_m`): a neighbour cannot move our Phi_i faster than
+            link_m / link_tau_s / 2 unseen;
 - agree:    r_j against this follower's own estimate and the other neighbours' latest
             ones: past the settling time, honest estimates agree to the paper's eps, so
             r_j within `agree_m` of any one of them passes (a follower that drifted
