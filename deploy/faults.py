@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from agents.follower.lie import begin_signal, end_signal
 from agents.scenario.faults import FaultSpec
 from deploy.supervisor import Child, Supervisor
 
@@ -31,7 +32,8 @@ class FaultRunner:
     pending_restarts: dict[str, float] = field(default_factory=dict)  # the Watchdog's
     before_restart: Callable[[Child], None] = lambda _c: None  # as the Watchdog's
     clock: Callable[[], float] = time.monotonic
-    # (experiment time, what, process): "inject" a fault, "resume" a pause, "start" again
+    # (experiment time, what, process): "inject" a fault, "resume" a pause, "start" again,
+    # "truth": a lie ends
     _todo: list[tuple[float, str, str, FaultSpec]] = field(default_factory=list)
     paused: set[str] = field(default_factory=set)
 
@@ -62,6 +64,9 @@ class FaultRunner:
             self._signal(child, signal.SIGCONT)
             self.paused.discard(name)
             self._event(t, name, "resumed")
+        elif what == "truth":
+            self._signal(child, end_signal())
+            self._event(t, name, "lie ended")
         elif child.poll() is None:  # "start", but the stopped process is not gone yet
             if t - at > STOP_GRACE_S:
                 self._signal(child, signal.SIGKILL)
@@ -74,13 +79,17 @@ class FaultRunner:
         return True
 
     def _inject(self, child: Child, fault: FaultSpec, t: float) -> None:
+        mode = {} if fault.mode is None else {"mode": fault.mode}
         self._event(t, child.name, "fault", action=fault.action, duration_s=fault.duration_s,
-                    pid=child.pid)
+                    pid=child.pid, **mode)
         if child.poll() is not None:
             log.warning("fault on %s: it is not running", child.name)
             return
         if fault.action == "kill":
             self._signal(child, signal.SIGKILL)
+        elif fault.action == "lie":  # the process lies itself (agents.follower.lie)
+            self._signal(child, begin_signal(fault.mode or ""))
+            self._todo.append((t + (fault.duration_s or 0.0), "truth", child.name, fault))
         elif fault.action == "pause":
             self._signal(child, signal.SIGSTOP)
             self.paused.add(child.name)

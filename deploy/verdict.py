@@ -19,6 +19,7 @@ from rich.text import Text
 
 from deploy.cpu_load import load_line, memory_line, overrun_line
 from deploy.json_files import read_json
+from deploy.liars import liar_lines
 from deploy.refusals import launch_refusals, refusal_text
 
 # metrics.json key -> (label, unit, run.json key of its bound)
@@ -77,6 +78,7 @@ class Verdict:
     refused: dict[str, Any] | None = None  # bus input the processes refused (deploy.refusals)
     law: str | None = None  # the followers' law and how often it failed in flight
     network: tuple[str, ...] = ()  # each network fault: its window, recovery, closest approach
+    liars: tuple[str, ...] = ()  # followers refused as implausible (deploy.liars)
 
     @property
     def inside(self) -> bool:
@@ -202,7 +204,7 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
         tuple(f + ("/" if f == "logs" else "") for f in FILES if (run_dir / f).exists()), note,
         bool(launch), load_line(load), overrun_line(ticks), memory_line(load),
         silent_followers(metrics), recording_line(metrics), launch_refusals(launch),
-        law_line(info, metrics, launch), network_lines(metrics),
+        law_line(info, metrics, launch), network_lines(metrics), liar_lines(launch),
     )
 
 
@@ -236,6 +238,7 @@ def verdict_json(v: Verdict) -> dict[str, Any]:
         "recording": v.recording,
         "law": v.law,
         "network": list(v.network),
+        "liars": list(v.liars),
         "run_dir": str(v.run_dir),
     }}
 
@@ -269,6 +272,7 @@ def print_verdict(console: Console, v: Verdict) -> None:
     rows = [] if v.error else [("settle time", "never" if settle is None else f"{settle:.1f} s")]
     rows += [("law", v.law)] if v.law else []
     rows += [("network", line) for line in v.network]
+    rows += [("liars", line) for line in v.liars]
     if v.silent:
         n = len(v.metrics.get("followers") or {}) or None
         rows.append(("silent", silent_text(v.silent, n)))

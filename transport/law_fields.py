@@ -39,12 +39,14 @@ class FieldSpec:
     and is dropped, as the platform's own positions beyond 100 km are.  `rate`: the name
     of the field that is this one's time derivative (same kind): a receiver extrapolates
     this field by it from the message's stamp, held after the hold limit, as it does the
-    estimate r."""
+    estimate r.  `odd`: a per_link field whose two ends cancel (x_ij + x_ji ~ 0, as the
+    robust estimator's link sums): a receiver may hold a neighbour to that."""
 
     name: str
     kind: str
     bound: float
     rate: str | None = None
+    odd: bool = False
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -53,6 +55,8 @@ class FieldSpec:
             raise ValueError(f"field name {self.name!r}: an identifier of <= {MAX_NAME} chars")
         if not 0.0 < self.bound <= MAX_BOUND:
             raise ValueError(f"field {self.name!r}: bound must be in (0, {MAX_BOUND:g}]")
+        if self.odd and self.kind != "per_link":
+            raise ValueError(f"field {self.name!r}: only a per_link field can be odd")
 
 
 def check_specs(specs: Iterable[FieldSpec]) -> dict[str, FieldSpec]:

@@ -1,7 +1,9 @@
 """The newest of every input a follower's law reads: targets and neighbours' messages.
 
 Messages arrive decoded, checked and on this follower's clock (transport.decoder with
-the law's declared fields: transport.law_fields).  Here they become what a law reads
+the law's declared fields: transport.law_fields), and a neighbour's state must be
+plausible (agents.follower.plausible): an implausible one is dropped and counted, as if
+never sent.  Here they become what a law reads
 (agents.law.interface): a target's position with the platform's velocity estimate, a
 peer's estimate, vehicle state and declared fields as `Sample`s at their stamps (a
 per_link field: only the entry addressed to this follower).  Only the newest message of
@@ -13,7 +15,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from agents.follower.membership import TARGET_ACCEL_TAU_S, TARGET_VEL_TAU_S
+from agents.follower.membership import (
+    HOLD_AFTER_S,
+    MAX_GAP_S,
+    TARGET_ACCEL_TAU_S,
+    TARGET_VEL_TAU_S,
+)
+from agents.follower.plausible import GateLimits, Plausibility
 from agents.law.interface import Peer, Sample, Setup
 from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
 from transport.checks import newer
@@ -30,8 +38,12 @@ class Latest:
     """The newest target observations and peer messages of follower `index`, for a law
     that declared `specs`."""
 
-    def __init__(self, index: int, specs: Mapping[str, FieldSpec]) -> None:
+    def __init__(self, index: int, specs: Mapping[str, FieldSpec],
+                 limits: GateLimits | None = None) -> None:
         self.index = index
+        odd = tuple(name for name, s in specs.items() if s.odd)
+        self.gate = Plausibility(index, limits or GateLimits(), odd, HOLD_AFTER_S,
+                                 MAX_GAP_S)
         self.targets: dict[int, Sample] = {}
         # Per target heard twice or more, its velocity filter's state: the low-passed
         # velocity and acceleration of lag_free_velocity.
@@ -66,10 +78,12 @@ class Latest:
         self.targets[target] = _new(Sample, (pos_m, vel, stamp_s))
 
     def receive(self, msg: FollowerState, now_s: float) -> None:
-        """Keep `msg` if it is the peer's newest (transport.checks.newer)."""
+        """Keep `msg` if it is the peer's newest (transport.checks.newer) and plausible."""
         known = self.peers.get(msg.index)
         if known is None or newer(msg.header.stamp_s, known.r.stamp_s, now_s):
-            self.peers[msg.index] = self.peer(msg)
+            peer = self.peer(msg)
+            if self.gate.check(msg.index, peer, now_s) is None:
+                self.peers[msg.index] = peer
 
     def peer(self, msg: FollowerState) -> Peer:
         """What this follower keeps of a peer's message."""
@@ -119,4 +133,5 @@ class Latest:
         self.targets = {j: s for j, s in self.targets.items() if j in setup.observed}
         self.filters = {j: f for j, f in self.filters.items() if j in setup.observed}
         self.peers = {j: p for j, p in self.peers.items() if j in members}
+        self.gate.forget()
 

@@ -34,6 +34,7 @@ def run(opts: AgentOptions) -> int:
     def make(bus: Bus, mav: MavlinkAdapter) -> FollowerNode:
         impaired = ImpairedBus(bus, scenario.network, receiver=opts.index)  # [network] links
         node = FollowerNode(scenario, opts.index, impaired, mav, opts.bus.swarm, opts.join)
+        node.liar.install()  # the launcher's `lie` fault arrives as a signal
         if opts.journal is not None:
             node.runner.journal = JournalWriter(journal_path(Path(opts.journal), opts.index),
                                                 journal_header(opts),

@@ -16,7 +16,9 @@ import time
 from typing import Any
 
 from agents.follower.inputs import Latest
+from agents.follower.lie import Liar, Published
 from agents.follower.membership import setup_for, stand_ins
+from agents.follower.plausible import gate_limits, own_side
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Output, Sample
 from agents.law.loader import make_law
@@ -63,7 +65,8 @@ class FollowerNode:
         self.scenario = scenario
         self.members = frozenset(range(scenario.n))
         self.runner = LawRunner(law or make_law(scenario), setup_for(scenario, index))
-        self.latest = Latest(index, self.runner.declared)
+        self.latest = Latest(index, self.runner.declared,
+                             gate_limits(scenario.pattern.rho_d_m))
         self.index, self.bus, self.vehicle = index, bus, vehicle
         self.altitude_m = scenario.vehicle.altitude_m
         self.keys = SwarmKeys(swarm)
@@ -107,6 +110,8 @@ class FollowerNode:
         self.joining = joining
         # Phase CPU of a tick (agents.tick_cost), set by the loop when it is measured.
         self.cost: TickCost | NoCost = NoCost()
+        # The `lie` fault: off unless the launcher's signal turns it on (agents.follower.lie).
+        self.liar = Liar(self.runner.declared, seed=index)
 
     def _follow(self, peers: set[int]) -> None:
         """Subscribe to exactly the states of `peers` (neighbours and successor).
@@ -173,6 +178,11 @@ class FollowerNode:
         self._heard_again(now_s)
         peers = stand_ins(latest.peers, setup, runner.last_r, now_s)
         stepped = runner.step(now_s, command, own, latest.targets, peers, self.cost)
+        if stepped is not None:  # what the plausibility checks hold neighbours against
+            gate = latest.gate
+            armed = self.start_s is not None and now_s >= self.start_s + gate.limits.arm_after_s
+            gate.own = own_side(runner.last_r, setup, latest.targets, now_s, stepped[1],
+                                runner.declared, armed)
         if command and stepped is not None:
             self.status.counters["stale_inputs"] += latest.stale(setup, peers, now_s)
             for j in setup.neighbours:
@@ -239,6 +249,7 @@ class FollowerNode:
         elif isinstance(msg, RunControl):
             if msg.command == "start":
                 self.start_s = msg.start_stamp_s
+                self.latest.gate.origin_s = msg.start_stamp_s
                 if isinstance(self.bus, ImpairedBus):  # the network faults' time zero
                     self.bus.set_origin(msg.start_stamp_s)
                 self.stop_s = msg.start_stamp_s + msg.duration_s
@@ -289,9 +300,12 @@ class FollowerNode:
             self.status.counters["states_not_published"] += 1
             return
         stamper = self.est_stamper if estimate else self.stamper
-        msg = FollowerState(stamper.header(now_s), self.index, _xy(r), _xy(dr),
-                            vec2(state.pos_enu_m[:2]), vec2(state.vel_enu_m_s[:2]), _xy(u),
-                            state.stamp_s, fields)
+        pos, vel = vec2(state.pos_enu_m[:2]), vec2(state.vel_enu_m_s[:2])
+        if self.liar.mode is not None:
+            told = self.liar.apply(now_s, Published(r, dr, pos, vel, fields))
+            r, dr, pos, vel, fields = told.r, told.dr, told.pos, told.vel, told.fields
+        msg = FollowerState(stamper.header(now_s), self.index, _xy(r), _xy(dr), pos, vel,
+                            _xy(u), state.stamp_s, fields)
         try:
             payload = encode(msg)
         except CodecError as exc:  # a law field not finite (the platform's fields are)
@@ -315,7 +329,8 @@ class FollowerNode:
         links = self.bus.counters() if isinstance(self.bus, ImpairedBus) else {}
         sent = self.stamper.next_seq + self.est_stamper.next_seq
         return {**self.decoder.counters(), **self.liveness.counters(), **ages, **links,
-                "states_sent": sent, "law_failures": self.runner.failures,
+                **self.latest.gate.counters, "states_sent": sent,
+                "law_failures": self.runner.failures, "states_lied": self.liar.lies,
                 **self.cost.counters()}
 
     def close(self) -> None:

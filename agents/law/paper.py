@@ -44,7 +44,7 @@ MAX_POS_M, MAX_SPEED_M_S, MAX_ACCEL_M_S2 = 1e5, 1e3, 1e4
 AGE_TAU_S = 0.5
 
 ROBUST = (  # per link, the running sum of this follower's flow on it and its rate
-    FieldSpec("link_sums_m", "per_link", MAX_POS_M, rate="link_rates_m_s"),
+    FieldSpec("link_sums_m", "per_link", MAX_POS_M, rate="link_rates_m_s", odd=True),
     FieldSpec("link_rates_m_s", "per_link", MAX_SPEED_M_S),
 )
 SECOND_ORDER = (  # the velocity stage: rv_i, and its link sums and their rates

@@ -2,15 +2,19 @@
 
     [[faults]]
     at_s = 30.0               # experiment time (after the start word)
-    action = "kill"           # kill | pause | restart | leave
+    action = "kill"           # kill | pause | restart | leave | lie
     target = "follower-1"     # follower-K, target-K (1-based, as in the file) | recorder | sim
-    duration_s = 2.0          # pause: how long (required); restart, leave: back after (optional)
+    duration_s = 2.0          # pause, lie: how long (required); restart, leave: back after
+    # mode = "offset"         # lie only: offset | bound | walk | stale (agents.follower.lie)
 
 kill: SIGKILL, then the run's restart policy decides.  pause: SIGSTOP, SIGCONT after
 duration_s.  restart: SIGTERM (a clean stop) and a new process at once, or after
 duration_s.  leave: SIGTERM, and with duration_s it joins again after that long.
+lie: the follower publishes false but valid data from its own process for duration_s (an
+insider within its own rights; agents.follower.lie), started and ended by a signal.
 On the command line (`enclose run --fault`, and `fault` in a sweep) a fault is
-"AT_S:ACTION:TARGET[:DURATION_S]", e.g. "30:kill:follower-1"; "none" is no fault.
+"AT_S:ACTION:TARGET[:DURATION_S[:MODE]]", e.g. "30:kill:follower-1" or
+"20:lie:follower-2:30:offset"; "none" is no fault.
 The network faults (partition, isolate, degrade) share the table: agents.scenario.net_faults.
 """
 
@@ -24,8 +28,11 @@ from typing import Any
 from transport.errors import ScenarioError
 from transport.network_schema import NET_FAULT_ACTIONS
 
-FAULT_ACTIONS = ("kill", "pause", "restart", "leave")
-FAULT_KEYS = ("at_s", "action", "target", "duration_s")
+FAULT_ACTIONS = ("kill", "pause", "restart", "leave", "lie")
+FAULT_KEYS = ("at_s", "action", "target", "duration_s", "mode")
+# What a lying follower publishes (agents.follower.lie): its estimate offset, its link sums
+# at the declared bound, a random walk on both, or its whole state frozen at the onset.
+LIE_MODES = ("offset", "bound", "walk", "stale")
 _TARGET_RE = re.compile(r"^(follower|target)-([0-9]+)$|^recorder$|^sim$")
 
 
@@ -35,6 +42,7 @@ class FaultSpec:
     action: str
     process: str  # the launcher's (0-based) process name: follower-0 is the file's follower-1
     duration_s: float | None = None
+    mode: str | None = None  # lie: one of LIE_MODES
 
 
 def is_net_action(raw: Any) -> bool:
@@ -62,7 +70,25 @@ def parse_fault_table(raw: Any, where: str, n: int, m: int) -> FaultSpec:
         raise ScenarioError(f"{where}.duration_s", "a pause needs its duration")
     if action == "kill" and duration is not None:
         raise ScenarioError(f"{where}.duration_s", "a kill has no duration (see --restart)")
-    return FaultSpec(at_s, action, process, duration)
+    mode = _lie_mode(raw, where, action, process, duration)
+    return FaultSpec(at_s, action, process, duration, mode)
+
+
+def _lie_mode(raw: dict[str, Any], where: str, action: str, process: str,
+              duration: float | None) -> str | None:
+    """A lie's mode, checked with its target and duration; None for the other actions."""
+    mode = raw.get("mode")
+    if action != "lie":
+        if mode is not None:
+            raise ScenarioError(f"{where}.mode", f"is no setting of a {action}")
+        return None
+    if mode not in LIE_MODES:
+        raise ScenarioError(f"{where}.mode", f"must be one of {LIE_MODES}, got {mode!r}")
+    if not process.startswith("follower-"):
+        raise ScenarioError(f"{where}.target", f"only a follower can lie, got {raw['target']!r}")
+    if not duration:
+        raise ScenarioError(f"{where}.duration_s", "a lie needs its duration (> 0)")
+    return str(mode)
 
 
 def parse_faults(raw: Any, n: int, m: int) -> tuple[FaultSpec, ...]:
@@ -76,16 +102,19 @@ def parse_faults(raw: Any, n: int, m: int) -> tuple[FaultSpec, ...]:
 
 
 def parse_fault_flag(text: str, n: int, m: int, where: str = "--fault") -> FaultSpec | None:
-    """"AT_S:ACTION:TARGET[:DURATION_S]" (None for "none")."""
+    """"AT_S:ACTION:TARGET[:DURATION_S[:MODE]]" (None for "none")."""
     if text == "none":
         return None
     parts = text.split(":")
-    if len(parts) not in (3, 4):
-        raise ScenarioError(where, f"expected AT_S:ACTION:TARGET[:DURATION_S], got {text!r}")
+    if len(parts) not in (3, 4, 5):
+        raise ScenarioError(where, f"expected AT_S:ACTION:TARGET[:DURATION_S[:MODE]], "
+                                   f"got {text!r}")
     table: dict[str, Any] = {"at_s": _number(parts[0], where), "action": parts[1],
                              "target": parts[2]}
-    if len(parts) == 4:
+    if len(parts) >= 4:
         table["duration_s"] = _number(parts[3], where)
+    if len(parts) == 5:
+        table["mode"] = parts[4]
     return parse_fault_table(table, where, n, m)
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from agents.follower.lie import begin_signal, end_signal
 from agents.scenario.faults import FaultSpec, parse_fault_flag, parse_faults
 from agents.scenario.file import parse_scenario
 from deploy.faults import FaultRunner
@@ -19,6 +20,34 @@ BASE = (
     "[[followers]]\npos_m = [10.0, 0.0]\n[[followers]]\npos_m = [-10.0, 0.0]\n"
     '[[targets]]\npos_m = [0.0, 0.0]\nprofile = "constant"\nobserved_by = [1]\n'
 )
+
+
+def test_lie_table() -> None:
+    s = parse_scenario(BASE + '[[faults]]\nat_s = 5\naction = "lie"\ntarget = "follower-2"\n'
+                       'duration_s = 30\nmode = "bound"\n')
+    assert s.faults == (FaultSpec(5.0, "lie", "follower-1", 30.0, "bound"),)
+
+
+@pytest.mark.realtime
+def test_runner_lies_by_signal(tmp_path: Path) -> None:
+    """A lie is the process's own: the launcher only signals its start and its end."""
+    sup = Supervisor(tmp_path)
+    try:
+        a = sup.start("follower-0", "tests.child_proc", ["sleep", "30"])
+        sent: list[int] = []
+        run = FaultRunner(sup, (FaultSpec(0.0, "lie", "follower-0", 0.1, "walk"),),
+                          time.monotonic(), [])
+        run._signal = lambda _child, signum: sent.append(signum)  # type: ignore[method-assign]
+        deadline = time.monotonic() + 5.0
+        while len(sent) < 2:
+            assert time.monotonic() < deadline, sent
+            run.check()
+            time.sleep(0.01)
+        assert sent == [begin_signal("walk"), end_signal()] and a.poll() is None
+        assert [e["event"] for e in run.events] == ["fault", "lie ended"]
+        assert run.events[0]["mode"] == "walk"
+    finally:
+        sup.stop_all(grace_s=1.0)
 
 
 def test_faults_table_is_parsed_sorted_and_one_based() -> None:
@@ -40,6 +69,18 @@ def test_faults_table_is_parsed_sorted_and_one_based() -> None:
         ({"at_s": 1, "action": "kill", "target": "sim-0"}, r"faults\[0\]\.target"),
         ({"at_s": 1, "action": "pause", "target": "target-1"}, r"faults\[0\]\.duration_s"),
         ({"at_s": 1, "action": "kill", "target": "recorder", "when": 2}, r"faults\[0\]\.when"),
+        ({"at_s": 1, "action": "lie", "target": "follower-1", "duration_s": 5},
+         r"faults\[0\]\.mode"),
+        ({"at_s": 1, "action": "lie", "target": "follower-1", "duration_s": 5, "mode": "loud"},
+         r"faults\[0\]\.mode"),
+        ({"at_s": 1, "action": "lie", "target": "target-1", "duration_s": 5, "mode": "offset"},
+         r"faults\[0\]\.target"),
+        ({"at_s": 1, "action": "lie", "target": "follower-1", "mode": "walk"},
+         r"faults\[0\]\.duration_s"),
+        ({"at_s": 1, "action": "lie", "target": "follower-1", "mode": "walk", "duration_s": 0},
+         r"faults\[0\]\.duration_s"),
+        ({"at_s": 1, "action": "kill", "target": "follower-1", "mode": "offset"},
+         r"faults\[0\]\.mode"),
     ],
 )
 def test_bad_faults_name_the_field(table: dict[str, object], field: str) -> None:
@@ -52,6 +93,10 @@ def test_fault_flag() -> None:
     assert parse_fault_flag("5:leave:follower-4:3", 4, 2) == FaultSpec(5.0, "leave", "follower-3",
                                                                        3.0)
     assert parse_fault_flag("none", 4, 2) is None
+    assert parse_fault_flag("20:lie:follower-2:30:stale", 4, 2) == FaultSpec(
+        20.0, "lie", "follower-1", 30.0, "stale")
+    with pytest.raises(ScenarioError, match=r"--fault\.mode"):
+        parse_fault_flag("20:lie:follower-2:30", 4, 2)
     with pytest.raises(ScenarioError, match="--fault"):
         parse_fault_flag("30:kill", 4, 2)
 
