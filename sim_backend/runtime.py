@@ -41,7 +41,8 @@ log = logging.getLogger(__name__)
 TickHook = Callable[[float, model.FleetState], None]
 MAX_CATCHUP_S = 30.0  # a longer stall (a debugger, a laptop lid) is dropped, counted, logged
 MAX_VEHICLES = 255
-QUEUED_ROUNDS = 16  # rounds over the ready sockets when taking what is queued
+QUEUED_ROUNDS = 16
+RX_COALESCE_S = 0.002  # rounds over the ready sockets when taking what is queued
 
 
 class Simulator:
@@ -207,7 +208,8 @@ class Simulator:
         in at most QUEUED_ROUNDS rounds).  One datagram per ready socket per round (the
         selector is level-triggered): no read ends in EAGAIN, a wasted system call, and a
         chatty peer gets no more turns than the others.  The clock is checked after each
-        datagram; a burst waits in the socket buffers rather than delay the next tick."""
+        datagram; a burst waits in the socket buffers rather than delay the next tick.
+        Between rounds, while the tick is not near, the loop naps RX_COALESCE_S."""
         rounds = 0
         while True:
             remaining = deadline - self._clock()
@@ -219,6 +221,8 @@ class Simulator:
             rounds += 1
             if not events or (remaining <= 0.0 and rounds >= QUEUED_ROUNDS):
                 return
+            if deadline - self._clock() > 2.0 * RX_COALESCE_S:
+                time.sleep(RX_COALESCE_S)
 
     def _take(self, i: int) -> bool:
         """Handle one datagram of vehicle i's socket; False when none was queued or its
