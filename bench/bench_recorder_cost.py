@@ -3,10 +3,11 @@
 A real recorder (`python -m deploy.recorder --live-port 0`) on a Zenoh loopback bus (plain
 TCP, no mTLS: the bench's publisher holds no certificate) records a synthetic run
 (tests/recorder_synth.py: truth + every follower's state at --rate-hz, paced on the wall
-clock as the swarm sends them).  Its CPU over all its threads (/proc/<pid>/stat) over a
-window after it settled, per message it recorded in that window (the rate of the feed:
-every message it is sent is recorded, which metrics.json's count checks at the end), and
-per thread group (the main thread, Zenoh's, the live view's server).
+clock as the swarm sends them).  Its CPU over all its threads (/proc/<pid>/stat), from a
+progress.json write after it settled to the first one after it has recorded all it was
+sent, per message it recorded in between (progress.json's count: a recorder starved on
+a busy machine works its backlog off after the feed, and that is counted too), and per
+thread group (the main thread, Zenoh's, the live view's server).
 
     python bench/bench_recorder_cost.py [--case ring64] [--rate-hz 50] [--seconds 10] [--runs 5]
 """
@@ -39,6 +40,7 @@ from transport.zenoh_config import ZenohConfig, loopback_endpoint
 
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 SETTLE_S = 4.0
+QUIET_MESSAGES = 30  # recorded in a second once the feed has ended: statuses only
 
 
 def threads_cpu_s(pid: int) -> dict[str, float]:
@@ -73,7 +75,9 @@ def one_run(case: str, rate_hz: float, seconds: float, out: Path) -> dict:
             control = Stamper("launcher-0")
             bus.publish(keys.control(), encode(run.control(control, "start")))
             t_start = run.start_stamp_s
-            sampler = threading.Thread(target=_sample, args=(proc.pid, t_start, seconds, window))
+            sent_by = t_start + SETTLE_S + seconds + 1.0  # the feed's end: duration_s below
+            sampler = threading.Thread(target=_sample, args=(
+                proc.pid, out / "progress.json", t_start, seconds, sent_by, window))
             sampler.start()
             sent = _publish(bus, run)
             sampler.join()
@@ -85,9 +89,8 @@ def one_run(case: str, rate_hz: float, seconds: float, out: Path) -> dict:
             proc.wait()
     rec = json.loads((out / "metrics.json").read_text())["recorder"]
     msgs_per_s = (scenario.n + 1) * rate_hz
-    cpu = window.pop("_total")
-    wall = window.pop("_wall")
-    return {"us_per_msg": 1e6 * cpu / (wall * msgs_per_s), "cpu_pct": 100 * cpu / wall,
+    cpu, wall, msgs = window.pop("_total"), window.pop("_wall"), window.pop("_messages")
+    return {"us_per_msg": 1e6 * cpu / msgs, "cpu_pct": 100 * cpu / wall,
             "recorded": rec["messages_total"], "sent": sent, "msgs_per_s": msgs_per_s,
             "threads": {k: 100 * v / wall for k, v in sorted(window.items(), key=lambda x: -x[1])},
             "frames": rec["live"]["frames_per_topic"]}
@@ -106,15 +109,42 @@ def _publish(bus: ZenohBus, run: SynthRun) -> int:
     return sent
 
 
-def _sample(pid: int, t_start: float, seconds: float, into: dict[str, float]) -> None:
+def _sample(pid: int, progress: Path, t_start: float, seconds: float, sent_by: float,
+            into: dict[str, float]) -> None:
+    """CPU and messages recorded from the first progress.json write after the recorder
+    settled to the first one after it recorded everything sent (a starved recorder works a
+    backlog off after the feed: its CPU for it counts, its messages too)."""
     time.sleep(max(0.0, t_start + SETTLE_S - time.time()))
-    a, t0 = threads_cpu_s(pid), time.monotonic()
-    time.sleep(seconds)
-    b, t1 = threads_cpu_s(pid), time.monotonic()
+    m0, a, t0 = _at_progress_write(pid, progress)
+    time.sleep(max(0.0, t_start + SETTLE_S + seconds - time.time()))
+    prev = -1
+    while True:  # until a second after the feed's end in which (almost) nothing came
+        m1, b, t1 = _at_progress_write(pid, progress)
+        if time.time() > sent_by and 0 <= m1 - prev <= QUIET_MESSAGES:
+            break
+        prev = m1
     for k, v in b.items():
         into[k] = v - a.get(k, 0.0)
     into["_total"] = sum(into.values())
     into["_wall"] = t1 - t0
+    into["_messages"] = m1 - m0
+
+
+def _messages(progress: Path) -> int:
+    try:
+        return int(json.loads(progress.read_text())["messages_total"])
+    except (OSError, ValueError, KeyError):
+        return -1
+
+
+def _at_progress_write(pid: int, progress: Path) -> tuple[int, dict[str, float], float]:
+    """(messages recorded, CPU per thread group, time) just after progress.json changed."""
+    first = _messages(progress)
+    while True:
+        now = _messages(progress)
+        if now != first and now >= 0:
+            return now, threads_cpu_s(pid), time.monotonic()
+        time.sleep(0.002)
 
 
 def main() -> int:

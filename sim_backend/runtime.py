@@ -221,7 +221,7 @@ class Simulator:
             rounds += 1
             if not events or (remaining <= 0.0 and rounds >= QUEUED_ROUNDS):
                 return
-            if deadline - self._clock() > 2.0 * RX_COALESCE_S:
+            if RX_COALESCE_S > 0.0 and deadline - self._clock() > 2.0 * RX_COALESCE_S:
                 time.sleep(RX_COALESCE_S)
 
     def _take(self, i: int) -> bool:
