@@ -41,8 +41,14 @@ log = logging.getLogger(__name__)
 TickHook = Callable[[float, model.FleetState], None]
 MAX_CATCHUP_S = 30.0  # a longer stall (a debugger, a laptop lid) is dropped, counted, logged
 MAX_VEHICLES = 255
-QUEUED_ROUNDS = 16
-RX_COALESCE_S = 0.002  # rounds over the ready sockets when taking what is queued
+QUEUED_ROUNDS = 16  # rounds over the ready sockets when taking what is queued
+# Each agent ticks at its own phase, so datagrams arrive spread over the tick: ring64 at
+# 50 Hz woke the loop ~3 200 times a second, and a wake-up (epoll, the selector's Python,
+# the scheduler) cost about as much as handling the datagram it brought.  After a round
+# the loop naps this long, so one wake-up takes what came meanwhile.  A setpoint still
+# counts at the tick it arrived before (the nap stops 2 naps short of the tick); a reply
+# (COMMAND_ACK, TIMESYNC) leaves at most this much later.  0: no nap.
+RX_COALESCE_S = 0.002
 
 
 class Simulator:
