@@ -45,8 +45,10 @@ QUEUED_ROUNDS = 16  # rounds over the ready sockets when taking what is queued
 # Each agent ticks at its own phase, so datagrams arrive spread over the tick: ring64 at
 # 50 Hz woke the loop ~3 200 times a second, and a wake-up (epoll, the selector's Python,
 # the scheduler) cost about as much as handling the datagram it brought.  After a round
-# the loop naps this long, so one wake-up takes what came meanwhile.  A setpoint still
-# counts at the tick it arrived before (the nap stops 2 naps short of the tick); a reply
+# the loop naps this long, so one wake-up takes what came meanwhile; only while datagrams
+# come faster than one a nap (the last tick's count): sparser ones (the paper's 6
+# vehicles) would each cost the nap's wake-up and their own.  A setpoint still counts at
+# the tick it arrived before (the nap stops 2 naps short of the tick); a reply
 # (COMMAND_ACK, TIMESYNC) leaves at most this much later.  0: no nap.
 RX_COALESCE_S = 0.002
 
@@ -79,6 +81,8 @@ class Simulator:
         self._origin_s: float | None = None  # clock reading at boot time 0 while run() paces
         self._selector = selectors.DefaultSelector()
         self._resting: list[int] = []  # vehicles off the selector: their tick's budget is spent
+        self._rx_dense = False  # the last tick brought over a datagram a nap (RX_COALESCE_S)
+        self._rx_at_tick = 0  # counters["rx_datagrams"] when this tick began
         self.endpoints: list[VehicleEndpoint] = []
         self.clocks: list[ClockService] = []
         self._rows: list[Row] = []
@@ -171,7 +175,11 @@ class Simulator:
 
     def _new_budgets(self) -> None:
         """A new tick: every vehicle's receive budget afresh (first the datagram the last
-        one had no room for), every socket read again."""
+        one had no room for), every socket read again; whether datagrams came densely."""
+        taken = self.counters["rx_datagrams"]
+        self._rx_dense = RX_COALESCE_S > 0.0 and \
+            (taken - self._rx_at_tick) * RX_COALESCE_S >= self.dt_s
+        self._rx_at_tick = taken
         self._take_carried()
         for i in self._resting:
             self._selector.register(self.endpoints[i].sock, selectors.EVENT_READ, i)
@@ -227,7 +235,7 @@ class Simulator:
             rounds += 1
             if not events or (remaining <= 0.0 and rounds >= QUEUED_ROUNDS):
                 return
-            if RX_COALESCE_S > 0.0 and deadline - self._clock() > 2.0 * RX_COALESCE_S:
+            if self._rx_dense and deadline - self._clock() > 2.0 * RX_COALESCE_S:
                 time.sleep(RX_COALESCE_S)
 
     def _take(self, i: int) -> bool:

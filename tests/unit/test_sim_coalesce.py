@@ -1,5 +1,6 @@
-"""The simulator's receive loop naps between rounds while its tick is far (RX_COALESCE_S),
-never close to it, and still handles every datagram before the tick."""
+"""The simulator's receive loop naps between rounds (RX_COALESCE_S) while datagrams come
+densely (the last tick brought more than one a nap) and its tick is far, never close to it
+nor when they come sparsely, and still handles every datagram before the tick."""
 
 from __future__ import annotations
 
@@ -63,20 +64,41 @@ def handled_when_queued(sim: Simulator, count: int) -> None:
         sim.receive_until(-1.0)  # queued only: past deadlines never nap
 
 
-def test_a_far_tick_naps_between_rounds_and_takes_every_datagram(rig) -> None:
-    sim, clock, naps, client = rig
-    send_heartbeats(sim, client, 3)
+def a_tick_with(sim: Simulator, client: socket.socket, datagrams: int) -> None:
+    send_heartbeats(sim, client, datagrams)
     time.sleep(0.05)  # loopback delivery (the real sleep: the loop's is faked)
+    handled_when_queued(sim, sim.messages["HEARTBEAT:handled"] + datagrams)
+    sim.step_once()
+
+
+def test_dense_datagrams_and_a_far_tick_nap_between_rounds_and_all_are_taken(rig) -> None:
+    sim, clock, naps, client = rig
+    a_tick_with(sim, client, round(sim.dt_s / RX_COALESCE_S))  # one a nap: dense
+    before = sim.messages["HEARTBEAT:handled"]
+    send_heartbeats(sim, client, 3)
+    time.sleep(0.05)
     sim.receive_until(clock.t + 10 * RX_COALESCE_S)
-    assert sim.messages["HEARTBEAT:handled"] == 3
+    assert sim.messages["HEARTBEAT:handled"] == before + 3
     assert naps == [RX_COALESCE_S] * 3  # one round per datagram on one socket, a nap after each
 
 
-def test_no_nap_when_the_tick_is_near_or_past(rig) -> None:
+def test_no_nap_when_the_tick_is_near(rig) -> None:
     sim, clock, naps, client = rig
+    a_tick_with(sim, client, round(sim.dt_s / RX_COALESCE_S))
+    before = sim.messages["HEARTBEAT:handled"]
     send_heartbeats(sim, client, 2)
     time.sleep(0.05)
     sim.receive_until(clock.t + 1.5 * RX_COALESCE_S)
-    handled_when_queued(sim, 2)
-    assert sim.messages["HEARTBEAT:handled"] == 2
+    handled_when_queued(sim, before + 2)
+    assert naps == []
+
+
+def test_no_nap_when_datagrams_come_sparsely(rig) -> None:
+    sim, clock, naps, client = rig
+    a_tick_with(sim, client, 3)
+    before = sim.messages["HEARTBEAT:handled"]
+    send_heartbeats(sim, client, 3)
+    time.sleep(0.05)
+    sim.receive_until(clock.t + 10 * RX_COALESCE_S)
+    assert sim.messages["HEARTBEAT:handled"] == before + 3
     assert naps == []
