@@ -42,15 +42,6 @@ TickHook = Callable[[float, model.FleetState], None]
 MAX_CATCHUP_S = 30.0  # a longer stall (a debugger, a laptop lid) is dropped, counted, logged
 MAX_VEHICLES = 255
 QUEUED_ROUNDS = 16  # rounds over the ready sockets when taking what is queued
-# Each agent ticks at its own phase, so datagrams arrive spread over the tick: ring64 at
-# 50 Hz woke the loop ~3 200 times a second, and a wake-up (epoll, the selector's Python,
-# the scheduler) cost about as much as handling the datagram it brought.  After a round
-# the loop naps this long, so one wake-up takes what came meanwhile; only while datagrams
-# come faster than one a nap (the last tick's count): sparser ones (the paper's 6
-# vehicles) would each cost the nap's wake-up and their own.  A setpoint still counts at
-# the tick it arrived before (the nap stops 2 naps short of the tick); a reply
-# (COMMAND_ACK, TIMESYNC) leaves at most this much later.  0: no nap.
-RX_COALESCE_S = 0.002
 
 
 class Simulator:
@@ -81,8 +72,6 @@ class Simulator:
         self._origin_s: float | None = None  # clock reading at boot time 0 while run() paces
         self._selector = selectors.DefaultSelector()
         self._resting: list[int] = []  # vehicles off the selector: their tick's budget is spent
-        self._rx_dense = False  # the last tick brought over a datagram a nap (RX_COALESCE_S)
-        self._rx_at_tick = 0  # counters["rx_datagrams"] when this tick began
         self.endpoints: list[VehicleEndpoint] = []
         self.clocks: list[ClockService] = []
         self._rows: list[Row] = []
@@ -175,11 +164,7 @@ class Simulator:
 
     def _new_budgets(self) -> None:
         """A new tick: every vehicle's receive budget afresh (first the datagram the last
-        one had no room for), every socket read again; whether datagrams came densely."""
-        taken = self.counters["rx_datagrams"]
-        self._rx_dense = RX_COALESCE_S > 0.0 and \
-            (taken - self._rx_at_tick) * RX_COALESCE_S >= self.dt_s
-        self._rx_at_tick = taken
+        one had no room for), every socket read again."""
         self._take_carried()
         for i in self._resting:
             self._selector.register(self.endpoints[i].sock, selectors.EVENT_READ, i)
@@ -222,8 +207,7 @@ class Simulator:
         in at most QUEUED_ROUNDS rounds).  One datagram per ready socket per round (the
         selector is level-triggered): no read ends in EAGAIN, a wasted system call, and a
         chatty peer gets no more turns than the others.  The clock is checked after each
-        datagram; a burst waits in the socket buffers rather than delay the next tick.
-        Between rounds, while the tick is not near, the loop naps RX_COALESCE_S."""
+        datagram; a burst waits in the socket buffers rather than delay the next tick."""
         rounds = 0
         while True:
             remaining = deadline - self._clock()
@@ -235,8 +219,6 @@ class Simulator:
             rounds += 1
             if not events or (remaining <= 0.0 and rounds >= QUEUED_ROUNDS):
                 return
-            if self._rx_dense and deadline - self._clock() > 2.0 * RX_COALESCE_S:
-                time.sleep(RX_COALESCE_S)
 
     def _take(self, i: int) -> bool:
         """Handle one datagram of vehicle i's socket; False when none was queued or its
