@@ -14,8 +14,6 @@ import socket
 import statistics
 import time
 
-import numpy as np
-
 from agents.scenario.model import HomeConfig, VehicleConfig
 from bench.bench_process_cost import HOST, Agents
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
@@ -97,4 +95,3 @@ def main_phases(args: argparse.Namespace) -> None:
         v = [r[name] for r in rows]
         print(f"  {name:9s} median {statistics.median(v):6.1f} us (min {min(v):.1f}, "
               f"max {max(v):.1f})")
-    _ = np
