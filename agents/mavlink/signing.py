@@ -116,12 +116,17 @@ def load_key(path: str | Path) -> bytes:
 _KEYED: dict[bytes, Any] = {}
 
 
-def signature(key: bytes, frame_to_timestamp: bytes) -> bytes:
-    """MAVLink 2's signature: sha256(key + frame up to its timestamp), first 6 bytes."""
+def keyed_sha256(key: bytes) -> Any:
+    """A sha256 that has taken `key`: copy it, then update it with a frame."""
     base = _KEYED.get(key)
     if base is None:
         base = _KEYED[key] = hashlib.sha256(key)
-    digest = base.copy()
+    return base
+
+
+def signature(key: bytes, frame_to_timestamp: bytes) -> bytes:
+    """MAVLink 2's signature: sha256(key + frame up to its timestamp), first 6 bytes."""
+    digest = keyed_sha256(key).copy()
     digest.update(frame_to_timestamp)
     return digest.digest()[:6]
 

@@ -31,7 +31,13 @@ from dataclasses import dataclass
 from types import ModuleType
 from typing import Any, TypeAlias
 
-from agents.mavlink.signing import SignatureVerifier, signature, signing_timestamp
+from agents.mavlink.signing import (
+    EPOCH_2015_S,
+    TICKS_PER_S,
+    SignatureVerifier,
+    keyed_sha256,
+    signing_timestamp,
+)
 
 # A message, or a codec, of whichever dialect module made it.  pymavlink ships no types,
 # so mypy would see any of its classes as Any anyway.
@@ -43,6 +49,7 @@ _MARKER = re.compile(b"[\xfd\xfe]")
 _HEADER_V2 = struct.Struct("<BBBBBBBHB")
 _HEADER_V1 = struct.Struct("<BBBBBB")
 _STAMP = struct.Struct("<BQ")
+_BYTE = tuple(bytes((i,)) for i in range(256))
 # Types decoded without pymavlink's parser: what flows at the control rate, and the
 # status and command traffic around it.  Each has scalar fields only (no arrays, no text).
 FAST_IDS = (0, 1, 2, 24, 30, 32, 33, 74, 75, 76, 77, 84, 111, 245)
@@ -252,22 +259,31 @@ def encode_fields(mav: Codec, msg_cls: type[MAVLinkMessage], *fields: float) -> 
 def encode_payload(mav: Codec, msg_id: int, crc_extra: int, payload: bytes) -> bytes:
     """Frame a packed payload as the next MAVLink 2 packet of `mav`'s stream.
 
-    Also for messages this pymavlink's dialect lacks (PROTOCOL_VERSION, id 300).
+    Also for messages this pymavlink's dialect lacks (PROTOCOL_VERSION, id 300).  Written
+    out in one piece (the clock, CRC and signature inline): the simulator frames three of
+    these per vehicle per tick, 9 600 a second in ring64 at 50 Hz.
     """
     payload = payload.rstrip(b"\x00") or payload[:1]
     signing = mav.signing
     signed = signing.sign_outgoing
-    body = _HEADER_V2.pack(STX_V2, len(payload), 1 if signed else 0, 0, mav.seq, mav.srcSystem,
+    seq = mav.seq
+    mav.seq = (seq + 1) & 0xFF
+    body = _HEADER_V2.pack(STX_V2, len(payload), 1 if signed else 0, 0, seq, mav.srcSystem,
                            mav.srcComponent, msg_id & 0xFFFF, msg_id >> 16) + payload
-    mav.seq = (mav.seq + 1) & 0xFF
-    crc = _dialect(mav).crc(body[1:] + bytes((crc_extra,)), 0xFFFF)
-    frame = body + crc.to_bytes(2, "little")
+    crc_of = (_DIALECTS.get(type(mav)) or _dialect(mav)).crc
+    # CRC-16/MCRF4XX runs on: the CRC extra byte continues the body's register.
+    frame = body + crc_of(_BYTE[crc_extra], crc_of(body[1:], 0xFFFF)).to_bytes(2, "little")
     if not signed:
         return frame
-    _advance_signing_clock(mav)
-    stamped = frame + _STAMP.pack(signing.link_id, signing.timestamp)[:7]
-    signing.timestamp += 1
-    return stamped + signature(signing.secret_key, stamped)
+    # _advance_signing_clock, inline: the stream's timestamp kept on the wall clock.
+    stamp = int((time.time() - EPOCH_2015_S) * TICKS_PER_S)
+    if stamp < signing.timestamp:
+        stamp = signing.timestamp
+    signing.timestamp = stamp + 1
+    stamped = frame + _STAMP.pack(signing.link_id, stamp)[:7]
+    digest = keyed_sha256(signing.secret_key).copy()
+    digest.update(stamped)
+    return stamped + digest.digest()[:6]
 
 
 def _advance_signing_clock(mav: Codec) -> None:

@@ -105,8 +105,29 @@ def message_json(msg: Message) -> bytes:
     """The JSON a channel carries: the dataclass as an object, vectors as arrays.
 
     Equal to `json.dumps(dataclasses.asdict(msg))`, at a fraction of its cost (asdict
-    deep-copies every tuple): messages are flat but for the header.
+    deep-copies every tuple): messages are flat but for the header.  msgspec encodes a
+    dataclass itself, in field order, at half the cost again (~1.3 of 2.6 µs): a type takes
+    that path once its first message came out the same both ways (`_DIRECT`).
     """
+    direct = _DIRECT.get(type(msg))
+    if direct:
+        try:
+            return _JSON.encode(msg)
+        except (TypeError, ValueError):
+            return _dict_json(msg)
+    data = _dict_json(msg)
+    if direct is None:
+        try:
+            _DIRECT[type(msg)] = _JSON.encode(msg) == data
+        except (TypeError, ValueError):
+            _DIRECT[type(msg)] = False
+    return data
+
+
+_DIRECT: dict[type, bool] = {}  # per message type: msgspec's own dataclass encoding agrees
+
+
+def _dict_json(msg: Message) -> bytes:
     names = _FIELD_NAMES.get(type(msg))
     if names is None:
         names = _FIELD_NAMES[type(msg)] = tuple(f.name for f in dataclasses.fields(msg))
