@@ -54,6 +54,9 @@ from transport.law_fields import FieldSpec, LawFields
 
 log = logging.getLogger("enclose.follower")
 REASONS = ("rate", "jump", "link", "agree", "geometry")
+# The largest honest value each check passed, in mm (`Plausibility._over`): named once,
+# not formatted per message.
+_MAX_KEYS = {check: f"plausible_max_mm_{check}" for check in REASONS}
 
 
 @dataclass(frozen=True)
@@ -238,7 +241,7 @@ class Plausibility:
         if value > limit:
             self._excess = value - limit
             return True
-        key = f"plausible_max_mm_{check}"
+        key = _MAX_KEYS[check]
         mm = round(value * 1000.0)
         if mm > self.counters.get(key, 0):
             self.counters[key] = mm
