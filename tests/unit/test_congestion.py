@@ -3,15 +3,13 @@ with DROP; BLOCK is left to words sent once (run control, state changes)."""
 
 from __future__ import annotations
 
-from typing import Any, cast
-
-import numpy as np
+from typing import cast
 
 from agents.follower.node import FollowerNode
-from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.process import StatusReporter
 from agents.scenario.file import load_scenario
 from deploy.swarm_sim import SensorPublisher
+from tests.still_vehicle import still_vehicle
 from transport.bus import Congestion, Publisher
 from transport.keys import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub, MemoryPublisher
@@ -32,15 +30,6 @@ class RecordingBus(MemoryBus):
         return super().declare_publisher(key, congestion)
 
 
-class StillVehicle:
-    def poll(self) -> VehicleState:
-        return cast(Any, type("S", (), {
-            "pos_enu_m": np.array([1.0, 2.0, 10.0]), "vel_enu_m_s": np.zeros(3),
-            "stamp_s": 0.0, "link_ok": True}))()
-
-    def send_velocity_enu(self, v: tuple[float, float, float]) -> bool:
-        return True
-
 
 def test_the_default_is_drop_and_publish_is_block() -> None:
     with RecordingBus(MemoryHub()) as bus:
@@ -53,7 +42,7 @@ def test_the_default_is_drop_and_publish_is_block() -> None:
 def test_a_follower_publishes_its_states_and_estimates_with_drop() -> None:
     with RecordingBus(MemoryHub()) as bus:
         node = FollowerNode(load_scenario("paper"), 0, bus,
-                            cast(MavlinkAdapter, StillVehicle()), KEYS.swarm)
+                            still_vehicle(), KEYS.swarm)
         node.close()
     assert bus.declared[KEYS.follower_state(0)] == {Congestion.DROP}
     assert bus.declared[KEYS.follower_estimate(0)] == {Congestion.DROP}

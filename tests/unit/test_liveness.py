@@ -5,16 +5,14 @@ from __future__ import annotations
 
 import itertools
 import time
-from typing import Any, cast
 
-import numpy as np
 import pytest
 
 from agents.follower.node import FollowerNode
 from agents.liveness import REFRESH_MAX_S, REFRESH_S, MembershipWatch, StallGuard, TokenSet
-from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.member_hold import HOLD_S, SETTLE_S
 from agents.scenario.file import load_scenario
+from tests.still_vehicle import still_vehicle
 from transport.codec import encode
 from transport.keys import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
@@ -41,15 +39,6 @@ def test_tokens_make_the_members_and_a_missing_one_is_asked_for_at_doubling_inte
     assert not ts.due_refresh(200.0) and ts.due_refresh(200.0 + REFRESH_S)
 
 
-class FakeVehicle:
-    def poll(self) -> VehicleState:
-        return cast(Any, type("S", (), {
-            "pos_enu_m": np.array([1.0, 2.0, 10.0]), "vel_enu_m_s": np.zeros(3),
-            "stamp_s": 0.0, "link_ok": True}))()
-
-    def send_velocity_enu(self, v: tuple[float, float, float]) -> bool:
-        return True
-
 
 def status(bus: MemoryBus, i: int) -> None:
     msg = ProcessStatus(Stamper(f"follower-{i}").header(), "follower", i, "running", {}, "")
@@ -62,7 +51,7 @@ def test_watch_and_follower_node_reform_when_a_follower_leaves_and_returns() -> 
     tokens = {i: b.declare_token(KEYS.alive("follower", i)) for i, b in others.items()}
     bus = MemoryBus(hub, "f0")
     bus.declare_token(KEYS.alive("follower", 0))
-    node = FollowerNode(load_scenario("paper"), 0, bus, cast(MavlinkAdapter, FakeVehicle()), "t")
+    node = FollowerNode(load_scenario("paper"), 0, bus, still_vehicle(), "t")
     node.start_s = bus.now_s() + 1e6  # the start word was heard (membership applies)
     node.tick(bus.now_s())
     assert node.members == {0, 1, 2, 3} and node.runner.setup.neighbours == (1, 3)
@@ -165,7 +154,7 @@ def test_before_the_start_word_the_planned_ring_stands_and_alone_means_no_self_l
     hub = MemoryHub()
     bus = MemoryBus(hub, "f0")
     bus.declare_token(KEYS.alive("follower", 0))
-    node = FollowerNode(load_scenario("paper"), 0, bus, cast(MavlinkAdapter, FakeVehicle()), "t")
+    node = FollowerNode(load_scenario("paper"), 0, bus, still_vehicle(), "t")
     node.tick(bus.now_s())  # only its own token so far
     assert node.members == {0, 1, 2, 3} and set(node.peer_subs) == {1, 3}
     node.start_s = bus.now_s() + 1e6  # the start word was heard (membership applies)

@@ -4,14 +4,12 @@ stamp must not freeze a target at the follower (it keeps a target's newest obser
 from __future__ import annotations
 
 import math
-from typing import Any, cast
 
-import numpy as np
 import pytest
 
 from agents.follower.node import FollowerNode
-from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.scenario.file import load_scenario
+from tests.still_vehicle import still_vehicle
 from transport.checks import DEFAULT_LIMITS, check
 from transport.codec import encode
 from transport.keys import SwarmKeys
@@ -38,20 +36,11 @@ def test_observed_stamps_are_held_to_the_state_rules() -> None:
     assert check(obs(math.inf, NOW), key, NOW) == "nonfinite"
 
 
-class StillVehicle:
-    def poll(self) -> VehicleState:
-        return cast(Any, type("S", (), {
-            "pos_enu_m": np.array([1.0, 2.0, 10.0]), "vel_enu_m_s": np.zeros(3),
-            "stamp_s": 0.0, "link_ok": True}))()
-
-    def send_velocity_enu(self, v: tuple[float, float, float]) -> bool:
-        return True
-
 
 def test_a_future_stamped_observation_does_not_freeze_the_target() -> None:
     hub = MemoryHub()
     sim, bus = MemoryBus(hub, "sim"), MemoryBus(hub, "f0")
-    node = FollowerNode(load_scenario("paper"), 0, bus, cast(MavlinkAdapter, StillVehicle()),
+    node = FollowerNode(load_scenario("paper"), 0, bus, still_vehicle(),
                         KEYS.swarm)
     key = KEYS.sensor_targets(0)
     t0 = bus.now_s()

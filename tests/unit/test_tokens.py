@@ -3,17 +3,14 @@ counted, a flapping one rate-limited, the tallies kept per sender bounded."""
 
 from __future__ import annotations
 
-from typing import Any, cast
-
-import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agents.follower.node import FollowerNode
 from agents.liveness import FLAP_MAX_CHANGES, FLAP_WINDOW_S, MembershipWatch, TokenSet
-from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.scenario.file import load_scenario
+from tests.still_vehicle import still_vehicle
 from transport.bus import MAX_ALIVE_KEYS, AliveEvent, Received
 from transport.codec import encode
 from transport.keys import SwarmKeys
@@ -105,15 +102,6 @@ def test_a_leave_and_return_within_one_read_is_no_change() -> None:
     assert watch.members(0.1) == {1} and watch.counters()["tokens_held"] == 0
 
 
-class FakeVehicle:
-    def poll(self) -> VehicleState:
-        return cast(Any, type("S", (), {
-            "pos_enu_m": np.array([1.0, 2.0, 10.0]), "vel_enu_m_s": np.zeros(3),
-            "stamp_s": 0.0, "link_ok": True}))()
-
-    def send_velocity_enu(self, v: tuple[float, float, float]) -> bool:
-        return True
-
 
 def test_a_follower_ignores_out_of_range_tokens_and_counts_them() -> None:
     """Index >= n raised in agents.membership (a crash loop of every follower)."""
@@ -123,7 +111,7 @@ def test_a_follower_ignores_out_of_range_tokens_and_counts_them() -> None:
         b.declare_token(KEYS.alive("follower", i))
     bus = MemoryBus(hub, "f0")
     bus.declare_token(KEYS.alive("follower", 0))
-    node = FollowerNode(load_scenario("paper"), 0, bus, cast(MavlinkAdapter, FakeVehicle()),
+    node = FollowerNode(load_scenario("paper"), 0, bus, still_vehicle(),
                         KEYS.swarm)
     node.start_s = bus.now_s() + 1e6  # the start word was heard (membership applies)
     rogue = MemoryBus(hub, "rogue")
