@@ -230,6 +230,18 @@ def test_no_latency_without_arrival_stamps() -> None:
     assert not any("lat" in k for k in d.counters())
 
 
+def test_no_fork_beside_a_thread_python_does_not_know(tmp_path: Path) -> None:
+    """Zenoh's runtime threads outlive the last session (threading sees none of them): the
+    kernel's task list decides."""
+    from deploy.forked import only_thread
+
+    (tmp_path / "100").mkdir()
+    assert only_thread(tmp_path)
+    (tmp_path / "101").mkdir()  # a runtime thread left by a closed Zenoh session
+    assert not only_thread(tmp_path)
+    assert only_thread(tmp_path / "no-proc-here")  # no /proc: Python's count decides
+
+
 @pytest.mark.realtime
 @pytest.mark.timeout(30)
 def test_no_fork_while_a_thread_runs(tmp_path: Path) -> None:
