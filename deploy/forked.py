@@ -46,10 +46,9 @@ TASKS = Path("/proc/self/task")
 def fork_is_safe() -> bool:
     """True while this process runs no thread but the main one and holds no Zenoh
     session.  Threads are counted by the kernel too (`only_thread`), not only Python's:
-    Zenoh's runtime threads outlive the last session closed in a process (an earlier run
-    of `enclose.run` in the same pytest worker), and a child forked beside them inherits a
-    runtime whose threads it does not have: its own `zenoh.open` then hung for good (the
-    recorder and both targets of the second run in one worker)."""
+    Zenoh's runtime threads outlive the last session a process closed (a process that ran
+    `enclose.run` before, as a pytest worker does), and a child forked beside them inherits
+    a runtime whose threads it does not have: its `zenoh.open` hangs for good."""
     from transport.zenoh_bus import ZenohBus
 
     return threading.active_count() == 1 and ZenohBus.open_sessions == 0 and only_thread()

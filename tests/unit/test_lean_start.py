@@ -231,7 +231,7 @@ def test_no_latency_without_arrival_stamps() -> None:
 
 
 def test_no_fork_beside_a_thread_python_does_not_know(tmp_path: Path) -> None:
-    """Zenoh's runtime threads outlive the last session (threading sees none of them): the
+    """Threads Python does not see (Zenoh's runtime, alive after its last session): the
     kernel's task list decides."""
     from deploy.forked import only_thread
 
