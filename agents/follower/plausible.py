@@ -10,9 +10,13 @@ law's own dynamics allow, and against what it knows itself, before its law sees 
             times the time between them, up to the integration's small error.  The
             differences are summed, leaking with `rate_tau_s`, each clipped at twice the
             limit: past `rate_m`, refused.  A jump (an offset, a sum set at the bound),
-            a frozen value whose rate says it moves, a random walk: all are caught
-            within a few messages, and a liar back to the truth is taken back within
-            `rate_tau_s * ln 2`;
+            a random walk: all are caught within a few messages, and a liar back to the
+            truth is taken back within `rate_tau_s * ln 2`;
+- frozen:   a value resent unchanged under a fresh stamp while its own rate says it
+            moves (a replayed or stale state): an honest sender integrates its rate
+            between two stamps, so an unmoved value is never honest.  `frozen_n`
+            such messages in a row are refused at once (the rate check alone needs
+            ~1 s, and never fires for a rate below `rate_m / rate_tau_s`);
 - jump:     r_j against where it was last believed, held there, plus `slack_m_s` per
             second since (the targets' centre moves at most beta): a silence does not
             reset it, so going quiet buys a liar no fresh start;
@@ -53,7 +57,7 @@ from agents.law.interface import Peer, Sample, Setup, reference
 from transport.law_fields import FieldSpec, LawFields
 
 log = logging.getLogger("enclose.follower")
-REASONS = ("rate", "jump", "link", "agree", "geometry")
+REASONS = ("rate", "frozen", "jump", "link", "agree", "geometry")
 # The largest honest value each check passed, in mm (`Plausibility._over`): named once,
 # not formatted per message.
 _MAX_KEYS = {check: f"plausible_max_mm_{check}" for check in REASONS}
@@ -72,6 +76,8 @@ class GateLimits:
     agree_m: float = 3.0
     geometry_m: float = 9.0
     arm_after_s: float = 10.0
+    frozen_n: int = 3
+    frozen_min_m: float = 1e-6  # |rate * dt| below which an unmoved value is honest
 
 
 def gate_limits(rho_d_m: float) -> GateLimits:
@@ -91,6 +97,7 @@ class _Track:
     d: dict[str, complex]  # each odd field's S_ij + S_ji, as last heard
     d_accepted: dict[str, complex]  # ... and as last accepted
     residual: dict[str, complex] = field(default_factory=dict)
+    frozen: int = 0  # messages in a row with a value unmoved against its own rate
 
 
 @dataclass
@@ -130,6 +137,7 @@ class Plausibility:
             # this one to, and agreement waits for it to converge; what it was last
             # believed still bounds where it can be now (`jump`, `link`).
             track.last, track.d, track.residual, track.since_s = heard, d, {}, now_s
+            track.frozen = 0
         # Armed after the start's transient (estimates converging from p~ at tens of m/s,
         # a standing estimate handing over to the law's): before, nothing is refused.
         why = None
@@ -162,7 +170,7 @@ class Plausibility:
                     d: Mapping[str, complex]) -> str | None:
         """The rate and link checks: each value against its own rate since the last
         message, and each odd field's two ends against their last sum."""
-        lim, why = self.limits, None
+        lim, why, still = self.limits, None, False
         for name, new in heard.items():
             old = track.last.get(name)
             if old is None or new.stamp_s <= old.stamp_s:
@@ -170,9 +178,14 @@ class Plausibility:
             dt = new.stamp_s - old.stamp_s
             if dt > self.max_gap_s:  # the sender stalled: it integrated less than this
                 continue
+            still = still or (new.value == old.value
+                              and abs(old.rate) * dt > lim.frozen_min_m)
             miss = new.value - old.value - old.rate * dt
             if self._leak(track, name, miss, dt, lim.rate_tau_s, "rate", lim.rate_m):
                 why = why or "rate"
+        track.frozen = track.frozen + 1 if still else 0
+        if track.frozen >= lim.frozen_n:
+            why = "frozen"
         dt = max(heard["r"].stamp_s - track.last["r"].stamp_s, 0.0)
         for name, now_d in d.items():
             was = track.d.get(name)

@@ -7,7 +7,9 @@ it; the follower that is not its neighbour refuses nothing; during the lie the h
 followers' estimates and vehicles stay within the documented bound (docs/security.md:
 2 rho_d / (n - 1) for a liar excluded, plus the paper's eps); no two vehicles come within
 the safety distance; and 10 s after the lie the honest followers are back inside the
-paper's bounds.  The other modes are measured by bench/bench_lie.py (30-s lies).
+paper's bounds.  The same through `--hosts 2` (the liar and its neighbours in their own
+network namespaces, each host's router between them), with the offset mode.  The other
+modes are measured by bench/bench_lie.py (30-s lies).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from pathlib import Path
 import pytest
 
 from deploy.lie_window import lie_figures
+from deploy.netns.hosts import unavailable
 from tests.integration.real_time import judged
 from tests.integration.runs import pid_alive, spawned_run
 
@@ -28,13 +31,22 @@ RHO_D_M, N, EPS_M, SAFETY_M = 8.0, 4, 0.0999, 1.0
 DURING_BOUND_M = 2.0 * RHO_D_M / (N - 1) + EPS_M
 
 
+NO_HOSTS = unavailable()
+
+
 @pytest.mark.serial  # back inside the bounds within 10 s: among the timed tests
 @pytest.mark.timeout(300)
-def test_a_lying_follower_is_named_and_does_bounded_damage(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("mode", "hosts"), [
+    ("stale", ()),
+    pytest.param("offset", ("--hosts", "2"), marks=pytest.mark.skipif(
+        NO_HOSTS is not None, reason=f"--hosts {NO_HOSTS}")),
+], ids=["one-host-stale", "two-hosts-offset"])
+def test_a_lying_follower_is_named_and_does_bounded_damage(
+        tmp_path: Path, mode: str, hosts: tuple[str, ...]) -> None:
     out = tmp_path / "run"
-    argv = [sys.executable, "-m", "deploy.cli", "run", "--out", str(out), "--link-timeout",
-            "60", "--duration", f"{DURATION_S:g}", "--no-live", "--no-figures",
-            "--fault", f"{AT_S:g}:lie:follower-{LIAR}:{LIE_S:g}:stale"]
+    argv = [sys.executable, "-m", "deploy.cli", "run", *hosts, "--out", str(out),
+            "--link-timeout", "60", "--duration", f"{DURATION_S:g}", "--no-live",
+            "--no-figures", "--fault", f"{AT_S:g}:lie:follower-{LIAR}:{LIE_S:g}:{mode}"]
     with spawned_run(argv, out) as proc:
         output, _ = proc.communicate(timeout=DURATION_S + 150.0)
     assert proc.returncode in (0, 1), output  # 1: outside the bounds (the liar's own error)

@@ -47,11 +47,35 @@ def test_a_continuous_estimate_passes_and_a_jump_is_refused_and_counted() -> Non
     assert g.counters["implausible_first_ms_f1"] == 1000
 
 
-def test_a_frozen_value_whose_rate_says_it_moves_is_refused() -> None:
+def test_a_value_off_its_own_rate_is_refused_by_the_rate_check() -> None:
     g = gate(centre=None)
-    refused = [g.check(1, peer(5 + 0j, 0.02 * k, 1.1 + 0j), 0.02 * k) for k in range(200)]
+    # moving at 0.35 m/s where its rate says 1.1 m/s: no message is a replay
+    refused = [g.check(1, peer(0.007 * k + 0j, 0.02 * k, 1.1 + 0j), 0.02 * k)
+               for k in range(200)]
     first = refused.index("rate")
     assert 0.5 < 0.02 * first < 3.0 and all(w == "rate" for w in refused[first:])
+
+
+@pytest.mark.parametrize("rate", [1.1 + 0j, 0.05j, 0.3 + 0.2j])
+def test_a_frozen_value_whose_rate_says_it_moves_is_refused_within_three_messages(
+        rate: complex) -> None:
+    """A stale state under fresh stamps, whatever its rate: at 0.05 m/s the rate check
+    alone would never see it (its leaky sum stays at rate * tau, under rate_m)."""
+    g = gate(centre=None)
+    for k in range(50):
+        assert g.check(1, peer(rate * 0.02 * k, 0.02 * k, rate), 0.02 * k) is None
+    frozen = rate * 0.02 * 49
+    refused = [g.check(1, peer(frozen, 0.02 * k, rate), 0.02 * k) for k in range(50, 100)]
+    assert refused[:2] == [None, None] and set(refused[2:]) == {"frozen"}
+    assert g.counters["implausible_frozen"] == 48
+    back = [g.check(1, peer(rate * 0.02 * k, 0.02 * k, rate), 0.02 * k)
+            for k in range(100, 200)]
+    assert back[-1] is None and back.index(None) * 0.02 < 1.0
+
+
+def test_a_value_at_rest_resent_unchanged_is_honest() -> None:
+    g = gate(centre=None)
+    assert all(g.check(1, peer(5 + 0j, 0.02 * k), 0.02 * k) is None for k in range(200))
 
 
 def test_a_liar_back_to_the_truth_is_taken_back_within_a_second() -> None:
