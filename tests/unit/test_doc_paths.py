@@ -41,20 +41,21 @@ LET_THROUGH = [
 SPLIT = re.compile(r"[\s\"'(),\[\]=;`]+")
 INLINE = re.compile(r"(?<!`)`([^`\n]+)`(?!`)")
 FENCE = re.compile(r"^\s*```")
-SHELL = {"bash", "sh", "console", "shell"}
+# Fenced blocks read line by line: shell commands and the pictures (docs/architecture.md).
+READ_FENCES = {"bash", "sh", "console", "shell", "text"}
 PLACEHOLDER = re.compile(r"[<>*{}$|^]|\.\.\.|(^|/)[A-Z][A-Z0-9_]*(/|\.|$)")
 
 
 def spans(text: str) -> Iterator[str]:
-    """The inline code of a markdown text, and the lines of its shell blocks (comments
-    left out); other fenced blocks (Python, TOML, output) are not read."""
+    """The inline code of a markdown text, and the lines of its shell and text blocks
+    (comments left out); other fenced blocks (Python, TOML) are not read."""
     fence: str | None = None
     for line in text.splitlines():
         if FENCE.match(line):
             fence = None if fence is not None else line.strip().strip("`")
         elif fence is None:
             yield from INLINE.findall(line)
-        elif fence in SHELL:
+        elif fence in READ_FENCES:
             yield line.split(" #", 1)[0]
 
 
