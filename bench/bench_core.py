@@ -18,8 +18,8 @@ import time
 
 import numpy as np
 
-from agents.core.lockstep import simulate_lockstep
-from agents.core.metrics import Metrics, compute_metrics, error_series
+from agents.analysis.metrics import Metrics, compute_metrics, error_series
+from agents.lockstep.engine import simulate_lockstep
 from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 

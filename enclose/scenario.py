@@ -21,7 +21,7 @@ import tomli_w
 from agents.scenario.file import DEFAULT_SCENARIO, build_scenario, shipped_text
 from agents.scenario.law import absolute_ref
 from agents.scenario.model import Scenario as ScenarioModel
-from transport.errors import ScenarioError
+from errors import ScenarioError
 
 SCENARIO_FILE = "scenario.toml"  # a variation, written into the run directory it runs in
 

@@ -84,7 +84,7 @@ class VehicleEndpoint:
         self.rx_codec = new_codec(sysid, 1, mavlink2)
         self.peers: dict[Addr, float] = {}
         self.missions = protocols.MissionStore()
-        # Services that own a message type (sim_backend.timesync: TIMESYNC, SYSTEM_TIME).
+        # Services that own a message type (sim_backend.clock_services: TIMESYNC, SYSTEM_TIME).
         self.handlers: dict[str, ServiceHandler] = {}
         fast = 1.0 / telemetry_hz
         self.default_intervals: dict[int, float] = {

@@ -25,9 +25,9 @@ from pathlib import Path
 
 import zenoh
 
+from errors import ConfigError
 from transport.codec import MAX_PAYLOAD_BYTES
 from transport.credentials import Identity
-from transport.errors import ConfigError
 from transport.network_schema import LINK_PROTOCOLS, ZENOH_LEASE_RANGE_S, ZENOH_RUNTIMES
 
 LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)

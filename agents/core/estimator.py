@@ -3,7 +3,7 @@
     p~_i = (n/m) * sum_{j in N_i^T} p_j^t / |N_j^F|,   edge fractions 1 / max(deg_i, deg_j)
 
 for the lock-step engine, which sees the whole swarm at once (the follower process forms
-its own row: agents.membership).  The laws themselves are agents.law's.
+its own row: agents.membership.ring).  The laws themselves are agents.law's.
 """
 
 from __future__ import annotations

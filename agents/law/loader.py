@@ -18,7 +18,7 @@ from typing import Any
 from agents.law.interface import Law
 from agents.law.shipped import SHIPPED
 from agents.scenario.model import LawSpec, Scenario
-from transport.errors import ScenarioError
+from errors import ScenarioError
 
 # What a law must define itself (the base class's raise NotImplementedError).
 REQUIRED = ("start", "step")

@@ -39,7 +39,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from transport.errors import ConfigError
+from errors import ConfigError
 
 KEY_LEN = 32
 SIGNATURE_LEN = 13

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from agents.scenario.model import Scenario, TargetSpec
-from transport.errors import InadmissibleError, ScenarioError
+from errors import InadmissibleError, ScenarioError
 
 SPEED_TOL_M_S = 1e-9
 

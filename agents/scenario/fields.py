@@ -12,7 +12,7 @@ from collections.abc import Iterable
 from fractions import Fraction
 from typing import Any
 
-from transport.errors import ScenarioError
+from errors import ScenarioError
 
 Table = dict[str, Any]
 

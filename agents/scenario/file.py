@@ -29,7 +29,7 @@ from agents.scenario.tables import (
     parse_targets,
     parse_vehicle,
 )
-from transport.errors import InadmissibleError, ScenarioError
+from errors import InadmissibleError, ScenarioError
 
 DEFAULT_SCENARIO = "paper"
 

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.scenario.model import LawSpec
-from transport.errors import ScenarioError
+from errors import ScenarioError
 
 KEYS = ("name", "module")
 MODULE_LINE = re.compile(r"""(?m)^(\s*module\s*=\s*)("[^"\n]*"|'[^'\n]*')""")
@@ -74,7 +74,7 @@ def absolute_ref(spec: LawSpec) -> str:
 
 def pinned_law(text: str, spec: LawSpec) -> str:
     """A scenario file's `text` with its `[law] module` naming its folder absolutely: what
-    a copy of the file written elsewhere (deploy.host_launch) needs to load the same law.
+    a copy of the file written elsewhere (deploy.hosts.host_launch) needs to load the same law.
     `spec` is the law the file was read into."""
     if spec.module is None:
         return text

@@ -76,7 +76,7 @@ class Pattern:
     rho_d_m: float
     w_d_rad_s: float
     angles_rad: tuple[float, ...]
-    rebalance: str = "scale"  # when followers leave: "scale" | "keep" (agents.membership)
+    rebalance: str = "scale"  # when followers leave: "scale" | "keep" (agents.membership.ring)
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ from agents.scenario.model import (
     full_turn_ok,
     successor_from_order,
 )
-from transport.errors import InadmissibleError, ScenarioError
+from errors import InadmissibleError, ScenarioError
 
 
 def parse_targets(raw: Any, n: int) -> tuple[TargetSpec, ...]:

@@ -19,9 +19,9 @@ from agents.mavlink.modes import FLAVOURS
 from agents.mavlink.signing import load_key
 from agents.scenario.file import load_scenario
 from agents.scenario.model import HomeConfig, VehicleConfig
+from errors import EncloseError
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned, spawn_points_ned
 from sim_backend.sim_values import parse_peer_hosts
-from transport.errors import EncloseError
 
 log = logging.getLogger("enclose.sim")
 

@@ -8,7 +8,7 @@ launcher fills the set when a partition or isolation starts and empties it at th
 session between the two sides times out (its lease), the far side's liveliness tokens
 vanish, its clock probes stop.  Exempt: ARP, MAVLink/UDP between the followers and
 their simulated autopilots, and the simulator's sensing links to the hosts' sensing
-ports (TCP; deploy.sensor_links): on a drone the autopilot link and the sensing are on
+ports (TCP; sim_backend.sensor_links): on a drone the autopilot link and the sensing are on
 board, not on the swarm's network.
 The table is deleted when the launcher ends; it goes with the hub namespace in any case
 (deploy.netns.namespace.destroy), so nothing is left behind even after a SIGKILL.
@@ -28,9 +28,9 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from deploy.deployment import Deployment
+from deploy.hosts.deployment import Deployment
 from deploy.netns.namespace import _tool
-from transport.errors import DeployError
+from errors import DeployError
 from transport.net_timeline import side
 from transport.network_schema import NetFault
 
@@ -98,7 +98,7 @@ class HostCut:
     dep: Deployment
     faults: tuple[NetFault, ...]  # those `cuttable`
     exempt_udp: tuple[range, ...]
-    exempt_tcp: tuple[int, ...] = ()  # the sensing ports (deploy.deployment)
+    exempt_tcp: tuple[int, ...] = ()  # the sensing ports (deploy.hosts.deployment)
     applied: frozenset[tuple[int, int]] = frozenset()
     changes: list[tuple[float, int]] = field(default_factory=list)  # (t_s, pairs cut)
 

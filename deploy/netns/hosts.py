@@ -2,7 +2,7 @@
 
 Each host is a namespace `enclose-<pid>-h<k>` with a veth link `eth0` (10.77.0.<k+1>/24)
 to a bridge in a hub namespace `enclose-<pid>-hub`: hosts reach each other only over
-those links.  The run is a deployment (deploy.deployment) written to RUN_DIR and run
+those links.  The run is a deployment (deploy.hosts.deployment) written to RUN_DIR and run
 with `enclose host RUN_DIR/deployment.toml --all` inside host 0: one router per host,
 processes as clients of their host's router, each host's processes on their own clock
 (`--host-offsets`), MAVLink from the other hosts to the simulator over the links.
@@ -27,19 +27,19 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agents.scenario.model import Scenario
-from deploy.deployment import (
+from deploy.hosts.deployment import (
     Deployment,
     HostSpec,
     dump_deployment,
     split_along,
     split_over_hosts,
 )
-from deploy.launch_options import LaunchOptions
+from deploy.launch.launch_options import LaunchOptions
 from deploy.netns.namespace import _tool, clean_stale, destroy, install_tools
 from deploy.netns.namespace import unavailable as netns_unavailable
-from deploy.netns.run import run_forwarding_signals
+from deploy.netns.netns_run import run_forwarding_signals
+from errors import DeployError
 from transport.clock import clock_env
-from transport.errors import DeployError
 
 log = logging.getLogger("enclose.hosts")
 SUBNET = "10.77.0"

@@ -1,4 +1,4 @@
-"""The recorder's parts; `python -m deploy.recorder` wires them into one process.
+"""The recorder's parts; `python -m deploy.recording.recorder` wires them into one process.
 
 Nothing the recorder keeps in memory grows with the length of the run: what it needs at
 the end goes to disk as it arrives, and the end reads it back chunk by chunk.
@@ -13,7 +13,8 @@ the end goes to disk as it arrives, and the end reads it back chunk by chunk.
   indexes wait on disk for the summary (`mcap_fast`).
 - `progress`: the live `progress.json` for the launcher (atomic writes).
 - `outputs`: the end of a run: `metrics.json`, `run.json`, `series.csv`, `series.parquet`
-  and figures through `deploy.report.write_run_outputs` -- the code `enclose simulate` uses.
+  and figures through `deploy.report.run_report.write_run_outputs` -- the code
+  `enclose simulate` uses.
 - `links`: metrics.json "links" -- per link (`"f0->f2"`, `"sensor->f2"`, 0-based) the
   delivered ratio and age at delivery, from the followers' final ("done") counters, which
   the loop waits for (at most ~2 s) after the stop.

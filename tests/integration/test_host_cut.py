@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import pytest
 
 from agents.scenario.net_faults import parse_net_fault_flag
-from deploy.deployment import Deployment, HostSpec
+from deploy.hosts.deployment import Deployment, HostSpec
 from deploy.netns.cut import CUT_TABLE, HostCut
 from deploy.netns.hosts import SYN_RETRIES, TCP_RETRIES, linked_namespaces, unavailable
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.lie_window import lie_figures
+from deploy.report.lie_window import lie_figures
 from tests.integration.real_time import judged
 from tests.integration.runs import pid_alive, spawned_run
 

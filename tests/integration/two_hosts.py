@@ -20,7 +20,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO
 
-from deploy.deployment import Deployment, load_deployment
+from deploy.hosts.deployment import Deployment, load_deployment
 from deploy.netns.hosts import linked_namespaces
 from tests.integration.runs import kill_leftovers, wait_for
 

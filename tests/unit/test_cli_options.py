@@ -8,17 +8,17 @@ from typing import Any
 
 import pytest
 
-from agents.network_args import NetworkOptions
-from agents.process_options import AgentOptions, BusOptions
 from agents.scenario.model import Scenario
+from agents.shell.network_args import NetworkOptions
+from agents.shell.process_options import AgentOptions, BusOptions
 from deploy.cli import build_parser
 from deploy.commands.host import HostOptions
 from deploy.commands.run import RunOptions
-from deploy.launch_options import LaunchOptions
-from deploy.live_args import LiveOptions
+from deploy.launch.launch_options import LaunchOptions
+from deploy.launch.live_args import LiveOptions
 from deploy.netns import hosts as netns_hosts
-from deploy.netns import run as netns_run
-from transport.errors import TransportError
+from deploy.netns import netns_run
+from errors import TransportError
 
 RUN_FLAGS = ["--duration", "12.5", "--swarm", "sw", "--port-range", "20000-20999",
              "--noise-std-m", "0.2", "--link-timeout", "30", "--insecure", "--json",
@@ -76,7 +76,7 @@ class Stop(TransportError):
 
 
 def count_loads(monkeypatch: pytest.MonkeyPatch) -> list[Scenario]:
-    import agents.process as process
+    import agents.shell.process as process
 
     loaded: list[Scenario] = []
     real = process.load_scenario
@@ -114,8 +114,8 @@ def test_a_target_loads_its_scenario_once_and_flies_it(monkeypatch: pytest.Monke
 @pytest.mark.timeout(30)
 def test_the_simulator_and_recorder_open_their_bus_on_the_scenario_they_loaded(
         monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    import deploy.recorder as recorder
-    import deploy.swarm_sim as swarm_sim
+    import deploy.recording.recorder as recorder
+    import sim_backend.swarm_sim as swarm_sim
 
     loaded = count_loads(monkeypatch)
     opened: list[tuple[BusOptions, Any]] = []

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from agents.core.lockstep import simulate_lockstep
-from agents.core.metrics import compute_metrics, error_series, settle_time
+from agents.analysis.metrics import compute_metrics, error_series, settle_time
+from agents.lockstep.engine import simulate_lockstep
 from agents.scenario.file import load_scenario, parse_scenario, shipped_text
 
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from agents.analysis.geometry import as_complex, as_plane, included_angles, wrap_2pi
 from agents.core.estimator import edge_fractions, observation_weights
-from agents.core.geometry import as_complex, as_plane, included_angles, wrap_2pi
 from agents.law.enclosing import TWO_PI
 from agents.scenario.model import ccw_order, successor_is_cycle
 

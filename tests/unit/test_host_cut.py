@@ -9,7 +9,7 @@ import pytest
 
 from agents.scenario.file import load_scenario
 from agents.scenario.net_faults import parse_net_fault_flag
-from deploy.deployment import Deployment, HostSpec, split_along
+from deploy.hosts.deployment import Deployment, HostSpec, split_along
 from deploy.netns.cut import HostCut, cut_ruleset, cuttable, host_sides, pairs_script, separated
 from deploy.netns.hosts import HostsOptions, hosts_deployment, partition_groups
 

@@ -14,9 +14,9 @@ import math
 import numpy as np
 import pytest
 
-from agents.core.lockstep import simulate_lockstep
-from agents.core.metrics import compute_metrics, error_series
+from agents.analysis.metrics import compute_metrics, error_series
 from agents.law.enclosing import ControlGains, enclosing_control
+from agents.lockstep.engine import simulate_lockstep
 from agents.scenario.file import load_scenario
 from tests.reference.law import enclosing_control as reference_control
 

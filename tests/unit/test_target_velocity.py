@@ -15,8 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agents.follower.inputs import Latest
-from agents.follower.membership import setup_for
 from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
+from agents.membership.follower_place import setup_for
 from agents.scenario.file import load_scenario
 
 PERIOD_S = 0.05
