@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.frames import ned_to_enu
-from agents.mavlink.signing import load_key
+from agents.mavlink.signing import agent_of_vehicle, load_key
 from agents.membership.liveness import MembershipWatch
 from agents.membership.member_hold import MemberHold
 from agents.membership.ring import membership
@@ -34,7 +34,6 @@ from agents.shell.process import (
     stop_on_signals,
 )
 from agents.shell.process_options import BusOptions, add_bus_arguments
-from deploy.launch.run_secrets import agent_of_vehicle
 from sim_backend.kinematics import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from sim_backend.sensor_links import LinkBus, parse_sensor_link, sensor_buses

@@ -90,6 +90,12 @@ def vehicle_key(run_secret: bytes, sysid: int) -> bytes:
     return key_from_passphrase(vehicle_passphrase(run_secret, sysid))
 
 
+def agent_of_vehicle(sysid: int, n: int) -> str:
+    """The agent that flies vehicle `sysid` of a swarm of n followers, and alone holds its
+    key: follower i flies vehicle i (sysid i+1), target j vehicle n+j (sysid n+j+1)."""
+    return f"follower-{sysid - 1}" if sysid <= n else f"target-{sysid - 1 - n}"
+
+
 def write_raw_key(path: Path, key: bytes) -> None:
     """`key` written raw to `path`, 0600 from the start."""
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from agents.mavlink.signing import vehicle_key, write_key, write_raw_key
+from agents.mavlink.signing import agent_of_vehicle, vehicle_key, write_key, write_raw_key
 from deploy.procs.forked import call_forked
 from transport.credentials import Identity, identity_file, make_credentials
 from transport.key_exprs import SwarmKeys
@@ -33,12 +33,6 @@ MAVLINK_SECRET_FILE = "mavlink-secret.bin"
 def signing_key_file(cred_dir: Path, name: str) -> Path:
     """Where agent `name`'s vehicle key is (follower-<i>, target-<j>)."""
     return cred_dir / f"{name}.mavlink-key.bin"
-
-
-def agent_of_vehicle(sysid: int, n: int) -> str:
-    """The agent that flies vehicle `sysid` of a swarm of n followers, and alone holds its
-    key: follower i flies vehicle i (sysid i+1), target j vehicle n+j (sysid n+j+1)."""
-    return f"follower-{sysid - 1}" if sysid <= n else f"target-{sysid - 1 - n}"
 
 
 def write_mavlink_keys(cred_dir: Path, n: int, m: int) -> None:
