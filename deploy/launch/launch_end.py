@@ -11,21 +11,19 @@ from __future__ import annotations
 import logging
 import math
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from agents.shell.phases import stamps
+from deploy.launch.launch_state import LaunchState
 from deploy.procs.restarts import EXIT_SOMETHING_DIED
 from deploy.report.cpu_load import overrun_summary
 from deploy.report.verdict import announce
 from deploy.version import enclose_version
 
-if TYPE_CHECKING:
-    from deploy.launch.launcher import Launch
-
 log = logging.getLogger("enclose.run")
 
 
-def stop_in_order(launch: Launch) -> None:
+def stop_in_order(launch: LaunchState) -> None:
     """Movers end on the stop word; the recorder then writes its outputs; the sim last."""
     sup = launch.sup
     movers = [c for c in sup.children if c.name.startswith(("follower", "target"))]
@@ -44,7 +42,7 @@ def stop_in_order(launch: Launch) -> None:
     sup.terminate([c for c in sup.children if c.name == "sim"])
 
 
-def launch_report(launch: Launch) -> dict[str, Any]:
+def launch_report(launch: LaunchState) -> dict[str, Any]:
     """The content of launch.json (a host's launcher adds its hosts: deploy.hosts.host_launch)."""
     return {
         "enclose_version": enclose_version(),
@@ -72,7 +70,7 @@ def launch_report(launch: Launch) -> dict[str, Any]:
     }
 
 
-def load_report(launch: Launch) -> dict[str, Any]:
+def load_report(launch: LaunchState) -> dict[str, Any]:
     """CPU per process and machine busy over the steady half (deploy.report.cpu_load), and the
     followers' late ticks: the load an accuracy figure was measured under."""
     steady_from = launch.t0_s + 0.5 * launch.duration_s
@@ -82,7 +80,7 @@ def load_report(launch: Launch) -> dict[str, Any]:
     return {**cpu, "ticks": overrun_summary(launch.board.as_dict())}
 
 
-def exit_code(launch: Launch, interrupted: bool) -> int:
+def exit_code(launch: LaunchState, interrupted: bool) -> int:
     """130 interrupted; 1 a process failed at the end; EXIT_SOMETHING_DIED (3) a process
     died during the run (launch.json "events") but the run went to its end; else 0."""
     dog = launch.watchdog

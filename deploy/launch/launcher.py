@@ -25,8 +25,9 @@ from deploy.launch.launch_options import LaunchOptions
 from deploy.launch.live_args import announce_live_url, pin_live_port, recorder_live_argv
 from deploy.launch.ports import run_ports
 from deploy.launch.run_board import BoardView, LiveBoard
-from deploy.launch.run_monitor import StatusBoard, launch_view
+from deploy.launch.run_monitor import launch_view
 from deploy.launch.run_secrets import RunSecrets
+from deploy.launch.status_board import StatusBoard
 from deploy.procs.restarts import RestartPolicy, Watchdog
 from deploy.procs.supervisor import Child, Supervisor
 from deploy.report.cpu_load import CpuSampler, load_1min, machine_ticks, start_saturation_note

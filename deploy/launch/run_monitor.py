@@ -1,5 +1,6 @@
-"""What the launcher watches during a run: every process's latest status, the recorder's
-progress.json, and the health of each child: the data of its board (deploy.launch.run_board)."""
+"""What the launcher watches during a run: the recorder's progress.json, the health of each
+child and its latest status (deploy.launch.status_board): the data of its board
+(deploy.launch.run_board), read from a launch's view (deploy.launch.launch_state)."""
 
 from __future__ import annotations
 
@@ -8,46 +9,14 @@ import logging
 import time
 from collections.abc import Collection, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from deploy.launch.launch_state import LaunchState
 from deploy.launch.run_board import BoardView, ProcessView
+from deploy.launch.status_board import StatusBoard
 from deploy.procs.supervisor import Child
-from transport.bus import Subscription
-from transport.decoder import Decoder
-from transport.message_checks import DEFAULT_LIMITS
-from transport.messages import ProcessStatus
-
-if TYPE_CHECKING:
-    from deploy.launch.launcher import Launch
 
 log = logging.getLogger("enclose.run")
-
-
-class StatusBoard:
-    """Each process's latest ProcessStatus (its final counters go to launch.json).
-
-    A status counts only from the process it names, on its own key (transport.message_checks):
-    the table holds at most one entry per sender of the scenario (`senders`)."""
-
-    def __init__(self, senders: Collection[str]) -> None:
-        self.subscription: Subscription | None = None
-        self.latest: dict[str, ProcessStatus] = {}
-        self.decoder = Decoder(expect=(ProcessStatus,), limits=DEFAULT_LIMITS, senders=senders)
-
-    def collect(self) -> None:
-        if self.subscription is None:
-            return
-        for inbound in self.decoder.drain(self.subscription):
-            msg = inbound.message
-            if isinstance(msg, ProcessStatus):
-                self.latest[f"{msg.role}-{msg.index}"] = msg
-
-    def state_of(self, name: str) -> str:
-        status = self.latest.get(name)
-        return "" if status is None else status.state
-
-    def as_dict(self) -> dict[str, Any]:
-        return {name: {"state": s.state, **s.counters} for name, s in self.latest.items()}
 
 
 def read_progress(run_dir: Path) -> dict[str, Any]:
@@ -83,7 +52,7 @@ def event_text(e: dict[str, Any]) -> str:
 
 
 
-def launch_view(launch: Launch) -> BoardView:
+def launch_view(launch: LaunchState) -> BoardView:
     """What the launcher's live board shows now."""
     progress = read_progress(launch.out)
     inj, dog = launch.injector, launch.watchdog

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from deploy.launch.run_monitor import StatusBoard
+from deploy.launch.status_board import StatusBoard
 from deploy.report.refusals import launch_refusals, refusal_text, refusals
 from transport.access import own_keys, process_names, sender_id, sender_ids
 from transport.bus import Received

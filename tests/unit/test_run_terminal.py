@@ -206,7 +206,8 @@ def test_json_goes_alone_to_stdout_for_scripts(
 
 
 def test_process_health_and_state_as_the_board_shows_them(tmp_path: Path) -> None:
-    from deploy.launch.run_monitor import StatusBoard, process_views
+    from deploy.launch.run_monitor import process_views
+    from deploy.launch.status_board import StatusBoard
     from deploy.procs.supervisor import Child
     from transport.messages import Header, ProcessStatus
 
