@@ -7,7 +7,7 @@ observations of the followers on another host through a Zenoh session of its own
 a client of that host's router at its sensing endpoint (deploy.hosts.deployment), instead of
 through its own host's router and the link between the routers.  The path is the same
 message, key, codec and access control as on one machine; only the route differs, and
-a cut between hosts exempts it (deploy.netns.cut), as it exempts MAVLink.
+a cut between hosts exempts it (deploy.hosts.host_cut), as it exempts MAVLink.
 
     python -m sim_backend.swarm_sim ... --sensor-link tls/10.77.0.2:7448=2,3
 """

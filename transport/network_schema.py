@@ -98,7 +98,7 @@ class NetworkConfig:
     # leaves the simulator (the physical world) late.
     agent_nice: int = 0
     faults: tuple[NetFault, ...] = ()  # partitions, isolations, degradations on a timeline
-    # Numbers of the faults the OS cuts between hosts (`--os-cut`, deploy.netns.cut): the
+    # Numbers of the faults the OS cuts between hosts (`--os-cut`, deploy.hosts.host_cut): the
     # receivers leave them alone.
     os_cut: tuple[int, ...] = ()
 

@@ -46,7 +46,7 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
                         "(agents.scenario.net_faults; `enclose run --fault` takes it too)")
     g.add_argument("--os-cut", default=None, metavar="K,K",
                    help="the network faults (0-based, in time order) cut by the OS between "
-                        "hosts (deploy.netns.cut): not cut again at the receivers")
+                        "hosts (deploy.hosts.host_cut): not cut again at the receivers")
     g.add_argument("--latency-stamps", action="store_true", default=None,
                    help="stamp every sample's arrival: one-way latency per link in the "
                         "followers' status (lat_p50_us_f<j>; bench/bench_latency.py)")

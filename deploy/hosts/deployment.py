@@ -72,7 +72,7 @@ class Deployment:
     hosts: tuple[HostSpec, ...]
     inter_host_delay_ms: float = 0.0
     # Test hosts: the hub namespace whose bridge links them; partitions and isolations
-    # along hosts are cut there by nftables (deploy.netns.cut)
+    # along hosts are cut there by nftables (deploy.hosts.host_cut)
     cut_hub: str | None = None
 
     def host_of(self, process: str) -> int:

@@ -25,11 +25,11 @@ from agents.scenario.law import pinned_law
 from agents.scenario.model import Scenario
 from agents.shell.network_args import apply_network_arguments
 from deploy.hosts.deployment import Deployment
+from deploy.hosts.host_cut import HostCut, cuttable
 from deploy.hosts.host_keys import HostSecrets, write_swarm_keys
 from deploy.launch.launch_options import LaunchOptions
 from deploy.launch.launcher import Launch
 from deploy.launch.run_secrets import RunSecrets
-from deploy.netns.cut import HostCut, cuttable
 from sim_backend.sensor_links import SensorLink
 from transport.clock import clock_env
 from transport.clock_sync import format_clock_hosts, parse_clock_hosts

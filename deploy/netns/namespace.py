@@ -13,7 +13,7 @@ table with it) whatever happens, and one left by a crashed launcher whose PID is
 is removed at the next start.
 
 This module makes, watches and removes namespaces (also for `--hosts`:
-deploy.netns.hosts); the run inside one, and its netns.json, is deploy.netns.netns_run.
+deploy.hosts.namespaced_hosts); the run inside one, and its netns.json, is deploy.netns.netns_run.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """`enclose run --netns` itself: its flags, and the whole run as an inner `enclose run`
 in a lossy namespace (deploy.netns.namespace), reported in RUN_DIR/netns.json.
 
-Apart from the namespace machinery (deploy.netns.namespace), which `--hosts` (deploy.netns.hosts)
-shares and which knows nothing of a run's command line or its files.
+Apart from the namespace machinery (deploy.netns.namespace), which `--hosts`
+(deploy.hosts.namespaced_hosts) shares and which knows nothing of a run's command line or its files.
 """
 
 from __future__ import annotations

@@ -18,6 +18,7 @@ the end goes to disk as it arrives, and the end reads it back chunk by chunk.
 - `links`: metrics.json "links" -- per link (`"f0->f2"`, `"sensor->f2"`, 0-based) the
   delivered ratio and age at delivery, from the followers' final ("done") counters, which
   the loop waits for (at most ~2 s) after the stop.
-- `link_history`: links.csv, streamed to disk as the followers' counters arrive.
+- `deploy.report.link_history`: links.csv, streamed to disk as the followers' counters
+  arrive (its format is the run directory's, read back by the report).
 - `loop.Recorder`: the process's single loop over a `Bus`.
 """

@@ -22,7 +22,6 @@ from deploy.json_files import write_json_atomic
 from deploy.procs.forked import trim_heap
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.backlog import Backlog
-from deploy.recording.link_history import LinkHistory
 from deploy.recording.links import FINAL_STATES, link_report, unreadable_links
 from deploy.recording.live_server import LiveServer
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
@@ -31,6 +30,7 @@ from deploy.recording.queues import STEP_BATCH, drain_into, queue_capacities
 from deploy.recording.resume import newest_part, read_back
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
 from deploy.recording.view_feed import ViewFeed
+from deploy.report.link_history import LinkHistory
 from deploy.report.rundir import RunInfo
 from errors import CodecError, TransportError
 from transport.access import sender_ids

@@ -14,7 +14,7 @@ from agents.membership.ring_accuracy import PhaseReport, membership_phases
 from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import Assembly, RunAssembler, assembly_extra
-from deploy.recording.link_history import LINKS_CSV, LinkHistory
+from deploy.report.link_history import LINKS_CSV, LinkHistory
 from deploy.report.run_report import write_run_outputs
 from deploy.report.rundir import METRICS_FILE, RunInfo
 from errors import DeployError

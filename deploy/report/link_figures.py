@@ -1,5 +1,5 @@
 """links.png: the health of every link over time (delivered ratio and age), with the run's
-marks; drawn from links.csv (`deploy.recording.link_history`)."""
+marks; drawn from links.csv (`deploy.report.link_history`)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ matplotlib.use("Agg")  # files only: runs on headless machines and in CI
 import matplotlib.pyplot as plt
 import numpy as np
 
-from deploy.recording.link_history import LinkColumns
+from deploy.report.link_history import LinkColumns
 from deploy.report.marks import MAX_LEGEND, Mark, draw_marks, legend_handles
 
 LINKS_PNG = "links.png"

@@ -16,7 +16,7 @@ import numpy as np
 
 from agents.analysis.metrics import Metrics, MetricsAccumulator, WindowAccumulator, error_series
 from agents.analysis.timeseries import FloatArray, RunSeries, decimated_rows
-from deploy.recording.link_history import LINKS_CSV, read_links_csv
+from deploy.report.link_history import LINKS_CSV, read_links_csv
 from deploy.report.rundir import (
     METRICS_FILE,
     RunInfo,

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.netns.hosts import unavailable
+from deploy.hosts.namespaced_hosts import unavailable
 from tests.integration.real_time import judged
 from tests.integration.runs import spawned
 

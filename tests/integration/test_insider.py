@@ -42,8 +42,8 @@ from typing import Any
 import pytest
 
 from deploy.hosts.host_keys import CA_KEY, needed_files
+from deploy.hosts.namespaced_hosts import unavailable
 from deploy.launch.run_secrets import MAVLINK_SECRET_FILE, signing_key_file
-from deploy.netns.hosts import unavailable
 from tests.integration import host_insider
 from tests.integration.real_time import judged
 from tests.integration.rogue import BAD_TOKENS

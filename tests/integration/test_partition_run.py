@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from deploy.netns.hosts import unavailable
+from deploy.hosts.namespaced_hosts import unavailable
 from tests.integration.runs import pid_alive, spawned_run
 
 pytestmark = pytest.mark.integration

@@ -36,8 +36,8 @@ from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.chunks import EPS_S
-from deploy.recording.link_history import read_links_csv
 from deploy.recording.spill import RowSpill
+from deploy.report.link_history import read_links_csv
 from deploy.report.rundir import SeriesWriter, read_series, series_rows
 from tests.recorder_synth import SynthRun
 from transport.key_exprs import SwarmKeys

@@ -14,8 +14,8 @@ import pytest
 from agents.analysis.metrics import error_series
 from agents.lockstep.engine import simulate_lockstep
 from agents.scenario.file import load_scenario
-from deploy.recording.link_history import LinkHistory, read_links_csv
 from deploy.report.link_figures import link_health_figure
+from deploy.report.link_history import LinkHistory, read_links_csv
 from deploy.report.marks import Mark, event_marks, run_marks
 from deploy.report.run_figures import performance_figure, trajectory_figure
 from deploy.report.run_report import regenerate_figures, write_run_outputs

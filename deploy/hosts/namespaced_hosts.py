@@ -9,7 +9,7 @@ processes as clients of their host's router, each host's processes on their own 
 `--host-delay-ms` delays every follower link across hosts at its receiving end (the
 impairment layer: this kernel has no netem).  A partition into K groups places one
 group per host (the ground with the first), and its cut is made for real between the
-hosts by nftables in the hub (deploy.netns.cut); each host's kernel gives up a TCP
+hosts by nftables in the hub (deploy.hosts.host_cut); each host's kernel gives up a TCP
 connect or a silent connection within seconds (SYN_RETRIES, TCP_RETRIES), so the routers
 find each other again soon after the heal.  Every namespace is removed afterwards,
 whatever happens (deploy.netns.namespace.destroy; stale ones of dead launchers at the next start).
@@ -165,7 +165,7 @@ def linked_namespaces(dep: Deployment, hub: str) -> Iterator[None]:
 def inner_argv(opts: LaunchOptions, out: Path, duration_s: float) -> list[str]:
     # `enclose host` takes no network flags: the network faults go as --fault; the
     # partitions and isolations along hosts are cut by nftables in the hub (cut_hub of the
-    # deployment, deploy.netns.cut), the others where messages are received.
+    # deployment, deploy.hosts.host_cut), the others where messages are received.
     net_faults = [arg for text in opts.network.net_faults for arg in ("--fault", text)]
     return ["host", str(out / "deployment.toml"), "--all", "--out", str(out),
             "--duration", repr(duration_s), *opts.supervision_argv(), *net_faults]

@@ -1,7 +1,7 @@
 """Partitions and isolations cut for real between `--hosts K` namespaces (nftables).
 
 The hosts of `enclose run --hosts K` are linked by a bridge in a hub namespace
-(deploy.netns.hosts); each host's veth end there is `h<k>`.  A bridge-family table in
+(deploy.hosts.namespaced_hosts); each host's veth end there is `h<k>`.  A bridge-family table in
 the hub, `enclose_cut`, drops every frame between the host pairs in its set `pairs`; the
 launcher fills the set when a partition or isolation starts and empties it at the heal
 (`HostCut.check`, from the launcher's loop).  So Zenoh sees the cut itself: the routers'
