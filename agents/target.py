@@ -16,9 +16,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from agents.core.profiles import TargetMotion
 from agents.mavlink.adapter import MavlinkAdapter
 from agents.scenario.model import Scenario
+from agents.scenario.target_motion import TargetMotion
 from agents.shell.process import StatusReporter, load_run_scenario, process_main
 from agents.shell.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
 from agents.shell.tick_cost import NoCost, TickCost

@@ -16,13 +16,13 @@ from typing import Any
 import numpy as np
 
 from agents.analysis.timeseries import RunSeries
-from agents.core.profiles import TargetMotion
 from agents.follower.inputs import Latest
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Sample
 from agents.law.paper import PaperLaw
 from agents.membership.follower_place import setup_for, stand_ins
 from agents.scenario.model import Scenario
+from agents.scenario.target_motion import TargetMotion
 from transport.law_fields import NO_FIELDS
 from transport.messages import FollowerState, Header
 from transport.network_schema import NetworkConfig

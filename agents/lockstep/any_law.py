@@ -26,13 +26,13 @@ from typing import Any
 import numpy as np
 
 from agents.analysis.timeseries import RunSeries
-from agents.core.profiles import TargetMotion
 from agents.follower.inputs import Latest
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Sample
 from agents.lockstep.engine import estimator_substeps
 from agents.membership.follower_place import setup_for, stand_ins
 from agents.scenario.model import Scenario
+from agents.scenario.target_motion import TargetMotion
 from transport.law_fields import NO_FIELDS, LawFields
 from transport.messages import FollowerState, Header
 

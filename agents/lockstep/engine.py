@@ -17,11 +17,11 @@ import numpy as np
 
 from agents.analysis.geometry import as_complex, as_plane
 from agents.analysis.timeseries import RunSeries
-from agents.core.estimator import edge_fractions, observation_weights
-from agents.core.profiles import TargetMotion
 from agents.law.sig import rate_cap
 from agents.lockstep import kernel as lockstep_kernel
+from agents.lockstep.estimator_weights import edge_fractions, observation_weights
 from agents.scenario.model import Scenario
+from agents.scenario.target_motion import TargetMotion
 
 ProgressFn = Callable[[float], None]
 ENGINES = ("auto", "python", "numba")

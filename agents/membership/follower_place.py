@@ -3,7 +3,7 @@
 `setup_for` is the law's `Setup` from the member set (agents.membership.ring forms the ring),
 numpy-free: the follower process builds one at every change of members and must not
 import numpy (issue 15: <= 50 MB per follower); tests/unit/test_follower_setup.py pins its
-weights and edge fractions to the lock-step engine's matrices (agents.core.estimator).
+weights and edge fractions to the lock-step engine's matrices (agents.lockstep.estimator_weights).
 `stand_ins` fills a link not heard yet, `joined_estimate` is where a follower (re)joining
 a running swarm continues from; agents.follower.runner carries the law across a change.
 """

@@ -56,7 +56,8 @@ class Membership:
                                                                      if b == i}))
 
     def edge_fraction(self, i: int, j: int) -> float:
-        """agents.core.estimator.edge_fractions of the edge i -> j: 1 / max(deg_i, deg_j)."""
+        """agents.lockstep.estimator_weights.edge_fractions of the edge i -> j:
+        1 / max(deg_i, deg_j)."""
         return 1.0 / max(len(self.neighbours(i)), len(self.neighbours(j)))
 
     def weight_row(self, i: int) -> tuple[float, ...]:

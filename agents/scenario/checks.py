@@ -78,7 +78,7 @@ def _check_spread(scenario: Scenario) -> None:
     """rho_d must exceed every target's distance to the LAP over the whole run."""
     import numpy as np
 
-    from agents.core.profiles import TargetMotion
+    from agents.scenario.target_motion import TargetMotion
 
     times = np.linspace(0.0, scenario.run.duration_s, int(scenario.run.duration_s) + 2)
     pos, _ = TargetMotion(scenario).states(times)

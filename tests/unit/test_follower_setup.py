@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.core.estimator import edge_fractions, observation_weights
+from agents.lockstep.estimator_weights import edge_fractions, observation_weights
 from agents.membership.follower_place import setup_for
 from agents.membership.ring import membership
 from agents.scenario.file import load_scenario, parse_scenario, shipped_text

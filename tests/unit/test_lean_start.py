@@ -108,7 +108,7 @@ vehicle.close()
 """
 TARGET_SET_UP = """
 import agents.target
-from agents.core.profiles import TargetMotion
+from agents.scenario.target_motion import TargetMotion
 from agents.scenario.file import load_scenario
 TargetMotion(load_scenario("paper", whole_run=False), horizon_s=10.0).state(1.0)
 """
