@@ -16,8 +16,8 @@ import dataclasses
 import numpy as np
 
 from agents.analysis.metrics import compute_metrics, error_series
+from agents.loading.scenario_file import load_scenario
 from agents.lockstep.engine import simulate_lockstep
-from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 
 EPS_M, EPS_DELTA = 0.0999, 0.0199

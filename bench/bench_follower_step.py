@@ -28,8 +28,8 @@ from agents.follower.inputs import Latest
 from agents.follower.runner import LawRunner
 from agents.law.interface import Sample
 from agents.law.paper import PaperLaw
+from agents.loading.scenario_file import load_scenario
 from agents.membership.follower_place import setup_for, stand_ins
-from agents.scenario.file import load_scenario
 from transport.messages import FollowerState, Header
 from transport.network_schema import NetworkConfig
 

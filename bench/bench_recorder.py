@@ -16,7 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.recording.loop import MCAP_FILE, Recorder
 from deploy.recording.progress import live_errors
 from tests.recorder_synth import SynthRun

@@ -28,7 +28,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from tests.integration.test_transport_zenoh import free_port
 from tests.recorder_synth import SynthRun
 from transport.bus import wait_until_alive

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 
 KEYS = ("estimator_error_m", "radius_error_m", "angle_error", "settle_time_s",
         "command_jump_m_s", "silent_followers")

@@ -28,8 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.analysis.metrics import Metrics, compute_metrics, error_series
 from agents.analysis.timeseries import RunSeries
+from agents.loading.scenario_file import load_scenario
 from agents.lockstep.engine import simulate_lockstep
-from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 from tests.swarm_harness import run_swarm, with_estimator
 

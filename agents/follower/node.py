@@ -21,7 +21,7 @@ from agents.follower.lie import Liar, Published
 from agents.follower.plausible import gate_limits, own_side
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Output, Sample
-from agents.law.loader import make_law
+from agents.loading.law_loader import make_law
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.membership.follower_place import setup_for, stand_ins
 from agents.membership.liveness import MembershipWatch

@@ -10,7 +10,7 @@
 `module` is imported from the scenario file's folder; a folder may lead it
 (`module = "../laws/mine:MyLaw"`), relative to the file.  `name` and `module` are the
 table's own keys; every other key is a parameter of the law, which the law checks itself
-(`Law.from_params`, through agents.law.loader) when the scenario loads.
+(`Law.from_params`, through agents.loading.law_loader) when the scenario loads.
 
 A law reference outside a scenario file (`enclose run --law`, a sweep's `law` axis) is
 written the same way: a shipped name, or `[folder/]package.module:Class`, its folder

@@ -17,7 +17,7 @@ import tomllib
 from dataclasses import dataclass
 from typing import Any
 
-from agents.law.loader import make_law
+from agents.loading.law_loader import make_law
 from agents.scenario.law import absolute_ref, law_from_ref
 from agents.scenario.model import Scenario
 from errors import ScenarioError

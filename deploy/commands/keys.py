@@ -12,7 +12,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.hosts.deployment import Deployment, HostSpec, load_deployment, split_over_hosts
 from deploy.hosts.host_keys import OPERATOR, write_swarm_keys
 from errors import ConfigError

@@ -19,8 +19,8 @@ from typing import Any
 
 from agents.follower.journal_file import Frames
 from agents.follower.journal_replay import Replay, journals, replay
-from agents.law.loader import make_law
-from agents.scenario.file import load_scenario
+from agents.loading.law_loader import make_law
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import Scenario
 from agents.shell.law_args import LawOptions, add_law_arguments, apply_law_arguments, toml_value
 from agents.shell.network_args import NetworkOptions, add_network_arguments, apply_network_arguments

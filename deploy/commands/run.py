@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.net_faults import check_window
 from agents.shell.law_args import add_law_arguments, apply_law_arguments
 from agents.shell.network_args import NetworkOptions, add_network_arguments, apply_network_arguments

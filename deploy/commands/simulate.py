@@ -15,10 +15,10 @@ from pathlib import Path
 from typing import Any
 
 from agents.analysis.timeseries import RunSeries
-from agents.law.loader import make_law
+from agents.loading.law_loader import make_law
+from agents.loading.scenario_file import load_scenario
 from agents.lockstep.any_law import simulate_law
 from agents.lockstep.engine import ENGINES, simulate_lockstep
-from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 from agents.shell.law_args import LawOptions, add_law_arguments, apply_law_arguments
 from deploy.launch.launch_options import add_figures_argument

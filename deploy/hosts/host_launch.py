@@ -20,7 +20,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from agents.scenario.file import load_scenario, parse_scenario, shipped_text
+from agents.loading.scenario_file import load_scenario, parse_scenario, shipped_text
 from agents.scenario.law import pinned_law
 from agents.scenario.model import Scenario
 from agents.shell.network_args import apply_network_arguments

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from agents.law.loader import make_law
+from agents.loading.law_loader import make_law
 from agents.membership.liveness import MembershipWatch
 from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic

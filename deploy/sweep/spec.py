@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import ESTIMATORS
 from agents.scenario.net_faults import check_fault_flag
 from agents.scenario.network import IMPAIRMENT_KEYS, choice, impairment

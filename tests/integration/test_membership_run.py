@@ -18,8 +18,8 @@ from typing import Any
 
 import pytest
 
+from agents.loading.scenario_file import load_scenario
 from agents.membership.ring_accuracy import PhaseErrors, phase_errors
-from agents.scenario.file import load_scenario
 from deploy.procs.pids import read_pids, signal_same
 from deploy.report.rundir import read_series
 from tests.integration.real_time import judged

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.report.cpu_load import process_status_kb
 from tests.integration.test_recorder_process import (
     publish_paced,

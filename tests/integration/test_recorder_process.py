@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.report.verdict import read_verdict
 from tests.integration import runs
 from tests.integration.test_transport_zenoh import free_port

@@ -21,9 +21,9 @@ from agents.follower.inputs import Latest
 from agents.follower.runner import LawRunner
 from agents.law.interface import Sample
 from agents.law.paper import PaperLaw
+from agents.loading.scenario_file import load_scenario, parse_scenario
 from agents.lockstep.engine import estimator_substeps, simulate_lockstep
 from agents.membership.follower_place import setup_for
-from agents.scenario.file import load_scenario, parse_scenario
 from agents.scenario.model import Scenario
 from errors import ScenarioError
 from tests.unit.test_closed_loop import SIX

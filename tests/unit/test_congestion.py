@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import cast
 
 from agents.follower.node import FollowerNode
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.shell.process import StatusReporter
 from sim_backend.swarm_sim import SensorPublisher
 from tests.still_vehicle import still_vehicle

@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.hosts.deployment import dump_deployment, parse_deployment, split_over_hosts
 from deploy.hosts.host_launch import _links
 from errors import ConfigError

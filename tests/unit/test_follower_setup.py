@@ -8,10 +8,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from agents.loading.scenario_file import load_scenario, parse_scenario, shipped_text
 from agents.lockstep.estimator_weights import edge_fractions, observation_weights
 from agents.membership.follower_place import setup_for
 from agents.membership.ring import membership
-from agents.scenario.file import load_scenario, parse_scenario, shipped_text
 from agents.scenario.model import ccw_order
 from errors import InadmissibleError
 

@@ -7,7 +7,7 @@ import dataclasses
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.net_faults import parse_net_fault_flag
 from deploy.hosts.deployment import Deployment, HostSpec, split_along
 from deploy.hosts.host_cut import (

@@ -16,9 +16,9 @@ from agents.follower.journal_file import JOURNAL_VERSION, Frames, FrameWriter, e
 from agents.follower.journal_replay import replay
 from agents.follower.runner import LawRunner
 from agents.law.interface import Inputs, Law, Output, Peer, Sample, Setup
-from agents.law.loader import make_law
+from agents.loading.law_loader import make_law
+from agents.loading.scenario_file import load_scenario
 from agents.membership.follower_place import setup_for
-from agents.scenario.file import load_scenario
 from errors import JournalError
 
 pytestmark = pytest.mark.timeout(60)

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from agents.law.paper import PaperLaw
-from agents.scenario.file import load_scenario, shipped_text
+from agents.loading.scenario_file import load_scenario, shipped_text
 from agents.scenario.law import pinned_law
 from agents.shell.law_args import (
     LawOptions,

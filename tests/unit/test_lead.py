@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from agents.analysis.metrics import Metrics, compute_metrics, error_series
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from tests.swarm_harness import run_swarm
 
 VEHICLE_TAU_S = 0.05  # sim_backend.kinematics.VehicleParams.tau_s

@@ -45,7 +45,7 @@ def imported_by(code: str) -> set[str]:
 FOLLOWER_SET_UP = """
 import agents.follower.main
 from agents.membership.follower_place import setup_for
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from transport.impairment import ImpairedBus
 from transport.key_exprs import SwarmKeys
 from transport.link_stats import AgeHistogram
@@ -109,7 +109,7 @@ vehicle.close()
 TARGET_SET_UP = """
 import agents.target
 from agents.scenario.target_motion import TargetMotion
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 TargetMotion(load_scenario("paper", whole_run=False), horizon_s=10.0).state(1.0)
 """
 FULL_DIALECT = "pymavlink.dialects.v20.common"

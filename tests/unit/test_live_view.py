@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 from foxglove import messages as fm
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.launch import live_args
 from deploy.recording.live_links import LinkTracker, health

@@ -9,6 +9,7 @@ import time
 import pytest
 
 from agents.follower.node import FollowerNode
+from agents.loading.scenario_file import load_scenario
 from agents.membership.liveness import (
     REFRESH_MAX_S,
     REFRESH_S,
@@ -17,7 +18,6 @@ from agents.membership.liveness import (
     TokenSet,
 )
 from agents.membership.member_hold import HOLD_S, SETTLE_S
-from agents.scenario.file import load_scenario
 from tests.still_vehicle import still_vehicle
 from transport.codec import encode
 from transport.key_exprs import SwarmKeys

@@ -23,11 +23,11 @@ import pytest
 from agents.analysis.metrics import compute_metrics, error_series
 from agents.analysis.timeseries import RunSeries
 from agents.law.interface import Inputs, Law, Output, Sample, Setup
-from agents.law.loader import make_law
+from agents.loading.law_loader import make_law
+from agents.loading.scenario_file import load_scenario
 from agents.lockstep.any_law import simulate_law
 from agents.lockstep.engine import simulate_lockstep
 from agents.membership.follower_place import setup_for
-from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.cli import main
 

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from agents.loading.scenario_file import load_scenario, parse_scenario
 from agents.membership.ring import membership, ring_order
-from agents.scenario.file import load_scenario, parse_scenario
 from agents.scenario.model import Scenario
 from errors import InadmissibleError
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from agents.scenario.file import build_scenario, shipped_text
+from agents.loading.scenario_file import build_scenario, shipped_text
 from agents.scenario.net_faults import check_fault_flag, parse_net_fault_flag
 from agents.shell.network_args import NetworkOptions, apply_network_arguments
 from deploy.commands.run import RunOptions, run

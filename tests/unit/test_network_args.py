@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.shell.network_args import (
     NetworkOptions,
     add_network_arguments,
@@ -128,7 +128,7 @@ def test_yield_cpu_lowers_the_thread_and_its_own_sessions_autogroup(tmp_path: Pa
 
 
 def test_agent_nice_is_the_scenarios_whole_number_and_off_by_default() -> None:
-    from agents.scenario.file import parse_scenario, shipped_text
+    from agents.loading.scenario_file import parse_scenario, shipped_text
 
     base = shipped_text("paper")
     assert load_scenario().network.agent_nice == 0

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from agents.follower.node import FollowerNode
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from tests.still_vehicle import still_vehicle
 from transport.codec import encode
 from transport.key_exprs import SwarmKeys

@@ -16,8 +16,8 @@ import pytest
 
 from agents.analysis.metrics import compute_metrics, error_series
 from agents.law.enclosing import ControlGains, enclosing_control
+from agents.loading.scenario_file import load_scenario
 from agents.lockstep.engine import simulate_lockstep
-from agents.scenario.file import load_scenario
 from tests.reference.law import enclosing_control as reference_control
 
 GAINS = ControlGains(2.0, 3.0, 2.0, 3.0, 8.0, 0.2, 0.25)

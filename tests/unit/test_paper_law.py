@@ -17,8 +17,8 @@ from agents.follower.inputs import Latest
 from agents.follower.runner import LawRunner
 from agents.law.interface import Output, Sample, reference
 from agents.law.paper import PaperLaw, PaperState
+from agents.loading.scenario_file import load_scenario
 from agents.membership.follower_place import setup_for, stand_ins
-from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 from tests.swarm_harness import run_swarm, with_estimator
 from transport.messages import FollowerState, Header

@@ -12,7 +12,7 @@ import pytest
 
 from agents.analysis.metrics import worst
 from agents.analysis.timeseries import RunSeries
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.recording.assembler import RunAssembler, align_latest
 from deploy.recording.outputs import write_final_outputs

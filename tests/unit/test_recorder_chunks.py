@@ -31,8 +31,8 @@ from agents.analysis.metrics import (
     worst,
 )
 from agents.analysis.timeseries import RunSeries
+from agents.loading.scenario_file import load_scenario
 from agents.membership.ring_accuracy import PhaseReport, membership_phases, phase_report
-from agents.scenario.file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.chunks import EPS_S

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.recording.links import link_report, unreadable_links
 from deploy.recording.loop import Recorder
 from tests.recorder_synth import SynthRun

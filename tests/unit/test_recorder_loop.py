@@ -9,7 +9,7 @@ import msgpack
 import pytest
 from mcap.reader import make_reader
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.recording.loop import MCAP_FILE, Recorder
 from deploy.recording.queues import (

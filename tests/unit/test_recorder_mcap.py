@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.recording.mcap_log import McapLog, dataclass_schema, message_json
 from tests.recorder_synth import SynthRun
 from transport.key_exprs import SwarmKeys

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.recording.loop import Recorder
 from tests.recorder_synth import SynthRun
 from transport.codec import encode

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from agents.analysis.metrics import error_series
+from agents.loading.scenario_file import load_scenario
 from agents.lockstep.engine import simulate_lockstep
-from agents.scenario.file import load_scenario
 from deploy.report.link_figures import link_health_figure
 from deploy.report.link_history import LinkHistory, read_links_csv
 from deploy.report.marks import Mark, event_marks, run_marks

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.hosts.deployment import Deployment, HostSpec
 from deploy.launch.ports import free_tcp_port
 from errors import ConfigError

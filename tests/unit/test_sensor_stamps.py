@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from sim_backend.kinematics import FleetState
 from sim_backend.runtime import spawn_points_ned
 from sim_backend.swarm_sim import SensorPublisher, sensor_every_ticks, sim_tick_hz

@@ -16,7 +16,7 @@ from agents.analysis.metrics import (
     window_metrics,
 )
 from agents.analysis.timeseries import RunSeries
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.recording.scene import FOLLOWER_RGBA, TOO_CLOSE_RGBA, scene_update, too_close
 from deploy.recording.view import ERRORS_TOPIC, LOG_TOPIC, SCENE_TOPIC, LiveView
 from deploy.report.rundir import RunInfo

@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 
 from agents.follower.inputs import Latest
 from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
+from agents.loading.scenario_file import load_scenario
 from agents.membership.follower_place import setup_for
-from agents.scenario.file import load_scenario
 
 PERIOD_S = 0.05
 TAU_S, ACCEL_TAU_S = 0.1, 0.5

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agents.follower.node import FollowerNode
+from agents.loading.scenario_file import load_scenario
 from agents.membership.liveness import FLAP_MAX_CHANGES, FLAP_WINDOW_S, MembershipWatch, TokenSet
-from agents.scenario.file import load_scenario
 from tests.still_vehicle import still_vehicle
 from transport.bus import MAX_ALIVE_KEYS, AliveEvent, Received
 from transport.codec import encode

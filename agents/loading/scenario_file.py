@@ -11,7 +11,7 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
-from agents.law.loader import make_law
+from agents.loading.law_loader import make_law
 from agents.scenario.checks import check_admissible
 from agents.scenario.faults import parse_faults
 from agents.scenario.fields import Table, positive, table_of, vec2
