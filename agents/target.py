@@ -16,19 +16,19 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from agents.core.profiles import TargetMotion
 from agents.mavlink.adapter import MavlinkAdapter
-from agents.process import StatusReporter, load_run_scenario, process_main
-from agents.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
 from agents.scenario.model import Scenario
-from agents.tick_cost import NoCost, TickCost
-from agents.vehicle_loop import fly
+from agents.scenario.target_motion import TargetMotion
+from agents.shell.process import StatusReporter, load_run_scenario, process_main
+from agents.shell.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
+from agents.shell.tick_cost import NoCost, TickCost
+from agents.shell.vehicle_loop import fly
+from errors import EncloseError
 from transport.access import sender_ids
 from transport.bus import Bus
-from transport.checks import DEFAULT_LIMITS
 from transport.decoder import Decoder
-from transport.errors import EncloseError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
+from transport.message_checks import DEFAULT_LIMITS
 from transport.messages import RunControl
 
 log = logging.getLogger("enclose.target")
@@ -73,7 +73,7 @@ class TargetNode:
         self.decoder = Decoder(expect=(RunControl,), limits=DEFAULT_LIMITS,
                                senders=sender_ids(scenario.n, scenario.m))
         self.status = StatusReporter(bus, self.keys, "target", index)
-        self.cost: TickCost | NoCost = NoCost()  # set by the loop (agents.tick_cost)
+        self.cost: TickCost | NoCost = NoCost()  # set by the loop (agents.shell.tick_cost)
         self.start_s: float | None = None
         self.stop_s = math.inf
 

@@ -31,8 +31,8 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from deploy.cpu_load import process_status_kb
-from deploy.pids import read_pids
+from deploy.procs.pids import read_pids
+from deploy.report.cpu_load import process_status_kb
 
 CGROUP_V1, CGROUP_V2 = Path("/sys/fs/cgroup/cpu"), Path("/sys/fs/cgroup")
 

@@ -19,8 +19,8 @@ from pathlib import Path
 
 from rich.console import Console
 
-from deploy.run_board import BoardView, ProcessView, render_board
-from deploy.verdict import print_verdict, read_verdict
+from deploy.launch.run_board import BoardView, ProcessView, render_board
+from deploy.report.verdict import print_verdict, read_verdict
 
 PROGRESS = {"max_estimator_error_m": 0.012, "max_abs_e_rho_m": 0.25, "max_abs_e_delta": 0.004,
             "links": {"count": 12, "silent": [], "min_delivered": 0.98,

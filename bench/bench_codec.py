@@ -27,10 +27,10 @@ from collections.abc import Callable
 
 from transport.access import sender_ids
 from transport.bus import Received
-from transport.checks import DEFAULT_LIMITS
 from transport.codec import decode, encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.link_stats import LinkDecoder
+from transport.message_checks import DEFAULT_LIMITS
 from transport.messages import (
     FollowerState,
     Header,

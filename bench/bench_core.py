@@ -18,9 +18,9 @@ import time
 
 import numpy as np
 
-from agents.core.lockstep import simulate_lockstep
-from agents.core.metrics import Metrics, compute_metrics, error_series
-from agents.scenario.file import load_scenario
+from agents.analysis.metrics import Metrics, compute_metrics, error_series
+from agents.loading.scenario_file import load_scenario
+from agents.lockstep.engine import simulate_lockstep
 from agents.scenario.model import Scenario
 
 EPS_RHO_M, EPS_DELTA = 0.0999, 0.0199

@@ -1,7 +1,7 @@
 """How fast must the estimator run for a long ring (issue 15)? Lock-step, control at 50 Hz.
 
 For each scenario, k_e and estimator rate: the paper's metrics over the second half of
-a 120-s lock-step run (`agents.core.lockstep`, the estimator sub-stepped between
+a 120-s lock-step run (`agents.lockstep.engine`, the estimator sub-stepped between
 control steps).  Deterministic: no network, no machine load.
 
 Run: python bench/bench_estimator_rate.py [--cases ring16 ring32] [--rates 50 100 200 400 800]
@@ -15,9 +15,9 @@ import dataclasses
 
 import numpy as np
 
-from agents.core.lockstep import simulate_lockstep
-from agents.core.metrics import compute_metrics, error_series
-from agents.scenario.file import load_scenario
+from agents.analysis.metrics import compute_metrics, error_series
+from agents.loading.scenario_file import load_scenario
+from agents.lockstep.engine import simulate_lockstep
 from agents.scenario.model import Scenario
 
 EPS_M, EPS_DELTA = 0.0999, 0.0199

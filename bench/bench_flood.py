@@ -48,7 +48,7 @@ def victim(args: argparse.Namespace) -> int:
     from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
     from agents.mavlink.signing import load_key
     from agents.mavlink.startup import StartupTimeouts, start_offboard
-    from agents.process import Ticker
+    from agents.shell.process import Ticker
 
     cfg = AdapterConfig(local_port=args.local_port, remote_port=args.vehicle_port,
                         target_sysid=1, signing_key=load_key(args.key), signing_link_id=0)

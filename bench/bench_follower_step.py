@@ -25,11 +25,11 @@ from collections.abc import Callable
 from typing import Any
 
 from agents.follower.inputs import Latest
-from agents.follower.membership import setup_for, stand_ins
 from agents.follower.runner import LawRunner
 from agents.law.interface import Sample
 from agents.law.paper import PaperLaw
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
+from agents.membership.follower_place import setup_for, stand_ins
 from transport.messages import FollowerState, Header
 from transport.network_schema import NetworkConfig
 

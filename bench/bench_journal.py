@@ -32,8 +32,8 @@ from agents.follower.journal import (
     read_target,
 )
 from agents.follower.journal_file import Frames
-from agents.follower.replay import replay
-from agents.law.loader import make_law
+from agents.follower.journal_replay import replay
+from agents.loading.law_loader import make_law
 from deploy.commands.replay import run_scenario
 from transport.law_fields import FieldSpec
 

@@ -22,7 +22,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from deploy.lie_window import lie_figures
+from deploy.report.lie_window import lie_figures
 
 ENCLOSE = str(Path(sys.executable).with_name("enclose"))
 

@@ -21,13 +21,13 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.recording.live_server import LiveServer
 from deploy.recording.loop import Recorder
 from tests.recorder_synth import SynthRun
 from transport.codec import encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import FollowerState, Message, ProcessStatus, Stamper
 

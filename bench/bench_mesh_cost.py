@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from transport.bus import Congestion
 from transport.credentials import Identity, identity_file, make_credentials
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 

@@ -25,7 +25,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.json_files import read_json as read_json_or_none
 from deploy.netns.namespace import probe

@@ -3,7 +3,7 @@
 For each estimator and role, one real loopback `enclose run` in which that role's
 process is frozen (SIGSTOP, then SIGCONT, by PID) once per pause length, `--spacing`
 seconds apart; each recovery is judged from its resume to the next pause (series.csv,
-deploy.recovery).  Prints a markdown table.
+deploy.report.recovery).  Prints a markdown table.
 
 Run (idle machine, about 12 min with the defaults):
     python bench/bench_pauses.py [--lengths 0.2 0.5 1 2 5] [--roles sim follower-0 target-0]
@@ -19,7 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from deploy.recovery import recoveries
+from deploy.report.recovery import recoveries
 from tests.integration.pauses import Pause, run_with_pauses
 
 

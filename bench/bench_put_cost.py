@@ -21,9 +21,9 @@ from pathlib import Path
 
 import zenoh
 
-from deploy.ports import free_tcp_port
+from deploy.launch.ports import free_tcp_port
 from transport.credentials import Identity, identity_file, make_credentials
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.zenoh_config import ZenohConfig, build_zenoh_config
 
 KEYS = SwarmKeys("putcost")

@@ -16,12 +16,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.recording.loop import MCAP_FILE, Recorder
 from deploy.recording.progress import live_errors
 from tests.recorder_synth import SynthRun
 from transport.codec import encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import Stamper
 

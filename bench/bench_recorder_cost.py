@@ -1,6 +1,6 @@
 """The recorder process's CPU per message recorded, with its live view on (issue 50).
 
-A real recorder (`python -m deploy.recorder --live-port 0`) on a Zenoh loopback bus (plain
+A real recorder (`python -m deploy.recording.recorder --live-port 0`) on a Zenoh loopback bus (plain
 TCP, no mTLS: the bench's publisher holds no certificate) records a synthetic run
 (tests/recorder_synth.py: truth + every follower's state at --rate-hz, paced on the wall
 clock as the swarm sends them).  Its CPU over all its threads (/proc/<pid>/stat), from a
@@ -28,12 +28,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from tests.integration.test_transport_zenoh import free_port
 from tests.recorder_synth import SynthRun
 from transport.bus import wait_until_alive
 from transport.codec import encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import Stamper
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig, loopback_endpoint
@@ -63,7 +63,7 @@ def one_run(case: str, rate_hz: float, seconds: float, out: Path) -> dict:
     swarm, endpoint = f"rc{os.getpid()}", loopback_endpoint(free_port())
     keys, scenario = SwarmKeys(swarm), load_scenario(case)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "deploy.recorder", "--scenario", case, "--swarm", swarm,
+        [sys.executable, "-m", "deploy.recording.recorder", "--scenario", case, "--swarm", swarm,
          "--out", str(out), "--listen", endpoint, "--live-port", "0", "--no-figures"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     window: dict[str, float] = {}

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 
 KEYS = ("estimator_error_m", "radius_error_m", "angle_error", "settle_time_s",
         "command_jump_m_s", "silent_followers")
@@ -60,7 +60,7 @@ def swarm_run(out: Path, scenario: str, duration_s: float, extra: list[str]) -> 
 
 def load_figures(load: dict[str, Any]) -> dict[str, Any]:
     """Late ticks, CPU and the largest follower's peak RSS over the whole run, from
-    launch.json "load" (deploy.cpu_load)."""
+    launch.json "load" (deploy.report.cpu_load)."""
     ticks = load.get("ticks") or {}
     cpu = load.get("process_cpu_pct") or {}
     followers = [v for k, v in cpu.items() if k.startswith("follower-")]

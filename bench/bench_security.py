@@ -27,12 +27,12 @@ from pathlib import Path
 from agents.mavlink.signing import signing_timestamp
 from agents.mavlink.wire import decode_datagram, new_codec, sign_outgoing
 from agents.scenario.model import HomeConfig, VehicleConfig
-from deploy.cpu_load import process_cpu_s
-from deploy.ports import free_tcp_port
+from deploy.launch.ports import free_tcp_port
+from deploy.report.cpu_load import process_cpu_s
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 from transport.codec import encode
 from transport.credentials import Identity, identity_file, make_credentials
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import FollowerState, Stamper
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig

@@ -29,7 +29,7 @@ from pathlib import Path
 import zenoh
 
 from transport.bus import Congestion
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig, build_zenoh_config, loopback_endpoint
 

@@ -52,8 +52,8 @@ from soak_windows import (
     worst_errors,
 )
 
-from deploy.cpu_load import load_1min, process_cpu_s, process_status_kb
-from deploy.pids import read_pids
+from deploy.procs.pids import read_pids
+from deploy.report.cpu_load import load_1min, process_cpu_s, process_status_kb
 
 _OUTPUTS = re.compile(r"run outputs written in ([0-9.]+) s")
 _STATE = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) .*recorder (stopping|done|failed)$",

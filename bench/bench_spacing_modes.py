@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from deploy.recording.resume import read_back
-from deploy.rundir import SERIES_FILE, read_info, series_columns
+from deploy.report.rundir import SERIES_FILE, read_info, series_columns
 from transport.messages import FollowerState, TruthSnapshot
 
 FloatArray = NDArray[np.float64]
@@ -34,7 +34,7 @@ FloatArray = NDArray[np.float64]
 
 def read_deltas(run_dir: Path) -> tuple[FloatArray, FloatArray]:
     """(t_s, e_delta per follower) from series.csv: the true included-angle errors the
-    angle metric judges (`e<i>_e_delta`, deploy.rundir.series_columns), not the ones each
+    angle metric judges (`e<i>_e_delta`, deploy.report.rundir.series_columns), not the ones each
     follower saw against its estimate (`delta<i>_delta`)."""
     info = read_info(run_dir)
     data = np.loadtxt(run_dir / SERIES_FILE, delimiter=",", skiprows=1, ndmin=2)

@@ -2,7 +2,7 @@
 
 Runs `enclose run SCENARIO --duration D` (mTLS + access control and MAVLink signing on,
 as by default) and times each phase on CLOCK_MONOTONIC, which the bench, the launcher
-and every process it starts share (agents.phases):
+and every process it starts share (agents.shell.phases):
 
   launcher:  exec, credentials (made), spawned (all children), bus_open, linked (all tokens)
   follower:  spawn (launcher's Popen), exec, main (imports done), bus_open (Zenoh session,
@@ -30,9 +30,9 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from agents.phases import parse_phases
-from deploy.cpu_load import process_status_kb
-from deploy.pids import read_pids
+from agents.shell.phases import parse_phases
+from deploy.procs.pids import read_pids
+from deploy.report.cpu_load import process_status_kb
 
 FOLLOWER_PHASES = ("spawn", "exec", "main", "bus_open", "node", "heartbeat", "position", "armed",
                    "takeoff_accepted", "at_altitude", "offboard", "linked")

@@ -1,7 +1,7 @@
 """A bigger step share instead of more messages? ring16's lag against `[gains] step_fraction`.
 
 Prints, for each step_fraction, the errors over the second half of
-  - the lock-step loop at 50 Hz with the estimator at each of --rates (agents.core.lockstep);
+  - the lock-step loop at 50 Hz with the estimator at each of --rates (agents.lockstep.engine);
   - the networked follower logic in lock-step with every message --delays ticks late
     (tests/swarm_harness.run_swarm, robust estimator), as between processes.
 The command jump column is what tells a stable step from an oscillating one.  By default
@@ -26,10 +26,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from agents.core.lockstep import simulate_lockstep
-from agents.core.metrics import Metrics, compute_metrics, error_series
-from agents.core.timeseries import RunSeries
-from agents.scenario.file import load_scenario
+from agents.analysis.metrics import Metrics, compute_metrics, error_series
+from agents.analysis.timeseries import RunSeries
+from agents.loading.scenario_file import load_scenario
+from agents.lockstep.engine import simulate_lockstep
 from agents.scenario.model import Scenario
 from tests.swarm_harness import run_swarm, with_estimator
 

@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from deploy.cpu_load import process_cpu_s, process_status_kb
-from deploy.pids import read_pids
+from deploy.procs.pids import read_pids
+from deploy.report.cpu_load import process_cpu_s, process_status_kb
 
 
 def rss_mb(pid: int) -> float | None:

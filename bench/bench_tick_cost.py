@@ -4,7 +4,7 @@
 
 Runs `enclose run CASE` (the secure default unless --insecure) with ENCLOSE_TICK_COST set:
 every follower and target then measures, from the start word to its last status, the CPU
-of its loop thread per phase (agents.tick_cost.PHASES) and of its threads by group (the
+of its loop thread per phase (agents.shell.tick_cost.PHASES) and of its threads by group (the
 loop's, Zenoh's runtime, the rest), and reports them in its status.  Printed per tick, in
 microseconds: each phase, `rest` (the loop thread's CPU outside the marks: signal
 handlers, the garbage collector's pauses between marks land inside them), Zenoh's threads,
@@ -28,7 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from agents.tick_cost import ENV, PHASES  # noqa: E402
+from agents.shell.tick_cost import ENV, PHASES  # noqa: E402
 
 GROUPS = ("main", "zenoh", "other")
 ROWS = (*PHASES, "rest", "thread_zenoh", "thread_other", "total")

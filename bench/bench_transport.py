@@ -27,7 +27,7 @@ from collections.abc import Callable
 from transport.bus import Congestion
 from transport.codec import encode
 from transport.decoder import Decoder
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import FollowerState, ProcessStatus, Stamper
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig, loopback_endpoint

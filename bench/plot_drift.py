@@ -16,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from deploy.rundir import SERIES_FILE, read_info, read_series
+from deploy.report.rundir import SERIES_FILE, read_info, read_series
 
 
 def drift(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,7 @@ import statistics
 import time
 
 from agents.scenario.model import HomeConfig, VehicleConfig
-from bench.bench_process_cost import HOST, Agents
+from bench.gcs_agents import HOST, Agents
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 
 

@@ -8,10 +8,10 @@ import logging
 import sys
 from collections.abc import Sequence
 
-from agents.lifeline import die_with_launcher
-from agents.phases import mark
+from agents.shell.lifeline import die_with_launcher
+from agents.shell.phases import mark
 from deploy.version import enclose_version
-from transport.errors import EncloseError
+from errors import EncloseError
 
 # Each module exposes `register(subparsers)`, which adds its subparser and sets `func(args) -> int`.
 # Keyed by the command it registers: `enclose run` imports only deploy.commands.run (not the
@@ -19,7 +19,7 @@ from transport.errors import EncloseError
 COMMANDS: dict[str, str] = {
     "simulate": "deploy.commands.simulate",
     "run": "deploy.commands.run",
-    "report": "deploy.report",
+    "report": "deploy.report.run_report",
     "sim": "deploy.commands.sim",
     "sweep": "deploy.sweep.command",
     "keys": "deploy.commands.keys",
@@ -46,7 +46,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    die_with_launcher()  # an inner launcher (deploy.netns.run) dies with the outer one
+    die_with_launcher()  # an inner launcher (deploy.netns.netns_run) dies with the outer one
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser(argv).parse_args(argv)
     mark("imports")  # the subcommand's module is imported

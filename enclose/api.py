@@ -22,14 +22,14 @@ import tomli_w
 
 from enclose.results import Run, load_run
 from enclose.scenario import Scenario
-from transport.errors import ConfigError
+from errors import ConfigError
 
 if TYPE_CHECKING:
     import pandas as pd
 
-    from agents.law_args import LawOptions
+    from agents.shell.law_args import LawOptions
     from deploy.commands.replay import FollowerReplay
-    from deploy.launch_options import LaunchOptions
+    from deploy.launch.launch_options import LaunchOptions
 
 ScenarioLike = Scenario | str | Path | None
 RUN_KEYS = ("duration_s", "swarm")
@@ -69,7 +69,7 @@ def run(scenario: ScenarioLike = None, **overrides: Any) -> Run:
     `overrides` are the command's options by name: duration_s, out (default
     runs/run-<name>-<time>), swarm, insecure, noise_std_m, link_timeout_s, restart,
     max_restarts, faults (["AT_S:ACTION:TARGET[:DURATION_S]", ...]), port_range ("LO-HI"),
-    zenoh_config, live (True or a deploy.live_args.LiveOptions: serve the live view; default
+    zenoh_config, live (True or a deploy.launch.live_args.LiveOptions: serve the live view; default
     none), figures (False: none drawn), law and law_params (`law_options`), the network's
     (estimator, estimator_order, link, zenoh_runtime, agent_sched, impair_seed,
     latency_stamps) and its impairments
@@ -88,11 +88,11 @@ def run(scenario: ScenarioLike = None, **overrides: Any) -> Run:
 
 
 def launch_options(scenario_ref: str, overrides: Mapping[str, Any]) -> LaunchOptions:
-    """deploy.launch_options.LaunchOptions from `enclose.run`'s keyword overrides."""
-    from agents.network_args import NetworkOptions
+    """deploy.launch.launch_options.LaunchOptions from `enclose.run`'s keyword overrides."""
     from agents.scenario.network import IMPAIRMENT_KEYS
-    from deploy.launch_options import LaunchOptions
-    from deploy.live_args import LiveOptions
+    from agents.shell.network_args import NetworkOptions
+    from deploy.launch.launch_options import LaunchOptions
+    from deploy.launch.live_args import LiveOptions
 
     network_keys = {f.name for f in dataclasses.fields(NetworkOptions)} - {"impairment"}
     _check_keys("enclose.run", overrides,
@@ -113,8 +113,8 @@ def law_options(law: str | LawOptions | None,
     """The command's --law and --law-param: `law` a shipped law's name or
     "[folder/]module:Class" (from the current directory), None for the scenario's own;
     `params` override the law's parameters by name."""
-    from agents.law_args import LawOptions
     from agents.scenario.law import absolute_ref, law_from_ref
+    from agents.shell.law_args import LawOptions
 
     if isinstance(law, LawOptions):
         return law

@@ -1,9 +1,9 @@
 """`enclose.Run`: one run directory read back (`enclose.load_run`), lock-step or networked.
 
-Reads what `enclose simulate` and `enclose run` write (deploy.rundir, deploy.launch_end,
-deploy.recording): metrics.json, run.json, launch.json, series.parquet or series.csv,
-links.csv, the figures and the recording. Older run directories lack some of these: what is
-missing reads empty.
+Reads what `enclose simulate` and `enclose run` write (deploy.report.rundir,
+deploy.launch.launch_end, deploy.recording): metrics.json, run.json, launch.json,
+series.parquet or series.csv, links.csv, the figures and the recording. Older run
+directories lack some of these: what is missing reads empty.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from deploy.json_files import read_json
-from deploy.verdict import Verdict, read_verdict
-from transport.errors import ConfigError
+from deploy.report.verdict import Verdict, read_verdict
+from errors import ConfigError
 
 if TYPE_CHECKING:  # pandas is imported when a table is first read
     import pandas as pd
@@ -64,7 +64,7 @@ class Run:
 
     @cached_property
     def series(self) -> pd.DataFrame:
-        """The series (columns deploy.rundir.series_columns), indexed by time t_s: from
+        """The series (columns deploy.report.rundir.series_columns), indexed by time t_s: from
         series.parquet (full precision, quick for long runs) where the run has one, else
         from series.csv."""
         parquet = self.run_dir / FILES["series_parquet"]

@@ -1,7 +1,7 @@
 """`enclose.Scenario`: a scenario as its TOML document and its checked model, for code.
 
 A variation is the same document with some values replaced and checked again by the one
-scenario reader (`agents.scenario.file.build_scenario`): every error names its field.
+scenario reader (`agents.loading.scenario_file.build_scenario`): every error names its field.
 A networked run's processes read a scenario from a file, so a variation is written as
 TOML into its run directory (`Scenario.reference`), its `[law] module` pinned to the folder
 it was loaded from.
@@ -18,10 +18,10 @@ from typing import Any
 
 import tomli_w
 
-from agents.scenario.file import DEFAULT_SCENARIO, build_scenario, shipped_text
+from agents.loading.scenario_file import DEFAULT_SCENARIO, build_scenario, shipped_text
 from agents.scenario.law import absolute_ref
 from agents.scenario.model import Scenario as ScenarioModel
-from transport.errors import ScenarioError
+from errors import ScenarioError
 
 SCENARIO_FILE = "scenario.toml"  # a variation, written into the run directory it runs in
 

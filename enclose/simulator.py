@@ -1,7 +1,7 @@
 """`enclose.simulator.running_sim`: the MAVLink vehicle simulator (`enclose sim`) as a child
 process on ports of its own, for a client's tests; stopped by its PID when the block ends.
 
-Its ports come from a port slot (deploy.port_slots), the lock parallel sweep cells take,
+Its ports come from a port slot (deploy.launch.port_slots), the lock parallel sweep cells take,
 so that simulators and runs started side by side never share a port; a slot a port of
 which some other process holds (a client's socket a failed test left open) is passed over.
 """
@@ -21,9 +21,9 @@ from pathlib import Path
 
 from agents.mavlink.modes import FLAVOURS
 from agents.mavlink.signing import write_key
-from deploy.port_slots import port_slot
-from deploy.ports import ports_held
-from transport.errors import ConfigError, SimulatorError
+from deploy.launch.port_slots import port_slot
+from deploy.launch.ports import ports_held
+from errors import ConfigError, SimulatorError
 
 HOST = "127.0.0.1"
 READY_LINE = "listening on"  # deploy.commands.sim logs it once every vehicle's socket is bound

@@ -8,7 +8,7 @@
   as its `enclose.Run`. Configure with
   `@pytest.mark.enclose_swarm(scenario="paper", duration_s=10.0, **run_overrides)`.
 
-Both take the next free port block (deploy.port_slots) when a port of one is held, by any
+Both take the next free port block (deploy.launch.port_slots) when a port of one is held, by any
 process, the test's own included (a connection a failed test's traceback keeps open): one
 failure does not fail every later test.  DeployError names the ports only when no block
 is free.
@@ -56,8 +56,8 @@ def enclose_sim(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[SimE
 @pytest.fixture
 def enclose_swarm(request: pytest.FixtureRequest, tmp_path: Path) -> Run:
     """A networked run of the marker's scenario (default: the paper's case, 10 s)."""
-    from deploy.port_slots import port_slot
-    from deploy.ports import ports_held
+    from deploy.launch.port_slots import port_slot
+    from deploy.launch.ports import ports_held
     from enclose.api import run
 
     kwargs = _marker_kwargs(request, "enclose_swarm")

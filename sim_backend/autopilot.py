@@ -20,7 +20,7 @@ from agents.mavlink.modes import (
     known_mode,
     mode_of_do_set_mode,
 )
-from sim_backend.model import YAW_ANGLE, YAW_HOLD, YAW_RATE
+from sim_backend.kinematics import YAW_ANGLE, YAW_HOLD, YAW_RATE
 from sim_backend.setpoint import Setpoint
 
 MAV_CMD_NAV_RETURN_TO_LAUNCH = 20

@@ -10,16 +10,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 from agents.mavlink.wire import MAVLinkMessage as Msg
 from agents.mavlink.wire import encode
 from sim_backend import telemetry as tm
 from sim_backend.autopilot import ACCEPTED, DENIED, SEVERITY_WARNING, UNSUPPORTED
+from sim_backend.endpoint_view import EndpointView, Rx
 from sim_backend.setpoint import SetpointRejected, decode_setpoint
-
-if TYPE_CHECKING:
-    from sim_backend.endpoint import Rx, VehicleEndpoint
 
 MAV_CMD_DO_REPOSITION = 192
 MAV_CMD_GET_HOME_POSITION = 410
@@ -34,10 +31,10 @@ MSG_MESSAGE_INTERVAL = 244
 Params = tuple[float, ...]
 # MAV_RESULT, the reply (bytes, or what packs it after the ACK), reason when not ACCEPTED
 Outcome = tuple[int, bytes | Callable[[], bytes], str]
-CommandHandler = Callable[["VehicleEndpoint", Params, "Rx"], Outcome]
+CommandHandler = Callable[[EndpointView, Params, Rx], Outcome]
 
 
-def on_setpoint(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def on_setpoint(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     row = rx.row
     try:
         sp = decode_setpoint(msg.type_mask, msg.coordinate_frame, (msg.x, msg.y, msg.z),
@@ -61,7 +58,7 @@ def command_params(msg: Msg) -> Params:
     return (*p, x, y, msg.z)
 
 
-def on_command(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def on_command(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     ep.counters["commands"] += 1
     cmd = msg.command
     params = command_params(msg)
@@ -92,7 +89,7 @@ def exact_id(value: float) -> int | None:
     return int(value)
 
 
-def _request_message(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
+def _request_message(ep: EndpointView, p: Params, rx: Rx) -> Outcome:
     msg_id = exact_id(p[0])
     if msg_id is None:
         return DENIED, b"", f"REQUEST_MESSAGE: param1 {p[0]:g} is not a message id"
@@ -108,13 +105,13 @@ def _request_message(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
 
 
 def _reply_of(msg_id: int) -> CommandHandler:
-    def handler(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
+    def handler(ep: EndpointView, p: Params, rx: Rx) -> Outcome:
         reply = ep.packer(msg_id, rx.row)
         return (ACCEPTED, reply, "") if reply else (UNSUPPORTED, b"", "not available")
     return handler
 
 
-def _set_interval(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
+def _set_interval(ep: EndpointView, p: Params, rx: Rx) -> Outcome:
     msg_id, interval_us = exact_id(p[0]), p[1]
     if msg_id is None or msg_id not in ep.default_intervals:
         return DENIED, b"", f"SET_MESSAGE_INTERVAL: message {p[0]:g} is not streamed"
@@ -130,7 +127,7 @@ def _set_interval(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
     return ACCEPTED, b"", ""
 
 
-def _get_interval(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
+def _get_interval(ep: EndpointView, p: Params, rx: Rx) -> Outcome:
     msg_id = exact_id(p[0])
     if msg_id is None or msg_id > 0xFFFF:
         return DENIED, b"", f"GET_MESSAGE_INTERVAL: param1 {p[0]:g} is not a message id"
@@ -141,7 +138,7 @@ def _get_interval(ep: VehicleEndpoint, p: Params, rx: Rx) -> Outcome:
     return ACCEPTED, lambda: encode(ep.mav, ep.mav.message_interval_encode(msg_id, us)), ""
 
 
-def _reposition(ep: VehicleEndpoint, p: Params, frame: int, rx: Rx) -> Outcome:
+def _reposition(ep: EndpointView, p: Params, frame: int, rx: Rx) -> Outcome:
     """DO_REPOSITION: lat/lon (NaN = here), alt (NaN = current; AMSL or relative by frame)."""
     pos = rx.row.pos
     lat, lon, alt = p[4], p[5], p[6]

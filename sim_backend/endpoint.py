@@ -27,7 +27,6 @@ import logging
 import socket
 from collections import Counter
 from collections.abc import Callable
-from typing import NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -39,26 +38,13 @@ from agents.scenario.model import HomeConfig
 from sim_backend import commands, protocols
 from sim_backend import telemetry as tm
 from sim_backend.autopilot import SEVERITY_WARNING, Autopilot
+from sim_backend.endpoint_view import Addr, EndpointView, Handler, MissionStore, Rx
 from sim_backend.params import ParamStore
 
 log = logging.getLogger(__name__)
 PEER_TIMEOUT_S = 30.0
 MAX_PEERS = 8
 MAX_LOGGED_ERRORS = 5
-Addr = tuple[str, int]
-
-
-
-class Rx(NamedTuple):
-    """Where and when one message arrived, and the vehicle's state at that tick (made for
-    every datagram: a named tuple is several times cheaper than a frozen dataclass)."""
-
-    addr: Addr
-    now_s: float
-    row: tm.Row
-
-
-Handler = Callable[["VehicleEndpoint", Msg, Rx], str]
 ServiceHandler = Callable[[Msg, Addr], str]  # a service that owns a message type; outcome
 
 
@@ -83,8 +69,8 @@ class VehicleEndpoint:
         # stream's timestamp before it verifies (agents.mavlink.signing).
         self.rx_codec = new_codec(sysid, 1, mavlink2)
         self.peers: dict[Addr, float] = {}
-        self.missions = protocols.MissionStore()
-        # Services that own a message type (sim_backend.timesync: TIMESYNC, SYSTEM_TIME).
+        self.missions = MissionStore()
+        # Services that own a message type (sim_backend.clock_services: TIMESYNC, SYSTEM_TIME).
         self.handlers: dict[str, ServiceHandler] = {}
         fast = 1.0 / telemetry_hz
         self.default_intervals: dict[int, float] = {
@@ -268,7 +254,7 @@ class VehicleEndpoint:
             self.counters["tx_errors"] += 1
 
 
-def _heartbeat(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def _heartbeat(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     return "handled"  # a GCS's heartbeat only keeps it in `peers` (done on receipt)
 
 

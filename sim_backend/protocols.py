@@ -1,6 +1,7 @@
 """The protocols a ground station runs on connect: modes, parameters, missions, MAVFTP, PING.
 
-Handlers take (endpoint, message, rx) and return the outcome the endpoint counts.
+Handlers take (endpoint, message, rx) and return the outcome the endpoint counts
+(sim_backend.endpoint_view).
 Missions are stored, listed and cleared as PX4 does, but not flown (MISSION mode is refused).
 MAVFTP is not offered: every request gets a NAK at once, so clients fall back to the
 parameter and mission protocols instead of waiting for their FTP timeout.
@@ -10,17 +11,12 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 from agents.mavlink.modes import MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, PX4, decode_custom_mode
 from agents.mavlink.wire import MAVLinkMessage as Msg
 from agents.mavlink.wire import encode
 from sim_backend.autopilot import ACCEPTED, DENIED, SEVERITY_WARNING
-
-if TYPE_CHECKING:
-    from sim_backend.endpoint import Handler, Rx, VehicleEndpoint
-
+from sim_backend.endpoint_view import EndpointView, Handler, Rx
 
 MAV_CMD_DO_SET_MODE = 176
 MSG_SET_MODE = 11
@@ -31,25 +27,12 @@ FTP_ACK, FTP_NAK = 128, 129
 FTP_TERMINATE, FTP_RESET = 1, 2
 FTP_PATH_OPS = frozenset({3, 4, 6, 7, 8, 9, 10, 11, 13, 14, 15})
 FTP_ERR_UNKNOWN_COMMAND, FTP_ERR_FILE_NOT_FOUND = 7, 10
-# frame, command, current, autocontinue, param1..4, x (degE7), y (degE7), z
-Item = tuple[int, int, int, int, float, float, float, float, int, int, float]
-
-
-@dataclass
-class MissionStore:
-    """The stored mission (type 0 only) and an upload in progress."""
-
-    items: list[Item] = field(default_factory=list)
-    upload: list[Item] | None = None
-    upload_count: int = 0
-
-
-def _reply(ep: VehicleEndpoint, rx: Rx, *msgs: Msg) -> str:
+def _reply(ep: EndpointView, rx: Rx, *msgs: Msg) -> str:
     ep.send_to(b"".join(encode(ep.mav, m) for m in msgs), rx.addr)
     return "answered"
 
 
-def _refuse(ep: VehicleEndpoint, rx: Rx, why: str, *msgs: Msg) -> str:
+def _refuse(ep: EndpointView, rx: Rx, why: str, *msgs: Msg) -> str:
     ep.counters["refused_messages"] += 1
     _reply(ep, rx, *msgs)
     ep.send_to(ep.statustext(SEVERITY_WARNING, why), rx.addr)
@@ -57,7 +40,7 @@ def _refuse(ep: VehicleEndpoint, rx: Rx, why: str, *msgs: Msg) -> str:
 
 
 # ---- modes ------------------------------------------------------------------------------
-def on_set_mode(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def on_set_mode(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     """SET_MODE, acknowledged as each autopilot does (PX4 as DO_SET_MODE, ArduPilot as 11)."""
     ap = ep.autopilot
     if msg.base_mode & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
@@ -74,7 +57,7 @@ def on_set_mode(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
 
 
 # ---- parameters -------------------------------------------------------------------------
-def on_param(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def on_param(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     kind = msg.get_type()
     store = ep.params
     if kind == "PARAM_REQUEST_LIST":
@@ -99,7 +82,7 @@ def on_param(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
     return _reply(ep, rx, *out)
 
 
-def apply_params(ep: VehicleEndpoint) -> None:
+def apply_params(ep: EndpointView) -> None:
     """Copy the parameters the autopilot obeys into it (at start and after PARAM_SET)."""
     ap, store = ep.autopilot, ep.params
     scale = {"COM_OF_LOSS_T": 1.0, "GUID_TIMEOUT": 1.0, "MIS_TAKEOFF_ALT": 1.0,
@@ -119,12 +102,12 @@ def apply_params(ep: VehicleEndpoint) -> None:
 
 
 # ---- missions ---------------------------------------------------------------------------
-def _mission_ack(ep: VehicleEndpoint, msg: Msg, result: int) -> Msg:
+def _mission_ack(ep: EndpointView, msg: Msg, result: int) -> Msg:
     return ep.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), result,
                                      getattr(msg, "mission_type", 0))
 
 
-def on_mission(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def on_mission(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     kind = msg.get_type()
     if kind == "MISSION_ACK":
         return "handled"  # the end of a download: nothing to answer
@@ -155,11 +138,11 @@ def on_mission(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
     return _mission_request(ep, msg, rx)
 
 
-def _request_item(ep: VehicleEndpoint, msg: Msg, seq: int) -> Msg:
+def _request_item(ep: EndpointView, msg: Msg, seq: int) -> Msg:
     return ep.mav.mission_request_int_encode(msg.get_srcSystem(), msg.get_srcComponent(), seq, 0)
 
 
-def _mission_count(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def _mission_count(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     store = ep.missions
     if msg.count > MAX_MISSION_ITEMS:
         return _refuse(ep, rx, f"mission too long ({msg.count} > {MAX_MISSION_ITEMS})",
@@ -171,7 +154,7 @@ def _mission_count(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
     return _reply(ep, rx, _request_item(ep, msg, 0))
 
 
-def _mission_item(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def _mission_item(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     store = ep.missions
     if store.upload is None:
         return _refuse(ep, rx, "mission item without an upload in progress",
@@ -190,7 +173,7 @@ def _mission_item(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
     return _reply(ep, rx, _mission_ack(ep, msg, MISSION_ACCEPTED))
 
 
-def _mission_request(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def _mission_request(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     items = ep.missions.items
     if msg.seq >= len(items):
         return _refuse(ep, rx, f"no mission item {msg.seq}",
@@ -201,7 +184,7 @@ def _mission_request(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
 
 
 # ---- MAVFTP, PING, stream requests ------------------------------------------------------
-def on_ftp(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def on_ftp(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     """Answer every MAVFTP request at once: ACK session resets, NAK everything else."""
     payload = bytes(msg.payload)
     seq, session, opcode = struct.unpack_from("<HBB", payload)
@@ -217,14 +200,14 @@ def on_ftp(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
         0, msg.get_srcSystem(), msg.get_srcComponent(), list(body)))
 
 
-def on_ping(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def on_ping(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     if msg.target_system != 0:
         return "handled"  # a response to a ping of ours (we send none) or someone else's
     return _reply(ep, rx, ep.mav.ping_encode(msg.time_usec, msg.seq, msg.get_srcSystem(),
                                              msg.get_srcComponent()))
 
 
-def on_request_data_stream(ep: VehicleEndpoint, msg: Msg, rx: Rx) -> str:
+def on_request_data_stream(ep: EndpointView, msg: Msg, rx: Rx) -> str:
     # ArduPilot's old stream request: every stream is already on, and it has no reply.
     return "handled"
 

@@ -26,19 +26,19 @@ import numpy as np
 
 from agents.mavlink.modes import FLAVOURS
 from agents.scenario.model import HomeConfig, VehicleConfig
-from sim_backend import model
+from errors import SimulatorError
+from sim_backend import kinematics
 from sim_backend.autopilot import Autopilot, ControlRow
+from sim_backend.clock_services import ClockService
 from sim_backend.endpoint import VehicleEndpoint
 from sim_backend.params import ParamStore, default_params
 from sim_backend.sim_values import LoopStats, SimConfig, Snapshot
 from sim_backend.sim_values import grid_spawn_ned as grid_spawn_ned  # re-exported (importers)
 from sim_backend.sim_values import spawn_points_ned as spawn_points_ned  # re-exported
 from sim_backend.telemetry import Row
-from sim_backend.timesync import ClockService
-from transport.errors import SimulatorError
 
 log = logging.getLogger(__name__)
-TickHook = Callable[[float, model.FleetState], None]
+TickHook = Callable[[float, kinematics.FleetState], None]
 MAX_CATCHUP_S = 30.0  # a longer stall (a debugger, a laptop lid) is dropped, counted, logged
 MAX_VEHICLES = 255
 QUEUED_ROUNDS = 16  # rounds over the ready sockets when taking what is queued
@@ -70,9 +70,9 @@ class Simulator:
             raise SimulatorError("telemetry rate must be > 0 and not above the tick rate")
         self.cfg = cfg
         self.dt_s = 1.0 / cfg.rate_hz
-        self.params = model.ModelParams.from_vehicle(vehicle)
-        self.state = model.FleetState.on_ground(spawn_ned_m)
-        self.command = model.FleetCommand.idle(self.state.n)
+        self.params = kinematics.ModelParams.from_vehicle(vehicle)
+        self.state = kinematics.FleetState.on_ground(spawn_ned_m)
+        self.command = kinematics.FleetCommand.idle(self.state.n)
         self.sim_time_s = 0.0
         self.counters: Counter[str] = Counter()
         # Received messages by "TYPE:outcome" (answered, handled, ignored, refused, ...).
@@ -160,7 +160,7 @@ class Simulator:
                 changed.append((i, ap.control()))
         if changed:
             self._write_control(changed)
-        self.state = model.step(self.state, self.command, self.params, self.dt_s)
+        self.state = kinematics.step(self.state, self.command, self.params, self.dt_s)
         self.sim_time_s = round(self.sim_time_s + self.dt_s, 9)
         self._rows = self._build_rows()
         for i, ep in enumerate(self.endpoints):
@@ -208,8 +208,8 @@ class Simulator:
 
     def _build_rows(self) -> list[Row]:
         s = self.state
-        roll, pitch = model.tilt_rad(s.acc_ned_m_s2, s.yaw_rad)
-        on_ground = model.landed(s).tolist()
+        roll, pitch = kinematics.tilt_rad(s.acc_ned_m_s2, s.yaw_rad)
+        on_ground = kinematics.landed(s).tolist()
         ms = round(self.sim_time_s * 1000.0)
         return [Row(ms, tuple(p), tuple(v), r, q, y, w, g)
                 for p, v, r, q, y, w, g in zip(s.pos_ned_m.tolist(), s.vel_ned_m_s.tolist(),
@@ -315,7 +315,7 @@ class Simulator:
         self.stats.caught_up_ticks += behind
         self.stats.max_late_s = max(self.stats.max_late_s, behind * self.dt_s)
         for _ in range(behind):  # the commands in force, as a real airframe flies them
-            self.state = model.step(self.state, self.command, self.params, self.dt_s)
+            self.state = kinematics.step(self.state, self.command, self.params, self.dt_s)
             self.sim_time_s = round(self.sim_time_s + self.dt_s, 9)
         self._rows = self._build_rows()
 

@@ -16,7 +16,7 @@ import numpy as np
 from agents.frames import enu_to_ned
 from agents.mavlink.signing import vehicle_key
 from agents.scenario.model import Scenario
-from transport.errors import ConfigError
+from errors import ConfigError
 
 
 @dataclass(frozen=True)

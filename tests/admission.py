@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from deploy.cpu_load import PROC, TICKS_PER_S, stat_fields
+from deploy.report.cpu_load import PROC, TICKS_PER_S, stat_fields
 
 SCHED_IDLE = 5
 BACKGROUND_NICE = 10  # at or above: background work, not counted

@@ -2,13 +2,13 @@
 sleeps), `exit CODE`, `print TEXT`, or `has MODULE` (prints whether MODULE is imported).
 
 Runs as `python -m tests.child_proc ...` (bound to its launcher's life first, as every
-entry point: agents.lifeline) or forked (deploy.forked calls `main(argv)`)."""
+entry point: agents.shell.lifeline) or forked (deploy.procs.forked calls `main(argv)`)."""
 
 import sys
 import time
 from collections.abc import Sequence
 
-from agents.lifeline import die_with_launcher
+from agents.shell.lifeline import die_with_launcher
 
 
 def main(argv: Sequence[str]) -> int:

@@ -120,7 +120,7 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
 
 @pytest.fixture(autouse=True)
 def _restore_sys_path(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
-    """A law's folder put first on sys.path (agents.law.loader) ends with its test: a later
+    """A law's folder put first on sys.path (agents.loading.law_loader) ends with its test: a later
     test of the same worker would otherwise hand it to the processes it starts, where a law
     file named as a module (a test's `json.py`) shadows the standard library's."""
     monkeypatch.setattr(sys, "path", list(sys.path))

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.scenario.model import Scenario
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import (
     FollowerState,
     Message,

@@ -15,14 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from agents.core.profiles import TargetMotion
-from agents.core.timeseries import RunSeries
+from agents.analysis.timeseries import RunSeries
 from agents.follower.inputs import Latest
-from agents.follower.membership import setup_for, stand_ins
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Sample
 from agents.law.paper import PaperLaw
+from agents.membership.follower_place import setup_for, stand_ins
 from agents.scenario.model import Scenario
+from agents.scenario.target_motion import TargetMotion
 from transport.law_fields import NO_FIELDS
 from transport.messages import FollowerState, Header
 from transport.network_schema import NetworkConfig
@@ -57,7 +57,7 @@ def run_swarm(
 ) -> RunSeries:
     """`jitter_ticks`: each message is late by a further 0..jitter_ticks ticks, at random;
     `vehicle_tau_s`: vehicles follow their commands with this first-order lag, as the
-    simulator's do (sim_backend.model), instead of at once; `law`: the paper's by default."""
+    simulator's do (sim_backend.kinematics), instead of at once; `law`: the paper's by default."""
     dt, n = 1.0 / rate_hz, scenario.n
     rng = np.random.default_rng(seed)
     law = law or PaperLaw.from_params({}, scenario)

@@ -9,7 +9,7 @@
 - `transport.messages`: frozen message dataclasses, `Header`, `Stamper`.
 - `transport.codec`: versioned msgpack `encode` / `decode` (raise `CodecError`);
   `transport.decoder.Decoder`: drop-and-count decoding for process loops.
-- `transport.keys.SwarmKeys`: every key expression, under `enclose/<swarm>/`.
+- `transport.key_exprs.SwarmKeys`: every key expression, under `enclose/<swarm>/`.
 
 Import from the modules; this package imports nothing so that pure tests need not load zenoh.
 """

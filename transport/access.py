@@ -11,7 +11,7 @@ names (mTLS, see transport.credentials), so a rule is bound to an authenticated 
 - Ingress puts and liveliness tokens are allowed per process, on its own keys only:
   follower i its states (both rates), status and token; the simulator sensor and truth keys; targets
   and the recorder their status; only the launcher run control.
-- Across hosts (deploy.host_keys), a router relays for others, and a rule binds the *link*
+- Across hosts (deploy.hosts.host_keys), a router relays for others, and a rule binds the *link*
   a message arrived on, never the process that made it (Zenoh 1.10's ACL interceptor is
   built per transport from its peer's certificate).  So each host's ACL is its own
   (`here`): its own router and the first host's (the hub of the star every other router
@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 
 READ_MESSAGES = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query",
                  "query", "reply"]
@@ -53,7 +53,7 @@ def sender_ids(n_followers: int, n_targets: int, n_routers: int = 0) -> frozense
     return frozenset(map(sender_id, process_names(n_followers, n_targets, n_routers)))
 
 
-HUB = 0  # the router every other host's links to (deploy.deployment.router_links)
+HUB = 0  # the router every other host's links to (deploy.hosts.deployment.router_links)
 
 
 def relayed_keys(keys: SwarmKeys, k: int, hosts: Sequence[Sequence[str]] | None,
@@ -61,7 +61,7 @@ def relayed_keys(keys: SwarmKeys, k: int, hosts: Sequence[Sequence[str]] | None,
     """The keys router k's link may bring into a process of host `here`: all of them from
     this host's own router and from the hub (they relay for every host), or when the hosts
     are not known; else what host k's own processes may put, and k's clock probes.  The
-    simulator's sensing of a follower on host k comes to k straight (deploy.sensor_links)
+    simulator's sensing of a follower on host k comes to k straight (sim_backend.sensor_links)
     and goes no further: the hub's recorder records the sensing of its own host only."""
     if hosts is None or k in (here, HUB):
         return [keys.everything()]

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import Protocol, Self
 
-from transport.errors import TransportError
+from errors import TransportError
 
 Clock = Callable[[], float]
 

@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from transport.errors import ConfigError
+from errors import ConfigError
 
 Clock = Callable[[], float]
 ENV_OFFSET_S = "ENCLOSE_CLOCK_OFFSET_S"

@@ -1,7 +1,7 @@
 """The clock exchange of a swarm over hosts: one offset per other host, not per process.
 
 A clock belongs to a host: every process on it reads the same one.  So only the hosts'
-routers (deploy.router) probe each other: each publishes a probe every PERIOD_S on
+routers (deploy.hosts.router) probe each other: each publishes a probe every PERIOD_S on
 `<swarm>/clock/router/<k>` that echoes the newest probe heard from every other router (its
 stamp, our receive time), and each pair of routers gets NTP's four times from every probe
 (transport.peer_clock).  Every other process only listens to the routers' probes
@@ -37,10 +37,10 @@ import logging
 import threading
 from collections.abc import Callable, Collection
 
+from errors import CodecError, ConfigError, TransportError
 from transport.bus import Bus, Congestion
 from transport.codec import decode, encode
-from transport.errors import CodecError, ConfigError, TransportError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import ClockProbe, Stamper
 from transport.peer_clock import PROCESS_BOOK, ClockBook, exchange_sample
 

@@ -27,9 +27,9 @@ from typing import Any
 
 import msgpack
 
+from errors import CodecError
 from transport import codec_fast
 from transport.codec_twins import TWINS
-from transport.errors import CodecError
 from transport.law_fields import MAX_FIELDS, MAX_LINKS, MAX_NAME, LawValue
 from transport.messages import (
     PROCESS_STATES,

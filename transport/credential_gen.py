@@ -18,7 +18,7 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
 
 from transport.access import access_control
-from transport.keys import SwarmKeys, validate_name
+from transport.key_exprs import SwarmKeys, validate_name
 
 VALID_DAYS = 30
 _PRIVATE = 0o600

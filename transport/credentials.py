@@ -23,9 +23,9 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+from errors import ConfigError
 from transport.access import process_names
-from transport.errors import ConfigError
-from transport.keys import SwarmKeys, validate_name
+from transport.key_exprs import SwarmKeys, validate_name
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,8 @@
 A `Decoder` belongs to one process loop.  Every payload that fails to decode
 is dropped and counted under its `CodecError.reason`; a message whose type is
 not expected on that subscription, or that does not belong on its key (its type, the
-index it carries: transport.checks.key_reason), is dropped too, and so, given `limits`,
-is an implausible one (transport.checks), and, given `law_fields`, a FollowerState whose
+index it carries: transport.message_checks.key_reason), is dropped too, and so, given `limits`,
+is an implausible one (transport.message_checks), and, given `law_fields`, a FollowerState whose
 law fields are not the declared ones (transport.law_fields: `rejected_law_<why>`).
 Given `senders` -- the scenario's processes (transport.access.sender_ids) -- a message
 from any other sender is dropped (`unknown_sender`), and so is one on a key that is not
@@ -29,13 +29,13 @@ from collections import Counter
 from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass
 
+from errors import CodecError
 from transport.bus import Received, Subscription
-from transport.checks import Limits, check, key_reason, key_rule
 from transport.codec import decode
-from transport.errors import CodecError
 from transport.fastbuild import build
 from transport.law_fields import FieldSpec
 from transport.law_fields import reason as law_reason
+from transport.message_checks import Limits, check, key_reason, key_rule
 from transport.messages import (
     ClockProbe,
     FollowerState,
@@ -97,7 +97,8 @@ class Decoder:
         self.expect = expect
         self.law_fields = law_fields
         self.clocks = clocks  # stamps are mapped onto our clock (transport.peer_clock)
-        self.limits = limits  # with limits, implausible messages are dropped (transport.checks)
+        # with limits, implausible messages are dropped (transport.message_checks)
+        self.limits = limits
         self.senders = None if senders is None else frozenset(senders)
         self.dropped: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()  # per kind of key (KIND_NAMES)

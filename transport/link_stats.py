@@ -36,10 +36,10 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 from transport.bus import Received
-from transport.checks import Limits
 from transport.decoder import Decoder, Inbound
-from transport.keys import parse_key
+from transport.key_exprs import parse_key
 from transport.law_fields import FieldSpec
+from transport.message_checks import Limits
 from transport.messages import RunControl
 
 SENSOR = "sensor"

@@ -15,6 +15,7 @@ import threading
 import time
 from collections import deque
 
+from errors import TransportError
 from transport.bus import (
     DEFAULT_CAPACITY,
     AliveEvent,
@@ -24,8 +25,7 @@ from transport.bus import (
     Received,
     apply_alive,
 )
-from transport.errors import TransportError
-from transport.keys import key_matches, validate_concrete
+from transport.key_exprs import key_matches, validate_concrete
 
 
 class MemoryHub:

@@ -9,7 +9,7 @@ one that started last holds.
 
 `cut_alive_watch` is the liveliness a real cut would show: a follower's token is hidden
 while its link into this receiver is cut (it vanishes, then appears again at the heal
-if it is still alive), so membership (agents.liveness) drops and takes back the other
+if it is still alive), so membership (agents.membership.liveness) drops and takes back the other
 side exactly as Zenoh would after a lost session.  Only follower tokens are filtered
 (`HidingAliveWatch`; a cut between hosts hides them the same way: transport.clock_sync).
 """
@@ -19,7 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from transport.bus import AliveEvent, AliveWatch
-from transport.keys import parse_key
+from transport.key_exprs import parse_key
 from transport.network_schema import LinkImpairment, NetFault
 
 

@@ -88,17 +88,17 @@ class NetworkConfig:
     # 10 s.  Longer: fewer keep-alives over a large mesh, and a frozen process stays a
     # member that much longer (docs/faults.md).
     zenoh_lease_s: float | None = None
-    # "batch": followers, targets and the recorder run SCHED_BATCH (agents.process
+    # "batch": followers, targets and the recorder run SCHED_BATCH (agents.shell.process
     # apply_agent_sched): their wake-ups no longer preempt the simulator, which stands for
     # the physical world, on a machine they oversubscribe (ring64 on 2 cores).
     agent_sched: str = "normal"
     # The vehicles' agents' scheduling weight below the simulator's and the recorder's
-    # (agents.process.yield_cpu): the nice of followers' and targets' own autogroups.  0:
+    # (agents.shell.process.yield_cpu): the nice of followers' and targets' own autogroups.  0:
     # the kernel's fair share per process, which on a machine the agents oversubscribe
     # leaves the simulator (the physical world) late.
     agent_nice: int = 0
     faults: tuple[NetFault, ...] = ()  # partitions, isolations, degradations on a timeline
-    # Numbers of the faults the OS cuts between hosts (`--os-cut`, deploy.netns.cut): the
+    # Numbers of the faults the OS cuts between hosts (`--os-cut`, deploy.hosts.host_cut): the
     # receivers leave them alone.
     os_cut: tuple[int, ...] = ()
 

@@ -15,6 +15,7 @@ from typing import TypeVar, Union
 
 import zenoh
 
+from errors import TransportError
 from transport.bus import (
     DEFAULT_CAPACITY,
     AliveEvent,
@@ -27,9 +28,8 @@ from transport.bus import (
 )
 from transport.clock import process_clock
 from transport.clock_sync import ClockSync
-from transport.errors import TransportError
 from transport.fastbuild import build
-from transport.keys import SwarmKeys, validate_concrete
+from transport.key_exprs import SwarmKeys, validate_concrete
 from transport.net_timeline import HidingAliveWatch
 from transport.zenoh_config import RUNTIME_SETTINGS, ZenohConfig, build_zenoh_config
 
@@ -190,7 +190,7 @@ class ZenohAliveWatch:
 class ZenohBus(BusBase):
     """A Zenoh session configured by `ZenohConfig`."""
 
-    open_sessions = 0  # in this process: forking is unsafe while any is open (deploy.forked)
+    open_sessions = 0  # in this process: forking is unsafe while any is open (deploy.procs.forked)
 
     def __init__(self, cfg: ZenohConfig, clock: Clock | None = None) -> None:
         super().__init__()

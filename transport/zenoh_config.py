@@ -25,9 +25,9 @@ from pathlib import Path
 
 import zenoh
 
+from errors import ConfigError
 from transport.codec import MAX_PAYLOAD_BYTES
 from transport.credentials import Identity
-from transport.errors import ConfigError
 from transport.network_schema import LINK_PROTOCOLS, ZENOH_LEASE_RANGE_S, ZENOH_RUNTIMES
 
 LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
@@ -64,7 +64,7 @@ MAX_MESSAGE_BYTES = MAX_PAYLOAD_BYTES + 1024
 # went with BLOCK congestion control, so a link that carries nothing (a partition between
 # hosts) held the router's forwarding, and behind it every publisher on its host, until
 # then: the simulator's sensing and the near side's own states stalled for seconds
-# (deploy.netns.cut, BENCHMARKS.md).  Real-time data now goes with DROP (transport.bus.
+# (deploy.hosts.host_cut, BENCHMARKS.md).  Real-time data now goes with DROP (transport.bus.
 # Congestion); the words sent once still block.  1 s: far past any queue on a link that
 # still moves.
 ROUTER_BLOCK_CLOSE_KEY = "transport/link/tx/queue/congestion_control/block/wait_before_close"
@@ -73,7 +73,7 @@ ROUTER_BLOCK_CLOSE_US = 1_000_000
 # (Zenoh: 10 s): the handshake, far past an mTLS exchange between hosts.  It does not bound
 # the TCP connect itself (Zenoh 1.10 awaits it without a timeout): an attempt begun during
 # a partition waits on the kernel's SYN retries, which the hosts bound instead
-# (deploy.netns.hosts: `net.ipv4.tcp_syn_retries`; docs/multihost.md for real hosts).
+# (deploy.hosts.namespaced_hosts: `net.ipv4.tcp_syn_retries`; docs/multihost.md for real hosts).
 ROUTER_OPEN_TIMEOUT_KEY = "transport/unicast/open_timeout"
 ROUTER_OPEN_TIMEOUT_MS = 2000
 # A router's lease (Zenoh: 10 s): a peer that heard nothing from it this long gives the

@@ -15,17 +15,17 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from agents.follower.membership import (
+from agents.follower.plausible import GateLimits, Plausibility
+from agents.law.interface import Peer, Sample, Setup
+from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
+from agents.membership.follower_place import (
     HOLD_AFTER_S,
     MAX_GAP_S,
     TARGET_ACCEL_TAU_S,
     TARGET_VEL_TAU_S,
 )
-from agents.follower.plausible import GateLimits, Plausibility
-from agents.law.interface import Peer, Sample, Setup
-from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
-from transport.checks import newer
 from transport.law_fields import FieldSpec
+from transport.message_checks import newer
 from transport.messages import FollowerState
 
 # A NamedTuple built without its Python-level __new__: half the cost, same object.
@@ -78,7 +78,7 @@ class Latest:
         self.targets[target] = _new(Sample, (pos_m, vel, stamp_s))
 
     def receive(self, msg: FollowerState, now_s: float) -> None:
-        """Keep `msg` if it is the peer's newest (transport.checks.newer) and plausible."""
+        """Keep `msg` if it is the peer's newest (transport.message_checks.newer) and plausible."""
         known = self.peers.get(msg.index)
         if known is None or newer(msg.header.stamp_s, known.r.stamp_s, now_s):
             peer = self.peer(msg)

@@ -9,7 +9,8 @@ Targets and peers are written as changes: the keys in the order the law iterates
 and only the entries that are not the very objects of the last record (agents.follower.inputs
 makes a new one per newer message), so a record costs about the messages that arrived.
 A step's result is kept as CRCs of its command, its estimate and rate, and its
-published fields; `enclose replay` (agents.follower.replay) re-runs the same runner and compares.
+published fields; `enclose replay` (agents.follower.journal_replay) re-runs the same runner
+and compares.
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ from typing import Any
 
 import msgpack
 
-from transport.errors import JournalError
+from errors import JournalError
 
 JOURNAL_VERSION = 1
 

@@ -2,7 +2,7 @@
 
 An insider holding one follower's credentials can publish anything that key may carry:
 valid, in bounds, from the key's owner.  The launcher makes the follower process itself
-do so (deploy.faults), by a signal: `SIGRTMIN + k` starts lie mode `LIE_MODES[k]`,
+do so (deploy.launch.fault_injector), by a signal: `SIGRTMIN + k` starts lie mode `LIE_MODES[k]`,
 `SIGRTMIN + len(LIE_MODES)` ends it.  The law keeps running honestly inside; only what
 is published changes:
 - offset: the estimate r moved by `OFFSET_M` (the issue-51 probe: 25 m off);

@@ -13,12 +13,12 @@ from pathlib import Path
 from agents.follower.journal import JournalWriter, journal_path
 from agents.follower.node import FollowerNode
 from agents.mavlink.adapter import MavlinkAdapter
-from agents.network_args import network_overrides
-from agents.process import load_run_scenario, process_main
-from agents.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
-from agents.vehicle_loop import fly
+from agents.shell.network_args import network_overrides
+from agents.shell.process import load_run_scenario, process_main
+from agents.shell.process_options import AgentOptions, add_bus_arguments, add_vehicle_arguments
+from agents.shell.vehicle_loop import fly
+from errors import EncloseError
 from transport.bus import Bus
-from transport.errors import EncloseError
 from transport.impairment import ImpairedBus
 
 

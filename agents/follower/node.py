@@ -1,10 +1,11 @@
 """A follower's node: its loop on a given bus and vehicle, top to bottom.
 
 `FollowerNode.tick` is the loop: re-form the ring if the members changed
-(agents.follower.membership via agents.liveness), receive (agents.follower.inputs), run the law
+(agents.membership.follower_place via agents.membership.liveness), receive
+(agents.follower.inputs), run the law
 (agents.follower.runner around an agents.law.interface law), command the vehicle, publish.
 Apart from agents.follower.main, the process around it (command line, impaired bus, the
-vehicle loop of agents.vehicle_loop), so that the node runs on whatever bus and vehicle it
+vehicle loop of agents.shell.vehicle_loop), so that the node runs on whatever bus and vehicle it
 is handed: tests/unit/test_liveness.py builds it on an in-memory bus.
 """
 
@@ -17,27 +18,27 @@ from typing import Any
 
 from agents.follower.inputs import Latest
 from agents.follower.lie import Liar, Published
-from agents.follower.membership import setup_for, stand_ins
 from agents.follower.plausible import gate_limits, own_side
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Output, Sample
-from agents.law.loader import make_law
-from agents.liveness import MembershipWatch
+from agents.loading.law_loader import make_law
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
-from agents.member_hold import MemberHold
-from agents.process import StatusReporter
+from agents.membership.follower_place import setup_for, stand_ins
+from agents.membership.liveness import MembershipWatch
+from agents.membership.member_hold import MemberHold
 from agents.scenario.model import Scenario
-from agents.tick_cost import NoCost, TickCost
+from agents.shell.process import StatusReporter
+from agents.shell.tick_cost import NoCost, TickCost
+from errors import CodecError
 from transport.access import sender_ids
 from transport.bus import Bus, Congestion, Subscription
-from transport.checks import DEFAULT_LIMITS
 from transport.codec import encode
 from transport.decoder import Decoder
-from transport.errors import CodecError
 from transport.impairment import ImpairedBus
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.law_fields import NO_FIELDS, LawFields
 from transport.link_stats import AgeHistogram, LinkDecoder
+from transport.message_checks import DEFAULT_LIMITS
 from transport.messages import FollowerState, RunControl, Stamper, TargetObservation, vec2
 
 log = logging.getLogger("enclose.follower")
@@ -93,7 +94,7 @@ class FollowerNode:
         self.last_state: VehicleState | None = None
         self.last_own: Sample | None = None
         self.last_u = 0j
-        # Checked, not trusted (transport.checks, the law's declared fields);
+        # Checked, not trusted (transport.message_checks, the law's declared fields);
         # + per-link rx and age (transport.link_stats)
         self.decoder: Decoder = LinkDecoder(limits=DEFAULT_LIMITS,
                                             senders=sender_ids(scenario.n, scenario.m),
@@ -108,7 +109,7 @@ class FollowerNode:
         # Started into a running swarm (restarted, or back after a leave): publish nothing
         # until our first estimate continues the neighbours' (LawRunner.join).
         self.joining = joining
-        # Phase CPU of a tick (agents.tick_cost), set by the loop when it is measured.
+        # Phase CPU of a tick (agents.shell.tick_cost), set by the loop when it is measured.
         self.cost: TickCost | NoCost = NoCost()
         # The `lie` fault: off unless the launcher's signal turns it on (agents.follower.lie).
         self.liar = Liar(self.runner.declared, seed=index)
@@ -202,7 +203,8 @@ class FollowerNode:
         self.silent = silent
 
     def regroup(self, now_s: float) -> None:
-        """Re-form around the followers alive now (agents.liveness, agents.membership).
+        """Re-form around the followers alive now (agents.membership.liveness,
+        agents.membership.ring).
 
         Not before the start word: the launcher sends it only once every follower is
         linked, so until then the planned ring is the member set.  The tokens seen before

@@ -1,6 +1,6 @@
 """What a follower had in hand at its largest command jump, from a replay.
 
-At every control tick of a replay (agents.follower.replay) `JumpWatch` compares the
+At every control tick of a replay (agents.follower.journal_replay) `JumpWatch` compares the
 command with the last one; at the largest change it keeps the inputs of that tick: each
 peer's message, new since the last control tick or not, and its age; the vehicle's
 telemetry and each target's observation age; and the time since the last control tick

@@ -19,9 +19,9 @@ from collections.abc import Mapping
 from typing import Any
 
 from agents.follower.journal import JournalWriter
-from agents.follower.membership import joined_estimate
 from agents.law.interface import Inputs, Law, Output, Peer, Sample, Setup, reference
-from agents.tick_cost import NoCost, TickCost
+from agents.membership.follower_place import joined_estimate
+from agents.shell.tick_cost import NoCost, TickCost
 from transport.law_fields import FieldSpec, LawFields, LawValue
 
 log = logging.getLogger("enclose.follower")
@@ -63,7 +63,7 @@ class LawRunner:
     def step(self, now_s: float, command: bool, own: Sample, targets: Mapping[int, Sample],
              peers: Mapping[int, Peer], cost: TickCost | NoCost = NO_COST,
              ) -> tuple[Output, LawFields] | None:
-        """`_step`, journaled; `cost` marks the two (agents.tick_cost)."""
+        """`_step`, journaled; `cost` marks the two (agents.shell.tick_cost)."""
         result = self._step(now_s, command, own, targets, peers)
         if self.journal is not None:
             cost.mark("law")

@@ -49,7 +49,7 @@ What a law gets for free (the platform does it, the same for every law):
   last estimate, at an age past every limit.
 - Targets: their velocity comes from the platform's filter over the sensor's samples.
 - Membership: the member set follows the processes alive (Zenoh liveliness); the ring,
-  the graph, observers, weights and angles are re-formed (agents.membership) and the law
+  the graph, observers, weights and angles are re-formed (agents.membership.ring) and the law
   gets a new `Setup` through `regroup`, whose default starts afresh.  Subscriptions,
   forgotten peers and link statistics are the platform's.
 - Continuity (`rebase_to`): after a change of members, or when this follower (re)joins a
@@ -72,7 +72,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, NamedTuple, TypeVar
 
-from transport.errors import ScenarioError
+from errors import ScenarioError
 from transport.law_fields import FieldSpec, check_specs
 
 if TYPE_CHECKING:
@@ -123,7 +123,7 @@ class Peer(NamedTuple):
 
 @dataclass(frozen=True)
 class Setup:
-    """Follower `index`'s place in the swarm formed by `members` (agents.membership)."""
+    """Follower `index`'s place in the swarm formed by `members` (agents.membership.ring)."""
 
     index: int
     members: tuple[int, ...]

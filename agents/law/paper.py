@@ -25,20 +25,20 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
-from agents.core.params import control_gains, estimator_params
 from agents.law.carry import REBASE_TAU_S, next_carry
 from agents.law.consensus import EstimatorParams, consensus_flows, link_balance
 from agents.law.enclosing import ControlGains, enclosing_control
 from agents.law.interface import FieldSpec, Inputs, Law, Output, Peer, Setup, reference
+from agents.law.scenario_params import control_gains, estimator_params
 from agents.law.sig import rate_cap
 from agents.law.velocity_stage import fed_flow, lap_velocity
-from transport.errors import ScenarioError
+from errors import ScenarioError
 
 if TYPE_CHECKING:
     from agents.scenario.model import Scenario
 
 # The bounds a receiver holds these fields to: those of the platform's own positions,
-# speeds and accelerations (transport.checks.Limits): beyond them, a forgery or a fault.
+# speeds and accelerations (transport.message_checks.Limits): beyond them, a forgery or a fault.
 MAX_POS_M, MAX_SPEED_M_S, MAX_ACCEL_M_S2 = 1e5, 1e3, 1e4
 # Time constant of the low-passed data ages that scale each link's step limit.
 AGE_TAU_S = 0.5

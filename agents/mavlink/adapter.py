@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from transport.errors import LinkLostError, MavlinkError
+from errors import LinkLostError, MavlinkError
 
 if TYPE_CHECKING:  # the follower's process runs without numpy (issue 15)
     import numpy as np
@@ -97,7 +97,7 @@ class MavlinkAdapter:
         self.sock: socket.socket | None = None
         self._selector: selectors.BaseSelector | None = None
         # Called while a blocking start-up helper waits: a process re-arming its vehicle
-        # mid-run keeps its status heartbeat going (agents.vehicle_loop).
+        # mid-run keeps its status heartbeat going (agents.shell.vehicle_loop).
         self.on_wait: Callable[[], None] | None = None
 
     # ---- lifecycle ----------------------------------------------------------------------

@@ -39,7 +39,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from transport.errors import ConfigError
+from errors import ConfigError
 
 KEY_LEN = 32
 SIGNATURE_LEN = 13
@@ -88,6 +88,12 @@ def vehicle_passphrase(run_secret: bytes, sysid: int) -> str:
 def vehicle_key(run_secret: bytes, sysid: int) -> bytes:
     """Vehicle `sysid`'s 32-byte signing key, derived from the run secret (module docstring)."""
     return key_from_passphrase(vehicle_passphrase(run_secret, sysid))
+
+
+def agent_of_vehicle(sysid: int, n: int) -> str:
+    """The agent that flies vehicle `sysid` of a swarm of n followers, and alone holds its
+    key: follower i flies vehicle i (sysid i+1), target j vehicle n+j (sysid n+j+1)."""
+    return f"follower-{sysid - 1}" if sysid <= n else f"target-{sysid - 1 - n}"
 
 
 def write_raw_key(path: Path, key: bytes) -> None:

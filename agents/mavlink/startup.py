@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
 from agents.mavlink.modes import ARDUPILOT, OFFBOARD_MODE, do_set_mode_params
-from transport.errors import CommandRejectedError, MavlinkError
+from errors import CommandRejectedError, MavlinkError
 
 log = logging.getLogger(__name__)
 
@@ -260,7 +260,7 @@ def start_offboard(ad: MavlinkAdapter, altitude_m: float, t: StartupTimeouts | N
                    mark: Callable[[str], None] = _no_mark) -> VehicleState:
     """The whole start-up sequence; returns once the vehicle flies our velocity setpoints.
 
-    `mark(phase)` is called as each phase ends (agents.phases): heartbeat, position,
+    `mark(phase)` is called as each phase ends (agents.shell.phases): heartbeat, position,
     armed, takeoff_accepted, at_altitude, offboard."""
     t = t or StartupTimeouts()
     connect(ad, t, mark)

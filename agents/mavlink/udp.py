@@ -7,7 +7,7 @@ import socket
 import struct
 
 from agents.mavlink.timemap import SO_TIMESTAMPNS
-from transport.errors import MavlinkError
+from errors import MavlinkError
 
 SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)  # Linux; Python does not export it
 _U32 = struct.Struct("I")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from agents.scenario.model import Scenario, TargetSpec
-from transport.errors import InadmissibleError, ScenarioError
+from errors import InadmissibleError, ScenarioError
 
 SPEED_TOL_M_S = 1e-9
 
@@ -78,7 +78,7 @@ def _check_spread(scenario: Scenario) -> None:
     """rho_d must exceed every target's distance to the LAP over the whole run."""
     import numpy as np
 
-    from agents.core.profiles import TargetMotion
+    from agents.scenario.target_motion import TargetMotion
 
     times = np.linspace(0.0, scenario.run.duration_s, int(scenario.run.duration_s) + 2)
     pos, _ = TargetMotion(scenario).states(times)

@@ -25,7 +25,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from transport.errors import ScenarioError
+from errors import ScenarioError
 from transport.network_schema import NET_FAULT_ACTIONS
 
 FAULT_ACTIONS = ("kill", "pause", "restart", "leave", "lie")
@@ -139,7 +139,8 @@ def _seconds(raw: Any, where: str, required: bool) -> float | None:
 
 def _process(raw: Any, where: str, n: int, m: int) -> str:
     if isinstance(raw, str) and re.fullmatch(r"router-\d+", raw):
-        return raw  # the Zenoh router of host K (0-based, deploy.deployment); runs with --hosts
+        # the Zenoh router of host K (0-based, deploy.hosts.deployment); runs with --hosts
+        return raw
     match = _TARGET_RE.match(raw) if isinstance(raw, str) else None
     if match is None:
         raise ScenarioError(where, f"must be follower-K, target-K, recorder or sim, got {raw!r}")

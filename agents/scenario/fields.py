@@ -1,6 +1,6 @@
 """The field readers of a scenario file: numbers, pairs, tables, follower numbers.
 
-Apart from the loader (agents.scenario.file) and the per-table parsers
+Apart from the loader (agents.loading.scenario_file) and the per-table parsers
 (agents.scenario.tables), which both read through them, so that a field is read and
 its error worded in one place.
 """
@@ -12,7 +12,7 @@ from collections.abc import Iterable
 from fractions import Fraction
 from typing import Any
 
-from transport.errors import ScenarioError
+from errors import ScenarioError
 
 Table = dict[str, Any]
 

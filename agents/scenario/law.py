@@ -10,7 +10,7 @@
 `module` is imported from the scenario file's folder; a folder may lead it
 (`module = "../laws/mine:MyLaw"`), relative to the file.  `name` and `module` are the
 table's own keys; every other key is a parameter of the law, which the law checks itself
-(`Law.from_params`, through agents.law.loader) when the scenario loads.
+(`Law.from_params`, through agents.loading.law_loader) when the scenario loads.
 
 A law reference outside a scenario file (`enclose run --law`, a sweep's `law` axis) is
 written the same way: a shipped name, or `[folder/]package.module:Class`, its folder
@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.scenario.model import LawSpec
-from transport.errors import ScenarioError
+from errors import ScenarioError
 
 KEYS = ("name", "module")
 MODULE_LINE = re.compile(r"""(?m)^(\s*module\s*=\s*)("[^"\n]*"|'[^'\n]*')""")
@@ -74,7 +74,7 @@ def absolute_ref(spec: LawSpec) -> str:
 
 def pinned_law(text: str, spec: LawSpec) -> str:
     """A scenario file's `text` with its `[law] module` naming its folder absolutely: what
-    a copy of the file written elsewhere (deploy.host_launch) needs to load the same law.
+    a copy of the file written elsewhere (deploy.hosts.host_launch) needs to load the same law.
     `spec` is the law the file was read into."""
     if spec.module is None:
         return text

@@ -2,7 +2,7 @@
 
 Positions are in the local ENU plane (x east, y north) in metres.  Follower and
 target numbers in TOML files are 1-based, as in the paper; everything in code
-is 0-based.  Validation happens once, in `agents.scenario.file`, and every
+is 0-based.  Validation happens once, in `agents.loading.scenario_file`, and every
 error names the offending field.
 """
 
@@ -76,7 +76,7 @@ class Pattern:
     rho_d_m: float
     w_d_rad_s: float
     angles_rad: tuple[float, ...]
-    rebalance: str = "scale"  # when followers leave: "scale" | "keep" (agents.membership)
+    rebalance: str = "scale"  # when followers leave: "scale" | "keep" (agents.membership.ring)
 
 
 @dataclass(frozen=True)
@@ -148,7 +148,7 @@ class HomeConfig:
 @dataclass(frozen=True)
 class LawSpec:
     """The scenario's `[law]`: a shipped law by name, or the user's own class by module
-    reference, and the law's own parameters (checked by the law: agents.law.loader)."""
+    reference, and the law's own parameters (checked by the law: agents.loading.law_loader)."""
 
     name: str = "paper"  # a shipped law (agents.law.shipped); unused with `module`
     module: str | None = None  # "package.module:Class"
@@ -168,7 +168,7 @@ class LawSpec:
 
 @dataclass(frozen=True)
 class Scenario:
-    """Everything one run needs; built only by `agents.scenario.file`."""
+    """Everything one run needs; built only by `agents.loading.scenario_file`."""
 
     name: str
     beta_m_s: float

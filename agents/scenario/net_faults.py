@@ -24,7 +24,7 @@ from typing import Any
 
 from agents.scenario.faults import is_net_action, parse_fault_flag
 from agents.scenario.network import IMPAIRMENT_KEYS, impairment
-from transport.errors import ScenarioError
+from errors import ScenarioError
 from transport.network_schema import LinkImpairment, NetFault
 
 NET_FAULT_KEYS = ("at_s", "action", "duration_s", "groups", "target", "links", *IMPAIRMENT_KEYS)

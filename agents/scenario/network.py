@@ -7,7 +7,7 @@ from dataclasses import fields, replace
 from typing import Any
 
 from agents.scenario.model import ESTIMATORS
-from transport.errors import ScenarioError
+from errors import ScenarioError
 from transport.network_schema import (
     AGENT_NICE_MAX,
     AGENT_SCHEDS,

@@ -1,6 +1,6 @@
 """The parsers of a scenario file's tables: targets, graph, pattern, gains, run, vehicle, home.
 
-Apart from the loader (agents.scenario.file), which reads the file and assembles the
+Apart from the loader (agents.loading.scenario_file), which reads the file and assembles the
 `Scenario` from what these return, so that each table's rules are read in one place;
 `[network]` and `[[faults]]` have their own modules (agents.scenario.network,
 agents.scenario.faults).
@@ -33,7 +33,7 @@ from agents.scenario.model import (
     full_turn_ok,
     successor_from_order,
 )
-from transport.errors import InadmissibleError, ScenarioError
+from errors import InadmissibleError, ScenarioError
 
 
 def parse_targets(raw: Any, n: int) -> tuple[TargetSpec, ...]:

@@ -1,7 +1,7 @@
 """`enclose host DEPLOYMENT.toml --host NAME`: the part of a swarm that lives on this host.
 
 Starts this host's Zenoh router and the processes the deployment file places here
-(deploy.deployment, deploy.host_launch).  Run it on every host; the host of the
+(deploy.hosts.deployment, deploy.hosts.host_launch).  Run it on every host; the host of the
 `launcher` waits until the whole swarm is linked, starts and stops the run and writes
 the outputs (its recorder's, if the recorder is there).  `--all` runs every host of the
 file from here (namespaced test hosts: what `enclose run --hosts K` does).
@@ -14,19 +14,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.network_args import NetworkOptions
-from deploy.deployment import load_deployment
-from deploy.host_launch import HostLaunch
-from deploy.interrupts import interrupts
-from deploy.launch_options import LaunchOptions, add_figures_argument, add_journal_argument
-from deploy.restarts import add_supervision_arguments
-from deploy.verdict import add_json_argument
-from transport.errors import DeployError
+from agents.shell.network_args import NetworkOptions
+from deploy.hosts.deployment import load_deployment
+from deploy.hosts.host_launch import HostLaunch
+from deploy.launch.launch_options import LaunchOptions, add_figures_argument, add_journal_argument
+from deploy.procs.interrupts import interrupts
+from deploy.procs.restarts import add_supervision_arguments
+from deploy.report.verdict import add_json_argument
+from errors import DeployError
 
 
 def register(sub: Any) -> None:
     p = sub.add_parser("host", help="run this host's part of a swarm spread over hosts")
-    p.add_argument("deployment", type=Path, help="deployment file (TOML, deploy/deployment.py)")
+    p.add_argument("deployment", type=Path,
+                   help="deployment file (TOML, deploy/hosts/deployment.py)")
     which = p.add_mutually_exclusive_group(required=True)
     which.add_argument("--host", default=None, help="this host's name in the file")
     which.add_argument("--all", action="store_true", help="every host (namespaced test hosts)")

@@ -1,7 +1,7 @@
 """`enclose keys OUT_DIR`: a swarm's credentials for processes on several hosts.
 
 One folder per host, holding only what that host's processes need, and the CA key in
-OUT_DIR/operator/ (deploy.host_keys).  The hosts are a deployment file's
+OUT_DIR/operator/ (deploy.hosts.host_keys).  The hosts are a deployment file's
 (`--deployment`), or the split `enclose run --hosts K` makes (h0: launcher, simulator,
 recorder, targets; the followers over h1..h<K-1>).
 """
@@ -12,10 +12,10 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from agents.scenario.file import load_scenario
-from deploy.deployment import Deployment, HostSpec, load_deployment, split_over_hosts
-from deploy.host_keys import OPERATOR, write_swarm_keys
-from transport.errors import ConfigError
+from agents.loading.scenario_file import load_scenario
+from deploy.hosts.deployment import Deployment, HostSpec, load_deployment, split_over_hosts
+from deploy.hosts.host_keys import OPERATOR, write_swarm_keys
+from errors import ConfigError
 
 
 def register(sub: Any) -> None:
@@ -29,7 +29,7 @@ def register(sub: Any) -> None:
                    "router each (default 1)")
     p.add_argument("--deployment", type=Path, default=None, metavar="TOML",
                    help="the hosts, their processes, the swarm and the scenario of this "
-                   "deployment file (deploy/deployment.py)")
+                   "deployment file (deploy/hosts/deployment.py)")
     p.set_defaults(func=_main)
 
 

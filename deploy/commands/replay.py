@@ -18,13 +18,13 @@ from pathlib import Path
 from typing import Any
 
 from agents.follower.journal_file import Frames
-from agents.follower.replay import Replay, journals, replay
-from agents.law.loader import make_law
-from agents.law_args import LawOptions, add_law_arguments, apply_law_arguments, toml_value
-from agents.network_args import NetworkOptions, add_network_arguments, apply_network_arguments
-from agents.scenario.file import load_scenario
+from agents.follower.journal_replay import Replay, journals, replay
+from agents.loading.law_loader import make_law
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import Scenario
-from transport.errors import EncloseError, JournalError, ScenarioError
+from agents.shell.law_args import LawOptions, add_law_arguments, apply_law_arguments, toml_value
+from agents.shell.network_args import NetworkOptions, add_network_arguments, apply_network_arguments
+from errors import EncloseError, JournalError, ScenarioError
 
 
 def register(sub: Any) -> None:
@@ -138,7 +138,7 @@ def _counterfactual(path: Path, scenario: Scenario, found: Replay, run_dir: Path
     asked = replay(path, other, make_law(other), check=False)
     law_words = ["law " + opts.law.law] if opts.law.law else []
     label = " ".join([*law_words, *(f"{k_}={v}" for k_, v in opts.law.params), *opts.sets])
-    from deploy.replay_figure import counterfactual_figure
+    from deploy.report.replay_figure import counterfactual_figure
 
     out = opts.figure or run_dir / f"replay-follower-{k}.png"
     drawn = counterfactual_figure(found.series, asked.series, found.start_s, run_dir, k,

@@ -8,19 +8,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.law_args import add_law_arguments, apply_law_arguments
-from agents.network_args import NetworkOptions, add_network_arguments, apply_network_arguments
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.net_faults import check_window
-from deploy.interrupts import interrupts
-from deploy.launch import Launch
-from deploy.launch_options import LaunchOptions, add_figures_argument, add_journal_argument
-from deploy.live_args import LiveOptions, add_live_arguments
-from deploy.netns.hosts import HostsOptions, add_hosts_arguments, run_on_hosts
-from deploy.netns.run import NetnsOptions, add_netns_arguments, run_in_namespace
-from deploy.restarts import add_supervision_arguments
-from deploy.verdict import add_json_argument
-from transport.errors import DeployError
+from agents.shell.law_args import add_law_arguments, apply_law_arguments
+from agents.shell.network_args import NetworkOptions, add_network_arguments, apply_network_arguments
+from deploy.hosts.namespaced_hosts import HostsOptions, add_hosts_arguments, run_on_hosts
+from deploy.launch.launch_options import LaunchOptions, add_figures_argument, add_journal_argument
+from deploy.launch.launcher import Launch
+from deploy.launch.live_args import LiveOptions, add_live_arguments
+from deploy.netns.netns_run import NetnsOptions, add_netns_arguments, run_in_namespace
+from deploy.procs.interrupts import interrupts
+from deploy.procs.restarts import add_supervision_arguments
+from deploy.report.verdict import add_json_argument
+from errors import DeployError
 
 
 def register(sub: Any) -> None:
@@ -107,7 +107,7 @@ def run(opts: RunOptions) -> int:
     out = (opts.out or Path("runs") / f"run-{scenario.name}-{stamp}").resolve()
     swarm = opts.swarm or f"{scenario.name}-{stamp}".replace("_", "-")
     with interrupts():  # SIGTERM stops as cleanly as Ctrl-C
-        if opts.hosts is not None:  # K namespaced hosts: deploy.netns.hosts
+        if opts.hosts is not None:  # K namespaced hosts: deploy.hosts.namespaced_hosts
             return run_on_hosts(opts.hosts, scenario, launch, out, swarm, duration)
         if opts.netns is not None:  # the same run, launched again inside a lossy namespace
             return run_in_namespace(opts.netns, launch, out, swarm, duration)

@@ -15,13 +15,13 @@ from dataclasses import dataclass
 from types import FrameType
 from typing import Any
 
+from agents.loading.scenario_file import load_scenario
 from agents.mavlink.modes import FLAVOURS
 from agents.mavlink.signing import load_key
-from agents.scenario.file import load_scenario
 from agents.scenario.model import HomeConfig, VehicleConfig
+from errors import EncloseError
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned, spawn_points_ned
 from sim_backend.sim_values import parse_peer_hosts
-from transport.errors import EncloseError
 
 log = logging.getLogger("enclose.sim")
 

@@ -1,7 +1,7 @@
 """`enclose simulate`: a scenario's closed loop integrated in lock-step, no network.
 
-The paper's law runs in its compiled engine (agents.core.lockstep); any other law, or the
-paper's with --through-interface, through the law interface (agents.core.lockstep_law).
+The paper's law runs in its compiled engine (agents.lockstep.engine); any other law, or the
+paper's with --through-interface, through the law interface (agents.lockstep.any_law).
 """
 
 from __future__ import annotations
@@ -14,18 +14,18 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from agents.core.lockstep import ENGINES, simulate_lockstep
-from agents.core.lockstep_law import simulate_law
-from agents.core.timeseries import RunSeries
-from agents.law.loader import make_law
-from agents.law_args import LawOptions, add_law_arguments, apply_law_arguments
-from agents.scenario.file import load_scenario
+from agents.analysis.timeseries import RunSeries
+from agents.loading.law_loader import make_law
+from agents.loading.scenario_file import load_scenario
+from agents.lockstep.any_law import simulate_law
+from agents.lockstep.engine import ENGINES, simulate_lockstep
 from agents.scenario.model import Scenario
-from deploy.launch_options import add_figures_argument
-from deploy.report import write_run_outputs
-from deploy.rundir import RunInfo
-from deploy.verdict import add_json_argument, announce
-from transport.errors import ScenarioError
+from agents.shell.law_args import LawOptions, add_law_arguments, apply_law_arguments
+from deploy.launch.launch_options import add_figures_argument
+from deploy.report.run_report import write_run_outputs
+from deploy.report.rundir import RunInfo
+from deploy.report.verdict import add_json_argument, announce
+from errors import ScenarioError
 
 log = logging.getLogger(__name__)
 

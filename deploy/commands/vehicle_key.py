@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from agents.mavlink.signing import load_key, vehicle_key, vehicle_passphrase, write_raw_key
-from deploy.run_secrets import MAVLINK_SECRET_FILE
-from transport.errors import ConfigError
+from deploy.launch.run_secrets import MAVLINK_SECRET_FILE
+from errors import ConfigError
 
 
 def register(sub: Any) -> None:

@@ -13,7 +13,7 @@ table with it) whatever happens, and one left by a crashed launcher whose PID is
 is removed at the next start.
 
 This module makes, watches and removes namespaces (also for `--hosts`:
-deploy.netns.hosts); the run inside one, and its netns.json, is deploy.netns.run.
+deploy.hosts.namespaced_hosts); the run inside one, and its netns.json, is deploy.netns.netns_run.
 """
 
 from __future__ import annotations
@@ -30,9 +30,9 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
-from deploy.pids import identify, is_alive, signal_same
-from deploy.ports import PX4_SITL_BASES
-from transport.errors import DeployError
+from deploy.launch.ports import PX4_SITL_BASES
+from deploy.procs.pids import identify, is_alive, signal_same
+from errors import DeployError
 
 log = logging.getLogger("enclose.netns")
 PREFIX = "enclose-"
@@ -149,7 +149,7 @@ def _pid_alive(pid: int) -> bool:
 
 def _stop_inside(ns: Namespace) -> None:
     """Whatever still runs in the namespace was started by this run: SIGTERM, then SIGKILL,
-    each only to the process listed (deploy.pids: one that exits meanwhile frees its PID)."""
+    each only to the process listed (deploy.procs.pids: one that exits meanwhile frees its PID)."""
     procs = [identify(pid) for pid in ns.pids()]
     for sig in (signal.SIGTERM, signal.SIGKILL):
         for ident in procs:

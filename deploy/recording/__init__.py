@@ -1,4 +1,4 @@
-"""The recorder's parts; `python -m deploy.recorder` wires them into one process.
+"""The recorder's parts; `python -m deploy.recording.recorder` wires them into one process.
 
 Nothing the recorder keeps in memory grows with the length of the run: what it needs at
 the end goes to disk as it arrives, and the end reads it back chunk by chunk.
@@ -13,10 +13,12 @@ the end goes to disk as it arrives, and the end reads it back chunk by chunk.
   indexes wait on disk for the summary (`mcap_fast`).
 - `progress`: the live `progress.json` for the launcher (atomic writes).
 - `outputs`: the end of a run: `metrics.json`, `run.json`, `series.csv`, `series.parquet`
-  and figures through `deploy.report.write_run_outputs` -- the code `enclose simulate` uses.
+  and figures through `deploy.report.run_report.write_run_outputs` -- the code
+  `enclose simulate` uses.
 - `links`: metrics.json "links" -- per link (`"f0->f2"`, `"sensor->f2"`, 0-based) the
   delivered ratio and age at delivery, from the followers' final ("done") counters, which
   the loop waits for (at most ~2 s) after the stop.
-- `link_history`: links.csv, streamed to disk as the followers' counters arrive.
+- `deploy.report.link_history`: links.csv, streamed to disk as the followers' counters
+  arrive (its format is the run directory's, read back by the report).
 - `loop.Recorder`: the process's single loop over a `Bus`.
 """

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.core.timeseries import RunSeries
+from agents.analysis.timeseries import RunSeries
 from deploy.recording.chunks import (
     STATE_WIDTH,
     Assembly,
@@ -38,7 +38,7 @@ from deploy.recording.chunks import (
     whole,
 )
 from deploy.recording.spill import BLOCK_ROWS, RowSpill
-from transport.errors import DeployError
+from errors import DeployError
 from transport.messages import FollowerState, Message, RunControl, TruthSnapshot
 
 __all__ = ["Assembly", "FollowerStats", "RunAssembler", "align_latest", "assembly_extra"]

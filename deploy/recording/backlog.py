@@ -10,7 +10,7 @@ from it.
 Queued here, a sample is its key, payload and stamps packed into chunks of CHUNK_BYTES
 (~400 B a ring64 state, not the ~880 B of a `Received` and its strings).  The chunks come
 from the C heap, not Python's small-object arenas, so a worked-off backlog's memory can be
-handed back to the system (deploy.forked.trim_heap) instead of staying resident.
+handed back to the system (deploy.procs.forked.trim_heap) instead of staying resident.
 
 A backlog beyond `max_bytes` loses its oldest samples of the key that overflowed it, as a
 full ring would, and counts them (`dropped`): the run's report then shows them missing.

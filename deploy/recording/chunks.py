@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.core.timeseries import RunSeries
+from agents.analysis.timeseries import RunSeries
 from deploy.recording.spill import RowSpill
 
 FloatArray = NDArray[np.float64]

@@ -17,7 +17,7 @@ import foxglove
 
 from deploy.recording.live_defaults import DEFAULT_HOST, DEFAULT_PORT
 from deploy.recording.view import ViewFrame
-from transport.errors import DeployError
+from errors import DeployError
 
 log = logging.getLogger(__name__)
 PORT_TRIES = 20

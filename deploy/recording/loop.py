@@ -15,14 +15,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from agents.law.loader import make_law
-from agents.liveness import MembershipWatch
+from agents.loading.law_loader import make_law
+from agents.membership.liveness import MembershipWatch
 from agents.scenario.model import Scenario
-from deploy.forked import trim_heap
 from deploy.json_files import write_json_atomic
+from deploy.procs.forked import trim_heap
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.backlog import Backlog
-from deploy.recording.link_history import LinkHistory
 from deploy.recording.links import FINAL_STATES, link_report, unreadable_links
 from deploy.recording.live_server import LiveServer
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
@@ -31,14 +30,15 @@ from deploy.recording.queues import STEP_BATCH, drain_into, queue_capacities
 from deploy.recording.resume import newest_part, read_back
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
 from deploy.recording.view_feed import ViewFeed
-from deploy.rundir import RunInfo
+from deploy.report.link_history import LinkHistory
+from deploy.report.rundir import RunInfo
+from errors import CodecError, TransportError
 from transport.access import sender_ids
 from transport.bus import Bus, Congestion
-from transport.checks import RECORDER_LIMITS
 from transport.codec import encode
 from transport.decoder import Decoder
-from transport.errors import CodecError, TransportError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
+from transport.message_checks import RECORDER_LIMITS
 from transport.messages import Message, ProcessStatus, Stamper
 
 log = logging.getLogger(__name__)
@@ -105,10 +105,10 @@ class Recorder:
         # After the subscription: what arrives while we read back waits in its queue.
         self.carried: Counter[str] = Counter()
         self._carry_on()
-        # progress.json names the live URL before anyone sees us linked (deploy.launch).
+        # progress.json names the live URL before anyone sees us linked (deploy.launch.launcher).
         write_json_atomic(self.run_dir / PROGRESS_FILE, self.progress())
         self._token = bus.declare_token(self.keys.alive(ROLE, index))
-        # Followers in and out, as they see it themselves (agents.liveness): the phases
+        # Followers in and out, as they see it themselves (agents.membership.liveness): the phases
         # of the run's metrics and the marks on its figures.
         self.liveness = MembershipWatch(bus, self.keys, scenario.n)
         self.membership: list[tuple[float, frozenset[int]]] = []

@@ -1,6 +1,6 @@
 """The end of a recorded run: the same metrics.json, run.json, series files and figures as
-`enclose simulate`, through the same `deploy.report.write_run_outputs`, read chunk by chunk
-from the assembler's spills (deploy.recording.chunks): memory does not grow with the run."""
+`enclose simulate`, through the same `deploy.report.run_report.write_run_outputs`, read chunk by
+chunk from the assembler's spills (deploy.recording.chunks): memory does not grow with the run."""
 
 from __future__ import annotations
 
@@ -9,15 +9,15 @@ import time
 from pathlib import Path
 from typing import Any
 
-from agents.core.metrics import Metrics
-from agents.membership_metrics import PhaseReport, membership_phases
+from agents.analysis.metrics import Metrics
+from agents.membership.ring_accuracy import PhaseReport, membership_phases
 from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
 from deploy.recording.assembler import Assembly, RunAssembler, assembly_extra
-from deploy.recording.link_history import LINKS_CSV, LinkHistory
-from deploy.report import write_run_outputs
-from deploy.rundir import METRICS_FILE, RunInfo
-from transport.errors import DeployError
+from deploy.report.link_history import LINKS_CSV, LinkHistory
+from deploy.report.run_report import write_run_outputs
+from deploy.report.rundir import METRICS_FILE, RunInfo
+from errors import DeployError
 
 log = logging.getLogger(__name__)
 RUN_KIND = "networked"

@@ -1,6 +1,6 @@
 """Live progress of a networked run, for the launcher: `RUN_DIR/progress.json`.
 
-Errors are those of `agents.core.metrics.error_series` -- the same definitions as the final
+Errors are those of `agents.analysis.metrics.error_series` -- the same definitions as the final
 metrics -- over the last second of truth with each follower's latest state aligned.
 """
 
@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from agents.core.metrics import error_series, worst
+from agents.analysis.metrics import error_series, worst
 from deploy.recording.assembler import RunAssembler
-from deploy.rundir import RunInfo
+from deploy.report.rundir import RunInfo
 
 PROGRESS_FILE = "progress.json"
 WINDOW_S = 1.0

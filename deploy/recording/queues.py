@@ -9,7 +9,7 @@ from collections.abc import Iterable
 from agents.scenario.model import Scenario
 from deploy.recording.backlog import Backlog
 from transport.bus import Subscription
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 
 # Each queue as long as its key's traffic fills in this time (at most QUEUE_MAX): all the
 # backlog a stall or an insider's flood may need, and its ring's pages mapped early on.
@@ -32,7 +32,7 @@ def queue_capacities(keys: SwarmKeys, scenario: Scenario, sensor: bool) -> dict[
     16384 slots at ~9 a second took 30 minutes of the paper's case, +4 MB."""
     n, hz = scenario.n, scenario.run.rate_hz
     # Truth and observations go out every simulator tick that gives at least the control
-    # rate (deploy.swarm_sim), under twice it: their rings fill in at most QUEUE_HOLD_S.
+    # rate (sim_backend.swarm_sim), under twice it: their rings fill in at most QUEUE_HOLD_S.
     # Every process's status once a second.
     per_s = {keys.all_follower_states(): n * hz, keys.all_sensor_targets(): n * hz,
              keys.truth(): hz, keys.all_status(): n + scenario.m + 4.0}

@@ -1,7 +1,7 @@
 """A restarted recorder carries on the run's outputs from what its predecessor recorded.
 
 The launcher keeps a dead recorder's MCAP beside the run as `recording-part<k>.mcap`
-(deploy.launch).  Its complete chunks are readable even though the file was never
+(deploy.launch.launcher).  Its complete chunks are readable even though the file was never
 finished (mcap_log flushes each second); the new recorder reads the newest part back into
 its own recording and its assembler, so that `recording.mcap`, `series.csv` and the metrics
 cover the whole run but for the seconds the recorder was down.  Since every recorder copies
@@ -23,8 +23,8 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 
 from deploy.recording.mcap_log import RawFrame, RawSchema, schema_name
+from errors import CodecError
 from transport.codec import CODEC_VERSION, SCHEMAS, decode
-from transport.errors import CodecError
 from transport.messages import Message as BusMessage
 
 log = logging.getLogger(__name__)

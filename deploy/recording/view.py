@@ -7,11 +7,11 @@ panels work without set-up:
   at most `scene_hz` per second of truth;
 - `/errors` (JSON `enclose.LiveErrors`): the paper's errors at that instant, per follower and
   their maxima, with the bounds they are judged against (the definitions of
-  `agents.core.metrics.error_series`);
+  `agents.analysis.metrics.error_series`);
 - `/links` (JSON `enclose.LiveLinks`): per link age and delivered ratio
   (`deploy.recording.live_links`), once a recorder tick;
 - `/status` (JSON `enclose.LiveStatus`): each process's state, the member set and what the
-  processes refused from the bus (deploy.refusals), each tick;
+  processes refused from the bus (deploy.report.refusals), each tick;
 - `/log` (`foxglove.Log`, protobuf): a line per process state or membership change.
 """
 
@@ -24,13 +24,13 @@ from typing import Any
 import numpy as np
 from foxglove import messages as fm
 
-from agents.core.metrics import error_series, separation_series
-from agents.core.timeseries import RunSeries
+from agents.analysis.metrics import error_series, separation_series
+from agents.analysis.timeseries import RunSeries
 from deploy.recording.live_links import LinkTracker
 from deploy.recording.mcap_log import RawFrame, RawSchema
 from deploy.recording.scene import LinkView, scene_update, timestamp, too_close
-from deploy.refusals import refusals
-from deploy.rundir import RunInfo
+from deploy.report.refusals import refusals
+from deploy.report.rundir import RunInfo
 from transport.messages import FollowerState, Message, ProcessStatus, RunControl, TruthSnapshot
 
 SCENE_TOPIC, ERRORS_TOPIC, LINKS_TOPIC = "/scene", "/errors", "/links"

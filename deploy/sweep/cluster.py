@@ -30,16 +30,16 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from deploy.sweep.cell_runner import CELL_LOG, STOP_GRACE_S, SubprocessRunner
 from deploy.sweep.parallel import StopSignals
-from deploy.sweep.runner import CELL_LOG, STOP_GRACE_S, SubprocessRunner
-from transport.errors import DeployError
+from errors import DeployError
 
 log = logging.getLogger("enclose.sweep")
 CONNECT_TIMEOUT_S = 30.0
 POLL_S = 0.5
 LOST_EXIT = 1  # the task raised or its worker was lost: the cell counts as failed
 INTERRUPTED_EXIT = 130
-NOT_SENT = ("credentials",)  # deploy.run_secrets: keys of the finished run
+NOT_SENT = ("credentials",)  # deploy.launch.run_secrets: keys of the finished run
 
 
 @contextlib.contextmanager

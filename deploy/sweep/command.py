@@ -24,18 +24,18 @@ from typing import Any
 
 from rich.console import Console
 
-from deploy.interrupts import interrupts
 from deploy.json_files import read_json
+from deploy.procs.interrupts import interrupts
+from deploy.sweep.cell_runner import HOST_FILE, CellRunner, SubprocessRunner
 from deploy.sweep.figure_by_law import law_figures
 from deploy.sweep.figures import write_figures
 from deploy.sweep.parallel import StopSignals, run_parallel
-from deploy.sweep.progress import SweepProgress
-from deploy.sweep.runner import HOST_FILE, CellRunner, SubprocessRunner
 from deploy.sweep.spec import Cell, SweepSpec, load_sweep
 from deploy.sweep.summary import write_summary
+from deploy.sweep.sweep_progress import SweepProgress
+from deploy.sweep.sweep_verdict import print_sweep_verdict
 from deploy.sweep.table import RECORD, CellState, cell_state, collect, write_tables
-from deploy.sweep.verdict import print_sweep_verdict
-from transport.errors import ConfigError
+from errors import ConfigError
 
 log = logging.getLogger("enclose.sweep")
 STARTUP_S = 15.0  # a cell's start-up and shutdown, for the ETA before any cell has run

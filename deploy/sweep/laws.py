@@ -3,7 +3,7 @@
 `law = ["paper", "simple_law:SimpleLaw"]` takes shipped names or module references whose
 folder is relative to the sweep file; `"law.k_c" = [2.0, 5.0]` one parameter of the law
 (quoted: TOML reads a bare dotted key as a table, which `law_keys` flattens the same).  A
-cell runs `enclose run --law REF --law-param KEY=VALUE` (agents.law_args).  Every law and
+cell runs `enclose run --law REF --law-param KEY=VALUE` (agents.shell.law_args).  Every law and
 parameter combination of the grid is checked by the law itself when the sweep file is read.
 """
 
@@ -13,11 +13,11 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from agents.law_args import LawOptions, apply_law_arguments
 from agents.scenario.law import absolute_ref, law_from_ref
 from agents.scenario.model import Scenario
+from agents.shell.law_args import LawOptions, apply_law_arguments
 from deploy.sweep.values import Value, format_value, toml_text
-from transport.errors import ConfigError, ScenarioError
+from errors import ConfigError, ScenarioError
 
 LAW_PARAM = "law."  # "law.<parameter>": one parameter of the law (--law-param)
 

@@ -10,14 +10,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import ESTIMATORS
 from agents.scenario.net_faults import check_fault_flag
 from agents.scenario.network import IMPAIRMENT_KEYS, choice, impairment
-from deploy.restarts import RESTART_POLICIES
+from deploy.procs.restarts import RESTART_POLICIES
 from deploy.sweep.laws import check_laws, is_law_key, law_flags, law_keys, law_value
 from deploy.sweep.values import Value, format_value
-from transport.errors import ConfigError, ScenarioError
+from errors import ConfigError, ScenarioError
 from transport.network_schema import LINK_PROTOCOLS, LinkImpairment
 
 # The network flags of `enclose run`, as sweep keys (--impair-seed comes from seed0 + repeat).

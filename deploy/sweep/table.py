@@ -10,9 +10,9 @@ from pathlib import Path
 from typing import Any
 
 from deploy.json_files import read_json
+from deploy.report.verdict import silent_followers
 from deploy.sweep.spec import Cell, SweepSpec
 from deploy.sweep.values import format_value
-from deploy.verdict import silent_followers
 
 RECORD = "sweep_cell.json"  # written by the sweep: the cell's argv, exit code, wall time
 METRICS = ("estimator_error_m", "radius_error_m", "angle_error", "settle_time_s",

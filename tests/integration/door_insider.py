@@ -29,7 +29,7 @@ import zenoh
 from tests.integration.rogue import wait_running
 from transport.bus import Congestion
 from transport.credentials import Identity
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 

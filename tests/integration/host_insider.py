@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from transport.credentials import Identity
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 

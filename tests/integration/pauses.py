@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from deploy.pids import read_pids
+from deploy.procs.pids import read_pids
 from tests.integration.runs import spawned_run, wait_for
 
 

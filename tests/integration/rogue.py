@@ -42,7 +42,7 @@ from agents.mavlink.wire import decode_datagram, new_codec
 from transport.bus import Congestion
 from transport.codec import encode
 from transport.credentials import Identity
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import FollowerState, Header, ProcessStatus, RunControl
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig

@@ -10,8 +10,8 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
-from deploy.pids import ProcessId, read_pids, signal_same
-from deploy.port_slots import port_slot
+from deploy.launch.port_slots import port_slot
+from deploy.procs.pids import ProcessId, read_pids, signal_same
 
 
 def pid_alive(pid: int) -> bool:
@@ -24,7 +24,7 @@ def pid_alive(pid: int) -> bool:
 
 def run_pids(root: Path) -> list[ProcessId]:
     """The processes of every `logs/pids.json` at or below `root` (a run, or a sweep's
-    cells), with their start times (deploy.pids)."""
+    cells), with their start times (deploy.procs.pids)."""
     return [ident for logs in [root / "logs", *(p.parent for p in root.glob("*/logs/pids.json"))]
             for ident in read_pids(logs).values()]
 
@@ -53,7 +53,7 @@ def spawned(argv: Sequence[str], root: Path) -> Iterator[subprocess.Popen[str]]:
 @contextlib.contextmanager
 def spawned_run(argv: Sequence[str], root: Path) -> Iterator[subprocess.Popen[str]]:
     """An `enclose run` command as `spawned`, on ports no other run on this machine takes:
-    a port slot (deploy.port_slots) held while it runs, given as `--port-range`.  Without
+    a port slot (deploy.launch.port_slots) held while it runs, given as `--port-range`.  Without
     one, runs started at the same moment (tests side by side, `pytest -n`) can find the
     same ports free."""
     with port_slot() as slot, spawned([*argv, "--port-range", slot.flag], root) as proc:

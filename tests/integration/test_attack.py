@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.run_secrets import MAVLINK_SECRET_FILE
+from deploy.launch.run_secrets import MAVLINK_SECRET_FILE
 from tests.integration.real_time import judged
 from tests.integration.runs import spawned_run, wait_for
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.netns.hosts import unavailable
+from deploy.hosts.namespaced_hosts import unavailable
 from tests.integration.real_time import judged
 from tests.integration.runs import wait_for
 from tests.integration.two_hosts import COMPANION, GROUND, two_hosts

@@ -21,7 +21,7 @@ from typing import Any
 
 import pytest
 
-from deploy.pids import read_pids
+from deploy.procs.pids import read_pids
 from tests.integration.pauses import experiment_time_s
 from tests.integration.real_time import SIM_LATE_MAX_PCT, judged
 from tests.integration.runs import spawned_run, wait_for

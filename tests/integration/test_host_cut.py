@@ -1,4 +1,4 @@
-"""The nftables cut between two namespaced hosts (deploy.netns.cut), on real namespaces:
+"""The nftables cut between two namespaced hosts (deploy.hosts.host_cut), on real namespaces:
 TCP between the hosts stops at the cut and passes again at the heal, MAVLink's UDP and
 the simulator's sensing link (TCP to the sensing port) pass throughout, the hosts' kernels
 give up a connect after one SYN retry and a connection after 3 retransmits, and neither
@@ -16,9 +16,9 @@ from collections.abc import Iterator
 import pytest
 
 from agents.scenario.net_faults import parse_net_fault_flag
-from deploy.deployment import Deployment, HostSpec
-from deploy.netns.cut import CUT_TABLE, HostCut
-from deploy.netns.hosts import SYN_RETRIES, TCP_RETRIES, linked_namespaces, unavailable
+from deploy.hosts.deployment import Deployment, HostSpec
+from deploy.hosts.host_cut import CUT_TABLE, HostCut
+from deploy.hosts.namespaced_hosts import SYN_RETRIES, TCP_RETRIES, linked_namespaces, unavailable
 
 pytestmark = pytest.mark.integration
 REASON = unavailable()

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.netns.hosts import unavailable
+from deploy.hosts.namespaced_hosts import unavailable
 from tests.integration.real_time import judged
 from tests.integration.runs import spawned
 
@@ -59,7 +59,7 @@ def test_paper_case_over_three_hosts_with_clock_offsets_and_a_router_restart(
     replays = {name: s.get("signing_rejected_replay", 0)
                for name, s in launch["status_at_stop"].items()}
     assert not any(replays.values()), replays
-    # Every host ran on its own folder of credentials (deploy.host_keys): no CA key
+    # Every host ran on its own folder of credentials (deploy.hosts.host_keys): no CA key
     # anywhere, no host holding a key of another host's process.
     creds = out / "credentials"
     assert not list(creds.rglob("ca.key"))

@@ -41,9 +41,9 @@ from typing import Any
 
 import pytest
 
-from deploy.host_keys import CA_KEY, needed_files
-from deploy.netns.hosts import unavailable
-from deploy.run_secrets import MAVLINK_SECRET_FILE, signing_key_file
+from deploy.hosts.host_keys import CA_KEY, needed_files
+from deploy.hosts.namespaced_hosts import unavailable
+from deploy.launch.run_secrets import MAVLINK_SECRET_FILE, signing_key_file
 from tests.integration import host_insider
 from tests.integration.real_time import judged
 from tests.integration.rogue import BAD_TOKENS
@@ -52,7 +52,7 @@ from tests.integration.test_attack import STARTED
 from tests.integration.two_hosts import COMPANION, GROUND, TwoHosts, two_hosts
 from transport.access import sender_ids
 from transport.credentials import identity_file
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 
 pytestmark = pytest.mark.integration
 DURATION_S, ATTACK_S = 40.0, 30.0

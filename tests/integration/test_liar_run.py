@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from deploy.lie_window import lie_figures
-from deploy.netns.hosts import unavailable
+from deploy.hosts.namespaced_hosts import unavailable
+from deploy.report.lie_window import lie_figures
 from tests.integration.real_time import judged
 from tests.integration.runs import pid_alive, spawned_run
 

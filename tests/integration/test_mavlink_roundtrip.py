@@ -6,8 +6,8 @@ import pytest
 
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.startup import StartupTimeouts, command, start_offboard, wait_until
+from errors import CommandRejectedError, LinkLostError
 from tests.integration.sim_process import start_sim
-from transport.errors import CommandRejectedError, LinkLostError
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
 TIMEOUTS = StartupTimeouts(heartbeat_s=10.0, takeoff_s=15.0)

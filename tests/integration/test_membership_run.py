@@ -18,10 +18,10 @@ from typing import Any
 
 import pytest
 
-from agents.membership_metrics import PhaseErrors, phase_errors
-from agents.scenario.file import load_scenario
-from deploy.pids import read_pids, signal_same
-from deploy.rundir import read_series
+from agents.loading.scenario_file import load_scenario
+from agents.membership.ring_accuracy import PhaseErrors, phase_errors
+from deploy.procs.pids import read_pids, signal_same
+from deploy.report.rundir import read_series
 from tests.integration.real_time import judged
 from tests.integration.runs import pid_alive, spawned_run, wait_for
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from deploy.netns.namespace import TABLE, destroy, lossy_namespace, namespaces, probe
-from deploy.pids import is_alive, read_pids
+from deploy.procs.pids import is_alive, read_pids
 from tests.integration.runs import spawned
 
 pytestmark = pytest.mark.integration

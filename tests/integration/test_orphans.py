@@ -1,4 +1,4 @@
-"""A SIGKILLed launcher leaves no process of its run behind (agents.lifeline)."""
+"""A SIGKILLed launcher leaves no process of its run behind (agents.shell.lifeline)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.pids import ProcessId, is_alive, read_pids
+from deploy.procs.pids import ProcessId, is_alive, read_pids
 from tests.integration.runs import spawned_run, wait_for
 
 pytestmark = pytest.mark.integration

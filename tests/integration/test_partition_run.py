@@ -3,7 +3,7 @@
 A partition {1, 2} | {3, 4} for 15 s at 20 s (bench/bench_partition.py cuts at 40 s; the
 ring is steady from ~10 s), cut at the receivers (loopback) and for real
 between two hosts (`--hosts 2`, nftables; skipped where network namespaces are not to be
-had): every follower holds the far side (half of the ring: agents.member_hold) instead of
+had): every follower holds the far side (half of the ring: agents.membership.member_hold) instead of
 re-forming, nothing dies, no two vehicles come within 1 m, and the errors are back inside
 the paper's bounds within 10 s of the heal.  An isolated follower (15 s) is dropped by the
 others and taken back, without a collision.
@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from deploy.netns.hosts import unavailable
+from deploy.hosts.namespaced_hosts import unavailable
 from tests.integration.runs import pid_alive, spawned_run
 
 pytestmark = pytest.mark.integration

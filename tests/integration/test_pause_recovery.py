@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.recovery import recoveries
+from deploy.report.recovery import recoveries
 from tests.integration.pauses import Pause, run_with_pauses
 from tests.integration.real_time import judged
 

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.scenario.file import load_scenario
-from deploy.cpu_load import process_status_kb
+from agents.loading.scenario_file import load_scenario
+from deploy.report.cpu_load import process_status_kb
 from tests.integration.test_recorder_process import (
     publish_paced,
     pubs_keys,
@@ -35,7 +35,7 @@ from tests.integration.test_transport_zenoh import free_port
 from tests.recorder_synth import SynthRun
 from transport.bus import Congestion, wait_until_alive
 from transport.codec import encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import Stamper
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig, loopback_endpoint

@@ -14,14 +14,14 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from agents.scenario.file import load_scenario
-from deploy.verdict import read_verdict
+from agents.loading.scenario_file import load_scenario
+from deploy.report.verdict import read_verdict
 from tests.integration import runs
 from tests.integration.test_transport_zenoh import free_port
 from tests.recorder_synth import SynthRun
 from transport.bus import Congestion, wait_until_alive
 from transport.codec import decode, encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import ProcessStatus, Stamper
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig, loopback_endpoint
@@ -36,7 +36,7 @@ wait_for = partial(runs.wait_for, period_s=0.005)
 
 def start_recorder(swarm: str, out: Path, endpoint: str) -> subprocess.Popen[bytes]:
     return subprocess.Popen(
-        [sys.executable, "-m", "deploy.recorder", "--scenario", "paper", "--swarm", swarm,
+        [sys.executable, "-m", "deploy.recording.recorder", "--scenario", "paper", "--swarm", swarm,
          "--out", str(out), "--listen", endpoint], cwd=REPO)
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.pids import read_pids, signal_same
+from deploy.procs.pids import read_pids, signal_same
 from tests.integration.runs import spawned_run, wait_for
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]

@@ -1,6 +1,6 @@
 """Host routers restarted one after another: every client hears every other one again.
 
-Three `deploy.router` processes on loopback, linked as a deployment links them
+Three `deploy.hosts.router` processes on loopback, linked as a deployment links them
 (`Deployment.router_links`), two client sessions behind each.  Zenoh 1.10's routers in a
 mesh lost a restarted router's routes to one of the others almost every time; this is
 the test that tells whether the deployment's topology heals.
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from deploy.deployment import Deployment, HostSpec
-from deploy.ports import free_tcp_port
+from deploy.hosts.deployment import Deployment, HostSpec
+from deploy.launch.ports import free_tcp_port
 from tests.integration.runs import wait_for
 from transport.bus import Subscription
 from transport.zenoh_bus import ZenohBus
@@ -41,7 +41,7 @@ class _Routers:
         self.procs: dict[int, subprocess.Popen[bytes]] = {}
 
     def start(self, k: int) -> None:
-        argv = [sys.executable, "-m", "deploy.router", *self.dep.router_argv(k, secure=False)]
+        argv = [sys.executable, "-m", "deploy.hosts.router", *self.dep.router_argv(k, secure=False)]
         with (self.logs / f"router-{k}.log").open("ab") as log:
             self.procs[k] = subprocess.Popen(argv, cwd=REPO, stdout=log, stderr=log)
 

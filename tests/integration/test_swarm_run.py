@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 from mcap.reader import make_reader
 
-from deploy.pids import read_pids, signal_same
+from deploy.procs.pids import read_pids, signal_same
 from tests.foxglove_client import Received, foxglove_client
 from tests.integration.real_time import judged
 from tests.integration.runs import pid_alive, spawned_run, wait_for

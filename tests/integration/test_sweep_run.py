@@ -17,11 +17,11 @@ from pathlib import Path
 
 import pytest
 
-from deploy.interrupts import interrupts
-from deploy.pids import is_alive
+from deploy.procs.interrupts import interrupts
+from deploy.procs.pids import is_alive
+from deploy.sweep.cell_runner import TIMEOUT_EXIT, SubprocessRunner
 from deploy.sweep.command import run_sweep
 from deploy.sweep.parallel import StopSignals
-from deploy.sweep.runner import TIMEOUT_EXIT, SubprocessRunner
 from deploy.sweep.spec import load_sweep
 from tests.integration.runs import pid_alive, run_pids, spawned, wait_for
 

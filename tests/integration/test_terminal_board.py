@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.port_slots import port_slot
+from deploy.launch.port_slots import port_slot
 from tests.integration.runs import kill_leftovers, wait_for
 
 pytestmark = pytest.mark.integration

@@ -21,7 +21,7 @@ from tests.integration import runs
 from transport.bus import Bus, wait_until_alive
 from transport.codec import encode
 from transport.decoder import Decoder
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import FollowerState, ProcessStatus, Stamper
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import LINK_BUFFER_BYTES, ZenohConfig, loopback_endpoint

@@ -12,7 +12,7 @@ import pytest
 from pymavlink import mavutil
 
 import enclose
-from deploy.port_slots import slot_ports
+from deploy.launch.port_slots import slot_ports
 
 # An installed enclose loads the plugin by its entry point; this line serves a source tree.
 pytest_plugins = ("enclose.testing",)

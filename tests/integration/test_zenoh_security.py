@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from deploy.ports import free_tcp_port
+from deploy.launch.ports import free_tcp_port
 from tests.integration.runs import wait_for
 from transport.bus import Congestion
 from transport.credentials import Identity, identity_file, make_credentials
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 

@@ -3,7 +3,7 @@
 One deployment file (the docs' own, at the namespaces' addresses), `enclose keys OUT
 --deployment FILE` once, then `enclose host FILE --host NAME --credentials OUT/NAME/` per
 host, each its own process in its own namespace, the companion first, as in the docs.
-The namespaces are the `--hosts` ones (deploy.netns.hosts.linked_namespaces: veth links
+The namespaces are the `--hosts` ones (deploy.hosts.namespaced_hosts.linked_namespaces: veth links
 to a bridge in a hub namespace); they, and every process started here, are gone
 afterwards whatever happens (by PID: the hosts, then what their run directories name).
 """
@@ -20,8 +20,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO
 
-from deploy.deployment import Deployment, load_deployment
-from deploy.netns.hosts import linked_namespaces
+from deploy.hosts.deployment import Deployment, load_deployment
+from deploy.hosts.namespaced_hosts import linked_namespaces
 from tests.integration.runs import kill_leftovers, wait_for
 
 GROUND, COMPANION = "ground", "companion"

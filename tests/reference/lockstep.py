@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.core.estimator import observation_weights
-from agents.core.params import control_gains, estimator_params
-from agents.core.profiles import TargetMotion
-from agents.core.timeseries import RunSeries
+from agents.analysis.timeseries import RunSeries
+from agents.law.scenario_params import control_gains, estimator_params
+from agents.lockstep.estimator_weights import observation_weights
 from agents.scenario.model import Scenario
+from agents.scenario.target_motion import TargetMotion
 from tests.reference.law import Edges, enclosing_control, estimator_rates
 
 

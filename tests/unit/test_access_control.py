@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
+from errors import ConfigError
 from transport.access import access_control, own_keys
 from transport.credentials import Identity, identity_file, make_credentials
-from transport.errors import ConfigError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.zenoh_config import ZenohConfig, build_zenoh_config
 
 KEYS = SwarmKeys("acl")

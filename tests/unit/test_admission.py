@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.cpu_load import TICKS_PER_S
+from deploy.report.cpu_load import TICKS_PER_S
 from tests.admission import Gate, demand_cores, foreground_ticks
 
 pytestmark = pytest.mark.timeout(30)

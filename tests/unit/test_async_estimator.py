@@ -16,17 +16,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.core.lockstep import estimator_substeps, simulate_lockstep
-from agents.core.metrics import compute_metrics, error_series
+from agents.analysis.metrics import compute_metrics, error_series
 from agents.follower.inputs import Latest
-from agents.follower.membership import setup_for
 from agents.follower.runner import LawRunner
 from agents.law.interface import Sample
 from agents.law.paper import PaperLaw
-from agents.scenario.file import load_scenario, parse_scenario
+from agents.loading.scenario_file import load_scenario, parse_scenario
+from agents.lockstep.engine import estimator_substeps, simulate_lockstep
+from agents.membership.follower_place import setup_for
 from agents.scenario.model import Scenario
+from errors import ScenarioError
 from tests.unit.test_closed_loop import SIX
-from transport.errors import ScenarioError
 from transport.messages import FollowerState, Header
 
 EPS_M, EPS_DELTA = 0.0999, 0.0199

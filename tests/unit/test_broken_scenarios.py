@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.scenario.file import shipped_text
+from agents.loading.scenario_file import shipped_text
 from deploy.cli import main
 
 PAPER = shipped_text("paper")

@@ -8,15 +8,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from deploy.refusals import launch_refusals, refusal_text, refusals
-from deploy.run_monitor import StatusBoard
+from deploy.launch.status_board import StatusBoard
+from deploy.report.refusals import launch_refusals, refusal_text, refusals
 from transport.access import own_keys, process_names, sender_id, sender_ids
 from transport.bus import Received
-from transport.checks import key_reason, key_rule
 from transport.codec import encode
 from transport.decoder import Decoder
-from transport.keys import KeyInfo, SwarmKeys, parse_key
+from transport.key_exprs import KeyInfo, SwarmKeys, parse_key
 from transport.memory_bus import MemoryBus, MemoryHub
+from transport.message_checks import key_reason, key_rule
 from transport.messages import FollowerState, Header, ProcessStatus, RunControl, TruthSnapshot
 from transport.ratelog import RateLimitedLog
 

@@ -1,6 +1,6 @@
 """The cheap per-message checks and tallies pinned to the generic code they replace.
 
-`check` (transport.checks) sums a message's numbers instead of testing each one,
+`check` (transport.message_checks) sums a message's numbers instead of testing each one,
 `AgeHistogram.add` (transport.link_stats) counts bins in a dict until read, and
 `ClockBook.to_local` copies field dicts instead of `dataclasses.replace`: here each is
 compared with the code before issue 15, kept below as the reference, on random and
@@ -19,9 +19,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from transport.checks import DEFAULT_LIMITS, Limits, _time_reason, check, key_rule
-from transport.keys import SwarmKeys, parse_key
+from transport.key_exprs import SwarmKeys, parse_key
 from transport.link_stats import AGE_MAX_S, AgeHistogram, latency_histogram
+from transport.message_checks import DEFAULT_LIMITS, Limits, _time_reason, check, key_rule
 from transport.messages import (
     ClockProbe,
     FollowerState,
@@ -39,7 +39,7 @@ KEYS = SwarmKeys("chk")
 NOW = 1_800_000_000.0
 
 
-# ---- the reference: transport.checks before issue 15 (with the rules added since) ----------
+# ---- the reference: transport.message_checks before issue 15 (with the rules added since) ----
 def _finite(values: Iterable[Any]) -> bool:
     return all(isinstance(v, int | float) and math.isfinite(v) for v in values)
 

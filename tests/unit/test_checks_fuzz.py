@@ -1,4 +1,4 @@
-"""Messages checked, not trusted (transport.checks), and the codec under random input."""
+"""Messages checked, not trusted (transport.message_checks), and the codec under random input."""
 
 from __future__ import annotations
 
@@ -9,14 +9,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from errors import CodecError
 from transport.bus import Received
-from transport.checks import DEFAULT_LIMITS, check, newer
 from transport.codec import decode, encode
 from transport.decoder import Decoder
-from transport.errors import CodecError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.law_fields import FieldSpec
 from transport.law_fields import reason as law_reason
+from transport.message_checks import DEFAULT_LIMITS, check, newer
 from transport.messages import FollowerState, Header, RunControl, TargetObservation
 
 KEYS = SwarmKeys("chk")

@@ -8,17 +8,17 @@ from typing import Any
 
 import pytest
 
-from agents.network_args import NetworkOptions
-from agents.process_options import AgentOptions, BusOptions
 from agents.scenario.model import Scenario
+from agents.shell.network_args import NetworkOptions
+from agents.shell.process_options import AgentOptions, BusOptions
 from deploy.cli import build_parser
 from deploy.commands.host import HostOptions
 from deploy.commands.run import RunOptions
-from deploy.launch_options import LaunchOptions
-from deploy.live_args import LiveOptions
-from deploy.netns import hosts as netns_hosts
-from deploy.netns import run as netns_run
-from transport.errors import TransportError
+from deploy.hosts import namespaced_hosts
+from deploy.launch.launch_options import LaunchOptions
+from deploy.launch.live_args import LiveOptions
+from deploy.netns import netns_run
+from errors import TransportError
 
 RUN_FLAGS = ["--duration", "12.5", "--swarm", "sw", "--port-range", "20000-20999",
              "--noise-std-m", "0.2", "--link-timeout", "30", "--insecure", "--json",
@@ -45,7 +45,7 @@ def test_enclose_run_reads_every_flag_into_its_options(tmp_path: Path) -> None:
     assert run_options("--no-live").launch.live is None
     assert run_options().launch.journal is None  # the scenario's [run] journal decides
     hosts = run_options("--hosts", "3", "--host-offsets", "0,1,2", "--host-delay-ms", "4").hosts
-    assert hosts == netns_hosts.HostsOptions(3, "0,1,2", 4.0)
+    assert hosts == namespaced_hosts.HostsOptions(3, "0,1,2", 4.0)
 
 
 def test_a_run_started_again_in_a_namespace_gets_the_same_options(tmp_path: Path) -> None:
@@ -62,7 +62,7 @@ def test_a_run_started_again_in_a_namespace_gets_the_same_options(tmp_path: Path
 
 def test_hosts_get_the_launchers_supervision_flags(tmp_path: Path) -> None:
     first = run_options("--hosts", "2", *RUN_FLAGS).launch
-    argv = netns_hosts.inner_argv(first, tmp_path, 12.5)
+    argv = namespaced_hosts.inner_argv(first, tmp_path, 12.5)
     host = HostOptions.from_namespace(build_parser(argv).parse_args(argv))
     assert host.host is None and host.deployment == tmp_path / "deployment.toml"
     shared = ("noise_std_m", "link_timeout_s", "insecure", "restart", "max_restarts", "faults",
@@ -76,7 +76,7 @@ class Stop(TransportError):
 
 
 def count_loads(monkeypatch: pytest.MonkeyPatch) -> list[Scenario]:
-    import agents.process as process
+    import agents.shell.process as process
 
     loaded: list[Scenario] = []
     real = process.load_scenario
@@ -114,8 +114,8 @@ def test_a_target_loads_its_scenario_once_and_flies_it(monkeypatch: pytest.Monke
 @pytest.mark.timeout(30)
 def test_the_simulator_and_recorder_open_their_bus_on_the_scenario_they_loaded(
         monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    import deploy.recorder as recorder
-    import deploy.swarm_sim as swarm_sim
+    import deploy.recording.recorder as recorder
+    import sim_backend.swarm_sim as swarm_sim
 
     loaded = count_loads(monkeypatch)
     opened: list[tuple[BusOptions, Any]] = []
@@ -140,6 +140,6 @@ def test_network_faults_reach_a_namespaced_run_and_hosts_once(tmp_path: Path) ->
     argv = netns_run.inner_argv(first.launch, tmp_path / "out", "sw", 60.0)
     again = RunOptions.from_namespace(build_parser(argv).parse_args(argv))
     assert again.launch.faults == (kill,) and again.launch.network.net_faults == (part,)
-    argv = netns_hosts.inner_argv(first.launch, tmp_path, 60.0)
+    argv = namespaced_hosts.inner_argv(first.launch, tmp_path, 60.0)
     host = HostOptions.from_namespace(build_parser(argv).parse_args(argv))
     assert host.launch.faults == (kill,) and host.launch.network.net_faults == (part,)

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from agents.core.lockstep import simulate_lockstep
-from agents.core.metrics import compute_metrics, error_series, settle_time
-from agents.scenario.file import load_scenario, parse_scenario, shipped_text
+from agents.analysis.metrics import compute_metrics, error_series, settle_time
+from agents.loading.scenario_file import load_scenario, parse_scenario, shipped_text
+from agents.lockstep.engine import simulate_lockstep
 
 
 def metrics_of(scenario, dt_s: float, duration_s: float):  # type: ignore[no-untyped-def]

@@ -18,9 +18,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from errors import CodecError
 from transport import codec, codec_fast
 from transport.codec import decode, decode_reference, encode, encode_reference
-from transport.errors import CodecError
 from transport.messages import (
     PROCESS_STATES,
     ClockProbe,

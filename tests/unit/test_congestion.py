@@ -6,12 +6,12 @@ from __future__ import annotations
 from typing import cast
 
 from agents.follower.node import FollowerNode
-from agents.process import StatusReporter
-from agents.scenario.file import load_scenario
-from deploy.swarm_sim import SensorPublisher
+from agents.loading.scenario_file import load_scenario
+from agents.shell.process import StatusReporter
+from sim_backend.swarm_sim import SensorPublisher
 from tests.still_vehicle import still_vehicle
 from transport.bus import Congestion, Publisher
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub, MemoryPublisher
 
 KEYS = SwarmKeys("s")

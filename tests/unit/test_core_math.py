@@ -1,4 +1,5 @@
-"""The numpy helpers of agents.core: angles for the metrics, the estimator's weights."""
+"""The numpy helpers: angles for the metrics (agents.analysis.geometry), the estimator's
+weights (agents.lockstep.estimator_weights)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from agents.core.estimator import edge_fractions, observation_weights
-from agents.core.geometry import as_complex, as_plane, included_angles, wrap_2pi
+from agents.analysis.geometry import as_complex, as_plane, included_angles, wrap_2pi
 from agents.law.enclosing import TWO_PI
+from agents.lockstep.estimator_weights import edge_fractions, observation_weights
 from agents.scenario.model import ccw_order, successor_is_cycle
 
 RNG = np.random.default_rng(7)

@@ -1,4 +1,4 @@
-"""deploy.cpu_load: CPU per process from the real /proc, late ticks, the verdict's lines."""
+"""deploy.report.cpu_load: CPU per process from the real /proc, late ticks, the verdict's lines."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from deploy.cpu_load import (
+from deploy.report.cpu_load import (
     CpuSampler,
     load_line,
     machine_ticks,
@@ -109,7 +109,7 @@ def test_enclose_profile_dir_leaves_a_cpu_profile_per_process(
     import pstats
     from pathlib import Path
 
-    from agents.process import profiled
+    from agents.shell.process import profiled
 
     folder = Path(str(tmp_path)) / "prof"
 

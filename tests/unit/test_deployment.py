@@ -1,4 +1,4 @@
-"""Deployment files (deploy.deployment) and the --hosts K layout."""
+"""Deployment files (deploy.hosts.deployment) and the --hosts K layout."""
 
 from __future__ import annotations
 
@@ -6,10 +6,10 @@ from typing import Any
 
 import pytest
 
-from agents.scenario.file import load_scenario
-from deploy.deployment import dump_deployment, parse_deployment, split_over_hosts
-from deploy.host_launch import _links
-from transport.errors import ConfigError
+from agents.loading.scenario_file import load_scenario
+from deploy.hosts.deployment import dump_deployment, parse_deployment, split_over_hosts
+from deploy.hosts.host_launch import _links
+from errors import ConfigError
 
 pytestmark = pytest.mark.timeout(30)
 

@@ -38,8 +38,9 @@ def hooked(markdown: str) -> str:
 
 
 def test_links_to_source_files_become_their_paths() -> None:
-    text = hooked("see [the reader](../../agents/scenario/file.py#L1) and ![x](../../a.png)")
-    assert text == "see the reader (`agents/scenario/file.py`) and ![x](../../a.png)"
+    text = hooked("see [the reader](../../agents/loading/scenario_file.py#L1) and "
+                  "![x](../../a.png)")
+    assert text == "see the reader (`agents/loading/scenario_file.py`) and ![x](../../a.png)"
     assert hooked("[`pyproject.toml`](../../pyproject.toml)") == "`pyproject.toml`"
 
 

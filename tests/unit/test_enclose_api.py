@@ -14,7 +14,7 @@ import pytest
 import enclose
 from enclose import api
 from enclose.simulator import running_sim
-from transport.errors import ConfigError
+from errors import ConfigError
 
 pytestmark = pytest.mark.timeout(60)
 ROOT = Path(__file__).resolve().parents[2]
@@ -138,8 +138,8 @@ def test_version_on_the_command_line_and_in_the_package(
 def test_metrics_json_carries_the_version(tmp_path: Path) -> None:
     import numpy as np
 
-    from agents.core.metrics import Metrics
-    from deploy.rundir import RunInfo, write_metrics
+    from agents.analysis.metrics import Metrics
+    from deploy.report.rundir import RunInfo, write_metrics
     from deploy.version import enclose_version
 
     metrics = Metrics(1.0, 0.01, 0.01, 0.001, 2.0, 0.1, 10.0, 100, 3.0, 3.0, 4.0)

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from enclose import Scenario
-from transport.errors import InadmissibleError, ScenarioError
+from errors import InadmissibleError, ScenarioError
 
 pytestmark = pytest.mark.timeout(30)
 

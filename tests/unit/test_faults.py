@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 
 from agents.follower.lie import begin_signal, end_signal
+from agents.loading.scenario_file import parse_scenario
 from agents.scenario.faults import FaultSpec, parse_fault_flag, parse_faults
-from agents.scenario.file import parse_scenario
-from deploy.faults import FaultRunner
-from deploy.supervisor import Supervisor
-from transport.errors import ScenarioError
+from deploy.launch.fault_injector import FaultRunner
+from deploy.procs.supervisor import Supervisor
+from errors import ScenarioError
 
 pytestmark = pytest.mark.timeout(30)
 BASE = (

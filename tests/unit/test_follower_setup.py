@@ -1,4 +1,4 @@
-"""The follower's numpy-free setup (agents.follower.membership) against the numpy reference,
+"""The follower's numpy-free setup (agents.membership.follower_place) against the numpy reference,
 and what a follower process leaves out of a scenario's checks (issue 15: lean processes)."""
 
 from __future__ import annotations
@@ -8,12 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.core.estimator import edge_fractions, observation_weights
-from agents.follower.membership import setup_for
-from agents.membership import membership
-from agents.scenario.file import load_scenario, parse_scenario, shipped_text
+from agents.loading.scenario_file import load_scenario, parse_scenario, shipped_text
+from agents.lockstep.estimator_weights import edge_fractions, observation_weights
+from agents.membership.follower_place import setup_for
+from agents.membership.ring import membership
 from agents.scenario.model import ccw_order
-from transport.errors import InadmissibleError
+from errors import InadmissibleError
 
 SCENARIOS = {name: load_scenario(name) for name in ("paper", "ring16")}
 PAPER_TEXT = shipped_text("paper")

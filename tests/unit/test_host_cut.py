@@ -1,5 +1,5 @@
 """Which hosts a partition or isolation separates, the hub's nftables table and the set a
-moment of the timeline asks for (deploy.netns.cut), and hosts split along a partition."""
+moment of the timeline asks for (deploy.hosts.host_cut), and hosts split along a partition."""
 
 from __future__ import annotations
 
@@ -7,11 +7,18 @@ import dataclasses
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.net_faults import parse_net_fault_flag
-from deploy.deployment import Deployment, HostSpec, split_along
-from deploy.netns.cut import HostCut, cut_ruleset, cuttable, host_sides, pairs_script, separated
-from deploy.netns.hosts import HostsOptions, hosts_deployment, partition_groups
+from deploy.hosts.deployment import Deployment, HostSpec, split_along
+from deploy.hosts.host_cut import (
+    HostCut,
+    cut_ruleset,
+    cuttable,
+    host_sides,
+    pairs_script,
+    separated,
+)
+from deploy.hosts.namespaced_hosts import HostsOptions, hosts_deployment, partition_groups
 
 GROUND = ("launcher", "sim", "recorder", "target-0", "target-1")
 

@@ -1,6 +1,6 @@
 """`enclose keys`: one folder per host holding only what its processes need, the CA key with
 the operator; `enclose host --credentials` refuses a folder with the CA key or missing a
-file (deploy.host_keys)."""
+file (deploy.hosts.host_keys)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from deploy.cli import main
-from deploy.deployment import Deployment, HostSpec, dump_deployment
-from deploy.host_keys import (
+from deploy.hosts.deployment import Deployment, HostSpec, dump_deployment
+from deploy.hosts.host_keys import (
     ACL_FILE,
     CA_KEY,
     OPERATOR,
@@ -24,8 +24,8 @@ from deploy.host_keys import (
     needed_files,
     write_swarm_keys,
 )
+from errors import ConfigError
 from transport.credentials import Identity
-from transport.errors import ConfigError
 
 pytestmark = pytest.mark.timeout(60)
 DEP = Deployment("field", "paper", (

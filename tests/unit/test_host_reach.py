@@ -11,7 +11,7 @@ import pytest
 
 from transport.clock_sync import REACH_S, ClockSync, parse_clock_hosts
 from transport.codec import encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import ClockProbe, Header
 from transport.net_timeline import HidingAliveWatch

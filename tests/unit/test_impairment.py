@@ -10,7 +10,7 @@ import pytest
 from transport.bus import Bus, Received
 from transport.codec import encode
 from transport.impairment import ImpairedBus, ImpairedSubscription
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.link_stats import LinkDecoder, link_of
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import FollowerState, Header, RunControl

@@ -6,7 +6,7 @@ import signal
 
 import pytest
 
-from deploy.interrupts import interrupts
+from deploy.procs.interrupts import interrupts
 
 pytestmark = pytest.mark.timeout(30)
 

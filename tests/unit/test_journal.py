@@ -13,13 +13,13 @@ import pytest
 
 from agents.follower.journal import JournalWriter, PeerCodec, journal_path
 from agents.follower.journal_file import JOURNAL_VERSION, Frames, FrameWriter, enclose_version
-from agents.follower.membership import setup_for
-from agents.follower.replay import replay
+from agents.follower.journal_replay import replay
 from agents.follower.runner import LawRunner
 from agents.law.interface import Inputs, Law, Output, Peer, Sample, Setup
-from agents.law.loader import make_law
-from agents.scenario.file import load_scenario
-from transport.errors import JournalError
+from agents.loading.law_loader import make_law
+from agents.loading.scenario_file import load_scenario
+from agents.membership.follower_place import setup_for
+from errors import JournalError
 
 pytestmark = pytest.mark.timeout(60)
 HEADER = {"index": 0, "scenario": "paper", "law": None, "law_params": [], "network": []}

@@ -17,12 +17,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.core.lockstep_kernel import _rates
 from agents.law.consensus import EstimatorParams, consensus_flows, link_balance, link_flow
 from agents.law.enclosing import TWO_PI, ControlGains, enclosing_control, spacing_step_s
 from agents.law.sig import NO_CAP_PER_S, limited_sig, rate_cap
 from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
 from agents.law.velocity_stage import fed_flow, lap_velocity
+from agents.lockstep.kernel import _rates
 from tests.reference import law as ref
 
 TOL = {"rtol": 1e-12, "atol": 1e-12}

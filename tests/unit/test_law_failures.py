@@ -16,10 +16,10 @@ import pytest
 from agents.follower.node import FollowerNode
 from agents.law.interface import Inputs, Output
 from agents.law.paper import PaperLaw, PaperState
+from agents.loading.scenario_file import load_scenario
 from agents.mavlink.adapter import MavlinkAdapter, VehicleState
-from agents.scenario.file import load_scenario
 from transport.codec import decode, encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import FollowerState, Header, TargetObservation
 

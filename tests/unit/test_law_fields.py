@@ -13,13 +13,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from errors import CodecError
 from transport.bus import Received
-from transport.checks import DEFAULT_LIMITS
 from transport.codec import decode, encode
 from transport.decoder import Decoder
-from transport.errors import CodecError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.law_fields import MAX_FIELDS, MAX_LINKS, FieldSpec, check_specs, reason
+from transport.message_checks import DEFAULT_LIMITS
 from transport.messages import FollowerState, Header
 
 KEYS = SwarmKeys("lf")

@@ -14,17 +14,17 @@ from pathlib import Path
 import pytest
 
 from agents.law.paper import PaperLaw
-from agents.law_args import (
+from agents.loading.scenario_file import load_scenario, shipped_text
+from agents.scenario.law import pinned_law
+from agents.shell.law_args import (
     LawOptions,
     add_law_arguments,
     apply_law_arguments,
     law_overrides,
     toml_value,
 )
-from agents.scenario.file import load_scenario, shipped_text
-from agents.scenario.law import pinned_law
 from deploy.cli import main
-from transport.errors import ScenarioError
+from errors import ScenarioError
 
 pytestmark = pytest.mark.timeout(120)
 

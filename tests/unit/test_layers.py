@@ -36,13 +36,14 @@ def test_the_check_sees_every_form_of_import() -> None:
     source = (
         "import agents.scenario.model\n"
         "from agents import phases\n"
-        "def f():\n    from agents.scenario.file import load_scenario\n"
+        "def f():\n    from agents.loading.scenario_file import load_scenario\n"
         "if TYPE_CHECKING:\n    import agents\n"
         "importlib.import_module('agents.follower')\n"
-        "import agentsx\nfrom transport.errors import ConfigError\n"
+        "import agentsx\nfrom errors import ConfigError\n"
     )
     assert sorted(agents_imports(source)) == sorted(
-        ["agents.scenario.model", "agents", "agents.scenario.file", "agents", "agents.follower"]
+        ["agents.scenario.model", "agents", "agents.loading.scenario_file", "agents",
+         "agents.follower"]
     )
 
 

@@ -13,11 +13,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from agents.core.metrics import Metrics, compute_metrics, error_series
-from agents.scenario.file import load_scenario
+from agents.analysis.metrics import Metrics, compute_metrics, error_series
+from agents.loading.scenario_file import load_scenario
 from tests.swarm_harness import run_swarm
 
-VEHICLE_TAU_S = 0.05  # sim_backend.model.VehicleParams.tau_s
+VEHICLE_TAU_S = 0.05  # sim_backend.kinematics.VehicleParams.tau_s
 
 
 def ring16_at_20_hz(lead_s: float, vehicle_tau_s: float = VEHICLE_TAU_S) -> Metrics:

@@ -14,12 +14,12 @@ from pathlib import Path
 
 import pytest
 
-from agents import phases
-from deploy.forked import call_forked, fork_main
+from agents.shell import phases
+from deploy.procs.forked import call_forked, fork_main
+from errors import DeployError
 from transport.bus import Received
 from transport.codec import encode
-from transport.errors import DeployError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.link_stats import LinkDecoder
 from transport.messages import FollowerState, Header, RunControl
 
@@ -44,10 +44,10 @@ def imported_by(code: str) -> set[str]:
 # What a follower does before its loop, in a fresh interpreter: what it imports then.
 FOLLOWER_SET_UP = """
 import agents.follower.main
-from agents.follower.membership import setup_for
-from agents.scenario.file import load_scenario
+from agents.membership.follower_place import setup_for
+from agents.loading.scenario_file import load_scenario
 from transport.impairment import ImpairedBus
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.link_stats import AgeHistogram
 for name in ("paper", "ring16"):
     s = load_scenario(name, whole_run=False)
@@ -64,7 +64,7 @@ for name in ("paper", "ring16"):
 @pytest.mark.realtime
 @pytest.mark.timeout(90)
 def test_a_follower_and_the_launcher_import_none_of_the_heavy_packages() -> None:
-    swarm = imported_by("import agents.follower.main, agents.target, deploy.swarm_sim")
+    swarm = imported_by("import agents.follower.main, agents.target, sim_backend.swarm_sim")
     assert "numpy" in swarm and "zenoh" in swarm  # the check can fail
     assert not swarm & set(NOT_IN_A_FOLLOWER)
     # Not even numpy (16.7 MB) in a follower (issue 15: <= 50 MB per follower).
@@ -108,8 +108,8 @@ vehicle.close()
 """
 TARGET_SET_UP = """
 import agents.target
-from agents.core.profiles import TargetMotion
-from agents.scenario.file import load_scenario
+from agents.scenario.target_motion import TargetMotion
+from agents.loading.scenario_file import load_scenario
 TargetMotion(load_scenario("paper", whole_run=False), horizon_s=10.0).state(1.0)
 """
 FULL_DIALECT = "pymavlink.dialects.v20.common"
@@ -123,7 +123,7 @@ def test_a_follower_and_a_target_hold_the_lean_mavlink_dialect_not_the_full_one(
         modules = modules_after(set_up + VEHICLE_SET_UP)
         assert "agents.mavlink.lean_common" in modules and "agents" in modules
         assert FULL_DIALECT not in modules
-    assert FULL_DIALECT in modules_after("import deploy.swarm_sim")  # the check can fail
+    assert FULL_DIALECT in modules_after("import sim_backend.swarm_sim")  # the check can fail
 
 
 # Compiles a large module from source, as an interpreter without cached bytecode does at
@@ -131,8 +131,8 @@ def test_a_follower_and_a_target_hold_the_lean_mavlink_dialect_not_the_full_one(
 TRIMMED = """
 import os
 import agents.mavlink.lean_gen as gen
-from deploy.cpu_load import process_status_kb
-from deploy.forked import trim_heap
+from deploy.report.cpu_load import process_status_kb
+from deploy.procs.forked import trim_heap
 code = compile(gen.OUTPUT.read_text(), "lean_common.py", "exec")
 before = process_status_kb(os.getpid(), "VmRSS")
 trim_heap()
@@ -233,7 +233,7 @@ def test_no_latency_without_arrival_stamps() -> None:
 def test_no_fork_beside_a_thread_python_does_not_know(tmp_path: Path) -> None:
     """Threads Python does not see (Zenoh's runtime, alive after its last session): the
     kernel's task list decides."""
-    from deploy.forked import only_thread
+    from deploy.procs.forked import only_thread
 
     (tmp_path / "100").mkdir()
     assert only_thread(tmp_path)
@@ -247,12 +247,12 @@ def test_no_fork_beside_a_thread_python_does_not_know(tmp_path: Path) -> None:
 def test_no_fork_while_a_thread_runs(tmp_path: Path) -> None:
     import threading
 
-    from deploy.forked import ForkedProcess, fork_is_safe
-    from deploy.supervisor import Supervisor
+    from deploy.procs.forked import ForkedProcess, fork_is_safe
+    from deploy.procs.supervisor import Supervisor
 
     # A fresh process is safe to fork from (this one may hold other tests' threads).
     fresh = subprocess.run(
-        [sys.executable, "-c", "from deploy.forked import fork_is_safe; "
+        [sys.executable, "-c", "from deploy.procs.forked import fork_is_safe; "
          "raise SystemExit(0 if fork_is_safe() else 1)"], timeout=20, check=False)
     assert fresh.returncode == 0
     stop = threading.Event()
@@ -275,8 +275,8 @@ def test_the_fork_server_forks_lean_children_that_this_process_waits_for(
         tmp_path: Path) -> None:
     import numpy  # noqa: F401  # this process has it; the server's children must not
 
-    from deploy.supervisor import Supervisor
-    from deploy.zygote import Zygote
+    from deploy.procs.supervisor import Supervisor
+    from deploy.procs.zygote import Zygote
 
     sup = Supervisor(tmp_path)
     zygote = sup.zygote = Zygote(["tests.child_proc"], tmp_path / "zygote.log")
@@ -307,7 +307,7 @@ def test_the_fork_server_forks_lean_children_that_this_process_waits_for(
 KILLED_LAUNCHER = """
 import os, sys, time
 from pathlib import Path
-from deploy.zygote import Zygote
+from deploy.procs.zygote import Zygote
 z = Zygote(["tests.child_proc"], Path(sys.argv[1]))
 z.fork("tests.child_proc", ["exit", "0"], Path(sys.argv[1] + ".child"))  # it is serving
 helper = os.fork()

@@ -1,10 +1,10 @@
-"""Naming a liar from the followers' own counts (deploy.liars)."""
+"""Naming a liar from the followers' own counts (deploy.report.liars)."""
 
 from __future__ import annotations
 
 import pytest
 
-from deploy.liars import accused, liar_lines
+from deploy.report.liars import accused, liar_lines
 
 pytestmark = pytest.mark.timeout(30)
 

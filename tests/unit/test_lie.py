@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 
 from agents.follower.lie import OFFSET_M, Liar, Published, begin_signal, end_signal
-from agents.law.loader import make_law
+from agents.loading.law_loader import make_law
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.faults import LIE_MODES
-from agents.scenario.file import load_scenario
 from transport.law_fields import reason
 
 pytestmark = pytest.mark.timeout(30)

@@ -1,4 +1,4 @@
-"""No process outlives its launcher (agents.lifeline): every way the supervisor starts a
+"""No process outlives its launcher (agents.shell.lifeline): every way the supervisor starts a
 child (a fresh interpreter, a fork, a fork by the fork server), then a SIGKILLed launcher."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.pids import ProcessId, identify, is_alive, signal_same
+from deploy.procs.pids import ProcessId, identify, is_alive, signal_same
 
 pytestmark = [pytest.mark.timeout(60), pytest.mark.realtime]
 
@@ -20,8 +20,8 @@ pytestmark = [pytest.mark.timeout(60), pytest.mark.realtime]
 KILLED_LAUNCHER = """
 import os, signal, sys, time
 from pathlib import Path
-from deploy.supervisor import Supervisor
-from deploy.zygote import Zygote
+from deploy.procs.supervisor import Supervisor
+from deploy.procs.zygote import Zygote
 sup = Supervisor(Path(sys.argv[1]))
 sup.zygote = Zygote(["tests.child_proc"], Path(sys.argv[1]) / "zygote.log")
 by_server = sup.start("follower-0", "tests.child_proc", ["sleep", "60"], fork=True)
@@ -70,11 +70,11 @@ def test_children_of_every_kind_die_with_a_killed_launcher(tmp_path: Path) -> No
 def test_a_child_whose_launcher_died_first_exits_at_once() -> None:
     # Our parent is the test process, not PID 1: binding to another PID must refuse.
     code = subprocess.run([sys.executable, "-c",
-                           "from agents.lifeline import die_with; die_with(1)"],
+                           "from agents.shell.lifeline import die_with; die_with(1)"],
                           timeout=30, check=False).returncode
     assert code == 75  # EXIT_ORPHANED
     env_bound = subprocess.run(
-        [sys.executable, "-c", "import os; from agents.lifeline import die_with_launcher; "
+        [sys.executable, "-c", "import os; from agents.shell.lifeline import die_with_launcher; "
          "die_with_launcher(); print(os.environ.get('ENCLOSE_LAUNCHER_PID'))"],
         env={"ENCLOSE_LAUNCHER_PID": "1", "PYTHONPATH": ":".join(sys.path)},
         capture_output=True, text=True, timeout=30, check=False)

@@ -12,9 +12,9 @@ from typing import Any
 import pytest
 from foxglove import messages as fm
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import Scenario
-from deploy import live_args
+from deploy.launch import live_args
 from deploy.recording.live_links import LinkTracker, health
 from deploy.recording.live_server import LiveServer, is_loopback
 from deploy.recording.scene import (
@@ -35,11 +35,11 @@ from deploy.recording.view import (
     LiveView,
     errors_now,
 )
-from deploy.rundir import RunInfo
+from deploy.report.rundir import RunInfo
+from errors import DeployError
 from tests.foxglove_client import foxglove_client, protobuf_class
 from tests.recorder_synth import SynthRun
-from transport.errors import DeployError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import FollowerState, Header, ProcessStatus, TruthSnapshot
 
 START_S = 1_700_000_000.0
@@ -248,7 +248,7 @@ def test_launcher_options_url_and_port_pinning(tmp_path: Path) -> None:
     assert live_args.announce_live_url(off, tmp_path) is None
     (tmp_path / "progress.json").write_text(json.dumps({"live_url": "ws://127.0.0.1:8770"}))
     assert live_args.read_live_url(tmp_path, wait_s=0.0) == "ws://127.0.0.1:8770"
-    argv = ["-m", "deploy.recorder", "--live-port", "8765", "--live-host", "127.0.0.1"]
+    argv = ["-m", "deploy.recording.recorder", "--live-port", "8765", "--live-host", "127.0.0.1"]
     live_args.pin_live_port(argv, "ws://127.0.0.1:8770")
     assert argv[3] == "8770"
     assert live_args.read_live_url(tmp_path / "none", wait_s=0.0) is None

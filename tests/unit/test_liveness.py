@@ -9,12 +9,18 @@ import time
 import pytest
 
 from agents.follower.node import FollowerNode
-from agents.liveness import REFRESH_MAX_S, REFRESH_S, MembershipWatch, StallGuard, TokenSet
-from agents.member_hold import HOLD_S, SETTLE_S
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
+from agents.membership.liveness import (
+    REFRESH_MAX_S,
+    REFRESH_S,
+    MembershipWatch,
+    StallGuard,
+    TokenSet,
+)
+from agents.membership.member_hold import HOLD_S, SETTLE_S
 from tests.still_vehicle import still_vehicle
 from transport.codec import encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import ProcessStatus, Stamper
 
@@ -58,7 +64,7 @@ def test_watch_and_follower_node_reform_when_a_follower_leaves_and_returns() -> 
     tokens[3].close()  # index 3 is killed: 0's ring neighbours are now 1 and 2
     killed_s = bus.now_s()
     node.tick(killed_s)
-    assert node.members == {0, 1, 2, 3}  # a vanishing settles first (agents.member_hold)
+    assert node.members == {0, 1, 2, 3}  # a vanishing settles first (agents.membership.member_hold)
     node.tick(killed_s + SETTLE_S)
     assert node.members == {0, 1, 2}
     assert node.runner.setup.neighbours == (1, 2) and node.runner.setup.successor == 1

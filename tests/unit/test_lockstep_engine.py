@@ -9,11 +9,11 @@ import inspect
 import numpy as np
 import pytest
 
-from agents.core import lockstep_kernel
-from agents.core.lockstep import estimator_substeps, simulate_lockstep
-from agents.core.timeseries import RunSeries
+from agents.analysis.timeseries import RunSeries
 from agents.law import consensus, enclosing, sig, velocity_stage
-from agents.scenario.file import load_scenario, parse_scenario
+from agents.loading.scenario_file import load_scenario, parse_scenario
+from agents.lockstep import kernel as lockstep_kernel
+from agents.lockstep.engine import estimator_substeps, simulate_lockstep
 from agents.scenario.model import Scenario
 from tests.reference import lockstep as reference
 from tests.unit.test_closed_loop import SIX

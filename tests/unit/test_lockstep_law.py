@@ -1,6 +1,6 @@
 """The generic lock-step path: any law through the interface, in one process.
 
-The paper's law through it against the paper's compiled engine (agents.core.lockstep):
+The paper's law through it against the paper's compiled engine (agents.lockstep.engine):
 not bit-identical, because the generic path gives each law its neighbours' messages of
 the previous step (extrapolated by their rates, as in flight) and the targets' velocity
 through the platform's filter, where the compiled engine uses the same step's estimates
@@ -20,14 +20,14 @@ from typing import Any
 import numpy as np
 import pytest
 
-from agents.core.lockstep import simulate_lockstep
-from agents.core.lockstep_law import simulate_law
-from agents.core.metrics import compute_metrics, error_series
-from agents.core.timeseries import RunSeries
-from agents.follower.membership import setup_for
+from agents.analysis.metrics import compute_metrics, error_series
+from agents.analysis.timeseries import RunSeries
 from agents.law.interface import Inputs, Law, Output, Sample, Setup
-from agents.law.loader import make_law
-from agents.scenario.file import load_scenario
+from agents.loading.law_loader import make_law
+from agents.loading.scenario_file import load_scenario
+from agents.lockstep.any_law import simulate_law
+from agents.lockstep.engine import simulate_lockstep
+from agents.membership.follower_place import setup_for
 from agents.scenario.model import Scenario
 from deploy.cli import main
 

@@ -14,7 +14,7 @@ from agents.mavlink.modes import encode_custom_mode
 from agents.mavlink.offboard import OffboardKeeper
 from agents.mavlink.timemap import SO_TIMESTAMPNS, BootClockMap, kernel_arrival_s
 from agents.mavlink.wire import decode_datagram, new_codec
-from transport.errors import LinkLostError, MavlinkError
+from errors import LinkLostError, MavlinkError
 
 ADDR = ("127.0.0.1", 14580)
 

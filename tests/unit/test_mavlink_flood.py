@@ -17,10 +17,10 @@ from agents.mavlink.rx_gate import ADAPTER_BUDGET, VEHICLE_BUDGET, RxBudget, RxG
 from agents.mavlink.signing import SignatureVerifier, signing_timestamp, vehicle_key
 from agents.mavlink.wire import encode, new_codec, sign_outgoing
 from agents.scenario.model import HomeConfig, VehicleConfig
+from errors import ConfigError, SimulatorError
 from sim_backend.endpoint import MAX_PEERS
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 from sim_backend.sim_values import parse_peer_hosts
-from transport.errors import ConfigError, SimulatorError
 
 SECRET = bytes(range(7, 39))
 

@@ -6,7 +6,7 @@ import socket
 
 import pytest
 
-from deploy.ports import PX4_SITL_BASES, mavlink_bases, udp_block_free
+from deploy.launch.ports import PX4_SITL_BASES, mavlink_bases, udp_block_free
 
 pytestmark = pytest.mark.realtime
 

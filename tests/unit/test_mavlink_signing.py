@@ -21,8 +21,8 @@ from agents.mavlink.signing import (
 )
 from agents.mavlink.wire import new_codec, sign_outgoing
 from agents.scenario.model import HomeConfig, VehicleConfig
+from errors import ConfigError
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
-from transport.errors import ConfigError
 
 KEY = bytes(range(1, 33))
 NOW_S = 1_800_000_000.0

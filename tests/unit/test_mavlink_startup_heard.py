@@ -13,8 +13,8 @@ import pytest
 from agents.mavlink.adapter import MavlinkAdapter
 from agents.mavlink.startup import StartupTimeouts, command, set_mode, wait_position
 from agents.mavlink.vehicle_types import VehicleState
+from errors import MavlinkError
 from tests.unit.test_mavlink_adapter import ADDR, feed, heartbeat, make
-from transport.errors import MavlinkError
 
 pytestmark = pytest.mark.timeout(30)
 T = StartupTimeouts(command_s=3.0, retry_s=0.5, silent_s=20.0)

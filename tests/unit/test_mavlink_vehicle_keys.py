@@ -23,7 +23,12 @@ from agents.mavlink.signing import (
 )
 from agents.mavlink.wire import encode, new_codec, sign_outgoing
 from agents.scenario.model import HomeConfig, VehicleConfig
-from deploy.run_secrets import MAVLINK_SECRET_FILE, RunSecrets, signing_key_file, write_mavlink_keys
+from deploy.launch.run_secrets import (
+    MAVLINK_SECRET_FILE,
+    RunSecrets,
+    signing_key_file,
+    write_mavlink_keys,
+)
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 
 SECRET = bytes(range(100, 132))
@@ -177,9 +182,9 @@ def test_screen_never_changes_state_and_agrees_with_check(data: st.DataObject) -
 
 def test_a_companions_host_folder_holds_its_own_vehicles_keys_only(tmp_path: Path) -> None:
     """Over hosts, a follower's host gets its followers' vehicle keys, not the run secret
-    nor another vehicle's key (deploy.host_keys copies what RunSecrets.args_for names)."""
-    from deploy.deployment import Deployment, HostSpec
-    from deploy.host_keys import write_swarm_keys
+    nor another vehicle's key (deploy.hosts.host_keys copies what RunSecrets.args_for names)."""
+    from deploy.hosts.deployment import Deployment, HostSpec
+    from deploy.hosts.host_keys import write_swarm_keys
 
     dep = Deployment("field", "paper", (
         HostSpec("ground", "10.0.0.1", ("launcher", "sim", "recorder", "target-0", "target-1")),

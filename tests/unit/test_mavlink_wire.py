@@ -11,7 +11,7 @@ CASES = [
     (mavlink2.MAVLink_attitude_message, (5, 0.1, -0.2, 0.3, 0.0, 0.0, 0.0)),
     (mavlink2.MAVLink_global_position_int_message, (7, 473977420, 85455940, 488000, 0, 1, -2,
                                                     0, 0)),
-    # The simulator's clock service (sim_backend/timesync.py): int64 ns, a request's tc1 = 0.
+    # The simulator's clock service (sim_backend/clock_services.py): int64 ns, a request's tc1 = 0.
     (mavlink2.MAVLink_timesync_message, (52_200_123_456_789, 1_795_561_625_000_000_000)),
     (mavlink2.MAVLink_timesync_message, (0, 52_200_123_456_789)),
     (mavlink2.MAVLink_system_time_message, (1_795_561_625_123_456, 4_294_967_295)),

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from agents.member_hold import HOLD_S, SETTLE_S, MemberHold
+from agents.membership.member_hold import HOLD_S, SETTLE_S, MemberHold
 
 ALL = frozenset({0, 1, 2, 3})
 

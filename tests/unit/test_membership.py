@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.membership import membership, ring_order
-from agents.scenario.file import load_scenario, parse_scenario
+from agents.loading.scenario_file import load_scenario, parse_scenario
+from agents.membership.ring import membership, ring_order
 from agents.scenario.model import Scenario
-from transport.errors import InadmissibleError
+from errors import InadmissibleError
 
 PAPER = load_scenario("paper")
 RING16 = load_scenario("ring16")
@@ -146,8 +146,8 @@ def test_any_member_set_forms_one_connected_ring(
 
 
 def test_phases_and_time_to_reform_from_a_synthetic_series() -> None:
-    from agents.core.timeseries import RunSeries
-    from agents.membership_metrics import membership_phases, phase_report
+    from agents.analysis.timeseries import RunSeries
+    from agents.membership.ring_accuracy import membership_phases, phase_report
 
     changes = [(-3.0, frozenset({0, 2})), (-2.0, frozenset({0, 1, 2, 3})),
                (10.0, frozenset({1, 2, 3})), (20.5, frozenset({0}))]

@@ -8,14 +8,14 @@ from typing import Any
 
 import pytest
 
-from agents.network_args import NetworkOptions, apply_network_arguments
-from agents.scenario.file import build_scenario, shipped_text
+from agents.loading.scenario_file import build_scenario, shipped_text
 from agents.scenario.net_faults import check_fault_flag, parse_net_fault_flag
+from agents.shell.network_args import NetworkOptions, apply_network_arguments
 from deploy.commands.run import RunOptions, run
-from deploy.launch_options import LaunchOptions
-from transport.errors import ScenarioError
+from deploy.launch.launch_options import LaunchOptions
+from errors import ScenarioError
 from transport.impairment import ImpairedBus
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.net_timeline import NetTimeline, separates
 from transport.network_schema import LinkImpairment, NetFault, NetworkConfig

@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 
 from deploy.commands.run import RunOptions
+from deploy.launch.ports import rendezvous_endpoint
 from deploy.netns import namespace as netns
-from deploy.netns import run as netns_run
-from deploy.ports import rendezvous_endpoint
-from transport.errors import ConfigError, DeployError
+from deploy.netns import netns_run
+from errors import ConfigError, DeployError
 from transport.zenoh_config import ZenohConfig, build_zenoh_config, loopback_endpoint
 
 

@@ -7,14 +7,14 @@ from pathlib import Path
 
 import pytest
 
-from agents.network_args import (
+from agents.loading.scenario_file import load_scenario
+from agents.shell.network_args import (
     NetworkOptions,
     add_network_arguments,
     apply_network_arguments,
     network_overrides,
 )
-from agents.scenario.file import load_scenario
-from transport.errors import ScenarioError
+from errors import ScenarioError
 
 
 def parse(*argv: str) -> NetworkOptions:
@@ -77,7 +77,7 @@ def test_batch_is_set_on_the_calling_thread_and_inherited_by_its_threads() -> No
     import os
     import threading
 
-    from agents.process import apply_agent_sched
+    from agents.shell.process import apply_agent_sched
 
     seen: dict[str, int] = {}
     before = os.sched_getscheduler(0)  # as the test runner set it
@@ -103,7 +103,7 @@ def test_yield_cpu_lowers_the_thread_and_its_own_sessions_autogroup(tmp_path: Pa
     import os
     import threading
 
-    from agents.process import yield_cpu
+    from agents.shell.process import yield_cpu
 
     group = tmp_path / "autogroup"
     seen: dict[str, object] = {}
@@ -128,7 +128,7 @@ def test_yield_cpu_lowers_the_thread_and_its_own_sessions_autogroup(tmp_path: Pa
 
 
 def test_agent_nice_is_the_scenarios_whole_number_and_off_by_default() -> None:
-    from agents.scenario.file import parse_scenario, shipped_text
+    from agents.loading.scenario_file import parse_scenario, shipped_text
 
     base = shipped_text("paper")
     assert load_scenario().network.agent_nice == 0

@@ -8,12 +8,12 @@ import math
 import pytest
 
 from agents.follower.node import FollowerNode
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from tests.still_vehicle import still_vehicle
-from transport.checks import DEFAULT_LIMITS, check
 from transport.codec import encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
+from transport.message_checks import DEFAULT_LIMITS, check
 from transport.messages import Header, TargetObservation
 
 pytestmark = pytest.mark.timeout(60)

@@ -14,10 +14,10 @@ import math
 import numpy as np
 import pytest
 
-from agents.core.lockstep import simulate_lockstep
-from agents.core.metrics import compute_metrics, error_series
+from agents.analysis.metrics import compute_metrics, error_series
 from agents.law.enclosing import ControlGains, enclosing_control
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
+from agents.lockstep.engine import simulate_lockstep
 from tests.reference.law import enclosing_control as reference_control
 
 GAINS = ControlGains(2.0, 3.0, 2.0, 3.0, 8.0, 0.2, 0.25)

@@ -12,13 +12,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.core.metrics import compute_metrics, error_series
+from agents.analysis.metrics import compute_metrics, error_series
 from agents.follower.inputs import Latest
-from agents.follower.membership import setup_for, stand_ins
 from agents.follower.runner import LawRunner
 from agents.law.interface import Output, Sample, reference
 from agents.law.paper import PaperLaw, PaperState
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
+from agents.membership.follower_place import setup_for, stand_ins
 from agents.scenario.model import Scenario
 from tests.swarm_harness import run_swarm, with_estimator
 from transport.messages import FollowerState, Header
@@ -266,7 +266,7 @@ def test_targets_are_extrapolated_over_a_short_stall_and_held_after_a_long_one()
 
 def test_parameters_and_fields_follow_the_scenario() -> None:
     """No [law] parameters of its own: its gains are [gains]; its fields its estimator's."""
-    from transport.errors import ScenarioError
+    from errors import ScenarioError
 
     with pytest.raises(ScenarioError) as err:
         PaperLaw.from_params({"k_e": 3.0}, PAPER)

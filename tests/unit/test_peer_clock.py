@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from agents.process import StatusReporter
+from agents.shell.process import StatusReporter
+from errors import ConfigError
 from transport.bus import Received
-from transport.checks import DEFAULT_LIMITS
 from transport.clock import SkewedClock, clock_env, process_clock
 from transport.clock_sync import (
     ClockExchange,
@@ -24,9 +24,9 @@ from transport.clock_sync import (
 )
 from transport.codec import decode, encode
 from transport.decoder import Decoder
-from transport.errors import ConfigError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
+from transport.message_checks import DEFAULT_LIMITS
 from transport.messages import ClockProbe, FollowerState, Header, ProcessStatus, RunControl
 from transport.peer_clock import (
     MAX_STEP_S,

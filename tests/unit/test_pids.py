@@ -1,4 +1,4 @@
-"""A PID is signalled only while it is still the process that was recorded (deploy.pids):
+"""A PID is signalled only while it is still the process that was recorded (deploy.procs.pids):
 a fake /proc reader for PID reuse, real children for the rest."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from deploy.pids import (
+from deploy.procs.pids import (
     ProcessId,
     identify,
     is_alive,
@@ -23,7 +23,7 @@ from deploy.pids import (
     start_ticks,
     write_pids,
 )
-from deploy.supervisor import Supervisor
+from deploy.procs.supervisor import Supervisor
 
 pytestmark = pytest.mark.timeout(30)
 

@@ -11,11 +11,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agents.follower.inputs import Latest
-from agents.follower.membership import setup_for
 from agents.follower.plausible import GateLimits, Own, Plausibility, gate_limits, own_side
 from agents.law.interface import Peer, Sample
-from agents.law.loader import make_law
-from agents.scenario.file import load_scenario
+from agents.loading.law_loader import make_law
+from agents.loading.scenario_file import load_scenario
+from agents.membership.follower_place import setup_for
 from transport.messages import FollowerState, Header
 
 pytestmark = pytest.mark.timeout(60)

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from deploy.port_slots import Held, port_slot, slot_ports
-from deploy.ports import ports_held
-from transport.errors import DeployError
+from deploy.launch.port_slots import Held, port_slot, slot_ports
+from deploy.launch.ports import ports_held
+from errors import DeployError
 
 pytestmark = pytest.mark.timeout(60)
 

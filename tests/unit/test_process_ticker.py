@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from agents.process import Ticker
+from agents.shell.process import Ticker
 
 
 class FakeClock:

@@ -10,18 +10,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.core.metrics import worst
-from agents.core.timeseries import RunSeries
-from agents.scenario.file import load_scenario
+from agents.analysis.metrics import worst
+from agents.analysis.timeseries import RunSeries
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.recording.assembler import RunAssembler, align_latest
 from deploy.recording.outputs import write_final_outputs
 from deploy.recording.progress import live_errors
-from deploy.report import write_run_outputs
-from deploy.rundir import RunInfo
+from deploy.report.run_report import write_run_outputs
+from deploy.report.rundir import RunInfo
+from errors import DeployError
 from tests.recorder_synth import SynthRun, formation_m, lap_m, targets_m
-from transport.errors import DeployError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import FollowerState, Header, Stamper, TruthSnapshot
 
 START_S = 1_700_000_000.0

@@ -18,7 +18,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.core.metrics import (
+from agents.analysis.metrics import (
     ErrorSeries,
     Metrics,
     MetricsAccumulator,
@@ -30,17 +30,17 @@ from agents.core.metrics import (
     settle_time,
     worst,
 )
-from agents.core.timeseries import RunSeries
-from agents.membership_metrics import PhaseReport, membership_phases, phase_report
-from agents.scenario.file import load_scenario
+from agents.analysis.timeseries import RunSeries
+from agents.loading.scenario_file import load_scenario
+from agents.membership.ring_accuracy import PhaseReport, membership_phases, phase_report
 from agents.scenario.model import Scenario
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.chunks import EPS_S
-from deploy.recording.link_history import read_links_csv
 from deploy.recording.spill import RowSpill
-from deploy.rundir import SeriesWriter, read_series, series_rows
+from deploy.report.link_history import read_links_csv
+from deploy.report.rundir import SeriesWriter, read_series, series_rows
 from tests.recorder_synth import SynthRun
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import FollowerState, Message, Stamper, TruthSnapshot
 
 START_S = 1_700_000_000.0

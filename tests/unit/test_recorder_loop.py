@@ -9,7 +9,7 @@ import msgpack
 import pytest
 from mcap.reader import make_reader
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from agents.scenario.model import Scenario
 from deploy.recording.loop import MCAP_FILE, Recorder
 from deploy.recording.queues import (
@@ -20,11 +20,11 @@ from deploy.recording.queues import (
     STEP_BATCH,
     queue_capacities,
 )
-from deploy.report import regenerate_figures
+from deploy.report.run_report import regenerate_figures
 from tests.recorder_synth import SynthRun
 from transport.bus import Received
 from transport.codec import decode, encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import Header, ProcessStatus, Stamper
 
@@ -284,8 +284,8 @@ def test_the_launcher_records_observations_only_when_they_are_noisy_and_figures_
         noise_std_m: float, figures: bool, argv: list[str]) -> None:
     from types import SimpleNamespace
 
-    from deploy.launch import Launch
-    from deploy.launch_options import LaunchOptions
+    from deploy.launch.launch_options import LaunchOptions
+    from deploy.launch.launcher import Launch
 
     opts = LaunchOptions(noise_std_m=noise_std_m, figures=figures)
     assert Launch.recorder_output_argv(SimpleNamespace(opts=opts)) == argv  # type: ignore[arg-type]

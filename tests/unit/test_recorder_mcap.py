@@ -11,10 +11,10 @@ from typing import Any
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.recording.mcap_log import McapLog, dataclass_schema, message_json
 from tests.recorder_synth import SynthRun
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.messages import (
     FollowerState,
     Header,

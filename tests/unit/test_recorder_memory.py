@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from deploy.recording.loop import Recorder
 from tests.recorder_synth import SynthRun
 from transport.codec import encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import Header, ProcessStatus, Stamper, TruthSnapshot
 

@@ -9,10 +9,10 @@ from pathlib import Path
 
 from rich.console import Console
 
-from deploy.refusals import launch_refusals, refusal_text
-from deploy.run_secrets import agent_of_vehicle
-from deploy.swarm_sim import wrong_key_senders
-from deploy.verdict import print_verdict, read_verdict
+from agents.mavlink.signing import agent_of_vehicle
+from deploy.report.refusals import launch_refusals, refusal_text
+from deploy.report.verdict import print_verdict, read_verdict
+from sim_backend.swarm_sim import wrong_key_senders
 
 SIM = {"state": "done", "ticks": 900, "signing_rejected_unsigned": 2500,
        "signing_rejected_wrong_key": 20, "signing_wrong_key_vehicle_3": 20,

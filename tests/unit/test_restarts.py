@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from deploy.restarts import RestartPolicy, Watchdog, how_it_ended
-from deploy.supervisor import Supervisor
-from transport.errors import DeployError
+from deploy.procs.restarts import RestartPolicy, Watchdog, how_it_ended
+from deploy.procs.supervisor import Supervisor
+from errors import DeployError
 
 pytestmark = pytest.mark.timeout(30)
 

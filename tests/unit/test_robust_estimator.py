@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from agents.law.consensus import link_balance
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
 from tests.swarm_harness import run_swarm, with_estimator
 
 RNG = np.random.default_rng(5)

@@ -11,15 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.core.lockstep import simulate_lockstep
-from agents.core.metrics import error_series
-from agents.scenario.file import load_scenario
-from deploy.figures import performance_figure, trajectory_figure
-from deploy.figures_links import link_health_figure
-from deploy.marks import Mark, event_marks, run_marks
-from deploy.recording.link_history import LinkHistory, read_links_csv
-from deploy.report import regenerate_figures, write_run_outputs
-from deploy.rundir import RunInfo
+from agents.analysis.metrics import error_series
+from agents.loading.scenario_file import load_scenario
+from agents.lockstep.engine import simulate_lockstep
+from deploy.report.link_figures import link_health_figure
+from deploy.report.link_history import LinkHistory, read_links_csv
+from deploy.report.marks import Mark, event_marks, run_marks
+from deploy.report.run_figures import performance_figure, trajectory_figure
+from deploy.report.run_report import regenerate_figures, write_run_outputs
+from deploy.report.rundir import RunInfo
 from transport.messages import Header, ProcessStatus
 
 EVENTS = [
@@ -165,7 +165,7 @@ def test_report_reads_series_csv_where_a_run_has_no_parquet(short_run: Path,
 @pytest.mark.timeout(120)
 def test_a_large_swarm_gets_a_colour_bar_not_a_legend_that_squeezes_the_panels(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import deploy.figures as figures
+    import deploy.report.run_figures as figures
 
     ring32 = load_scenario("ring32")
     series = simulate_lockstep(ring32, 0.02, 2.0)

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from deploy.run_board import (
+from deploy.launch.run_board import (
     BoardView,
     LiveBoard,
     ProcessView,
@@ -20,7 +20,7 @@ from deploy.run_board import (
     link_text,
     render_board,
 )
-from deploy.verdict import announce, print_verdict, read_verdict, verdict_json
+from deploy.report.verdict import announce, print_verdict, read_verdict, verdict_json
 
 ESC = "\x1b"
 BOUNDS = {"rho": 0.0999, "delta": 0.0199}
@@ -206,8 +206,9 @@ def test_json_goes_alone_to_stdout_for_scripts(
 
 
 def test_process_health_and_state_as_the_board_shows_them(tmp_path: Path) -> None:
-    from deploy.run_monitor import StatusBoard, process_views
-    from deploy.supervisor import Child
+    from deploy.launch.run_monitor import process_views
+    from deploy.launch.status_board import StatusBoard
+    from deploy.procs.supervisor import Child
     from transport.messages import Header, ProcessStatus
 
     kids = [Child(n, [], tmp_path / f"{n}.log") for n in ("sim", "follower-0", "follower-1",

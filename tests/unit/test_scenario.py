@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.core.params import control_gains
-from agents.core.profiles import TargetMotion
-from agents.scenario.file import load_scenario, parse_scenario, shipped_text
+from agents.law.scenario_params import control_gains
+from agents.loading.scenario_file import load_scenario, parse_scenario, shipped_text
+from agents.scenario.target_motion import TargetMotion
+from errors import ConfigError, InadmissibleError, ScenarioError
 from tests.unit.test_closed_loop import load_scenario_text
-from transport.errors import ConfigError, InadmissibleError, ScenarioError
 
 PAPER = shipped_text("paper")
 

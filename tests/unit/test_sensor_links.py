@@ -1,5 +1,5 @@
 """The simulator's sensing of followers on other hosts goes over a link to their host
-(deploy.sensor_links): the flag, the deployment's sensing endpoints, and the observations
+(sim_backend.sensor_links): the flag, the deployment's sensing endpoints, and the observations
 of a linked follower published on its link's bus only; the link's session opened in the
 background, so the simulator never waits for another host."""
 
@@ -9,16 +9,16 @@ import time
 
 import pytest
 
-from agents.scenario.file import load_scenario
-from deploy.deployment import Deployment, HostSpec
-from deploy.ports import free_tcp_port
-from deploy.sensor_links import LinkBus, SensorLink, check_disjoint, parse_sensor_link
-from deploy.swarm_sim import SensorPublisher
-from sim_backend.model import FleetState
+from agents.loading.scenario_file import load_scenario
+from deploy.hosts.deployment import Deployment, HostSpec
+from deploy.launch.ports import free_tcp_port
+from errors import ConfigError
+from sim_backend.kinematics import FleetState
 from sim_backend.runtime import spawn_points_ned
+from sim_backend.sensor_links import LinkBus, SensorLink, check_disjoint, parse_sensor_link
+from sim_backend.swarm_sim import SensorPublisher
 from transport.codec import decode
-from transport.errors import ConfigError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import TargetObservation
 from transport.zenoh_bus import ZenohBus

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from agents.scenario.file import load_scenario
-from deploy.swarm_sim import SensorPublisher, sensor_every_ticks, sim_tick_hz
-from sim_backend.model import FleetState
+from agents.loading.scenario_file import load_scenario
+from sim_backend.kinematics import FleetState
 from sim_backend.runtime import spawn_points_ned
+from sim_backend.swarm_sim import SensorPublisher, sensor_every_ticks, sim_tick_hz
 from transport.codec import decode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import TargetObservation, TruthSnapshot
 

@@ -9,18 +9,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.core.metrics import (
+from agents.analysis.metrics import (
     ErrorSeries,
     compute_metrics,
     separation_series,
     window_metrics,
 )
-from agents.core.timeseries import RunSeries
-from agents.scenario.file import load_scenario
+from agents.analysis.timeseries import RunSeries
+from agents.loading.scenario_file import load_scenario
 from deploy.recording.scene import FOLLOWER_RGBA, TOO_CLOSE_RGBA, scene_update, too_close
 from deploy.recording.view import ERRORS_TOPIC, LOG_TOPIC, SCENE_TOPIC, LiveView
-from deploy.rundir import RunInfo
-from deploy.verdict import read_verdict
+from deploy.report.rundir import RunInfo
+from deploy.report.verdict import read_verdict
 from tests.unit.test_live_view import START_S, entities, state
 from transport.messages import Header, RunControl, TruthSnapshot
 

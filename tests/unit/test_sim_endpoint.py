@@ -153,7 +153,7 @@ def test_message_intervals_are_per_vehicle_and_slow_streams_keep_flowing(sim: Si
 
 
 def test_a_slower_loop_gets_its_position_at_its_own_rate(sim: Simulator) -> None:
-    """A 20-Hz follower asks LOCAL_POSITION_NED down to its loop rate (agents.vehicle_loop):
+    """A 20-Hz follower asks LOCAL_POSITION_NED down to its loop rate (agents.shell.vehicle_loop):
     on 50-Hz ticks the vehicle keeps the average rate (every 2.5 ticks), not 25 or 50 Hz."""
     gcs = new_codec(255, 190)
     client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

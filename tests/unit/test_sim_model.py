@@ -7,15 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from sim_backend import model
-from sim_backend.model import FleetCommand, FleetState, ModelParams
+from sim_backend import kinematics
+from sim_backend.kinematics import FleetCommand, FleetState, ModelParams
 
 DT = 0.01
 
 
 def run(state: FleetState, cmd: FleetCommand, p: ModelParams, seconds: float) -> FleetState:
     for _ in range(round(seconds / DT)):
-        state = model.step(state, cmd, p, DT)
+        state = kinematics.step(state, cmd, p, DT)
     return state
 
 
@@ -58,7 +58,7 @@ def test_ground_contact_stops_descent_and_sliding() -> None:
     s = run(hovering(alt_m=1.0), velocity_cmd(1, (2.0, 0.0, 3.0)), p, 3.0)
     assert s.pos_ned_m[0, 2] == 0.0
     assert np.all(s.vel_ned_m_s[0] == 0.0)
-    assert bool(model.landed(s)[0])
+    assert bool(kinematics.landed(s)[0])
 
 
 def test_motors_off_on_ground_stays_put_and_in_air_falls() -> None:
@@ -77,11 +77,11 @@ def test_takeoff_and_land_with_position_axes() -> None:
     cmd.pos_sp_ned_m[:] = (0.0, 0.0, -5.0)
     s = run(FleetState.on_ground(np.zeros((2, 3))), cmd, p, 6.0)
     assert s.pos_ned_m[:, 2] == pytest.approx([-5.0, -5.0], abs=0.05)
-    assert not model.landed(s).any()
+    assert not kinematics.landed(s).any()
     cmd.pos_axis[:] = (True, True, False)
     cmd.vel_sp_ned_m_s[:] = (0.0, 0.0, p.land_speed_m_s)
     s = run(s, cmd, p, 5.0 / p.land_speed_m_s + 1.0)
-    assert model.landed(s).all()
+    assert kinematics.landed(s).all()
 
 
 def test_vectorised_rows_are_independent() -> None:
@@ -96,7 +96,7 @@ def test_vectorised_rows_are_independent() -> None:
 def test_yaw_tracks_angle_and_rate() -> None:
     p = ModelParams()
     cmd = velocity_cmd(2, (0.0, 0.0, 0.0))
-    cmd.yaw_mode[:] = (model.YAW_ANGLE, model.YAW_RATE)
+    cmd.yaw_mode[:] = (kinematics.YAW_ANGLE, kinematics.YAW_RATE)
     cmd.yaw_sp_rad[0] = 1.0
     cmd.yaw_rate_sp_rad_s[1] = 0.5
     s = run(hovering(2), cmd, p, 2.0)

@@ -1,4 +1,5 @@
-"""A start-up that fails on a saturated machine says so (deploy.cpu_load.start_saturation_note):
+"""A start-up that fails on a saturated machine says so
+(deploy.report.cpu_load.start_saturation_note):
 64 followers on a slow 2-core machine starve their simulator, and every follower's error
 then blames its vehicle."""
 
@@ -8,7 +9,7 @@ import os
 
 import pytest
 
-from deploy.cpu_load import start_saturation_note
+from deploy.report.cpu_load import start_saturation_note
 
 pytestmark = pytest.mark.timeout(10)
 

@@ -13,8 +13,8 @@ import pytest
 from deploy.cli import main
 from deploy.sweep.command import run_sweep
 from deploy.sweep.figures import error_against
-from deploy.sweep.progress import SweepProgress, clock_text
 from deploy.sweep.spec import SweepSpec, load_sweep, parse_sweep
+from deploy.sweep.sweep_progress import SweepProgress, clock_text
 from deploy.sweep.table import (
     RECOVERY,
     CellState,
@@ -25,7 +25,7 @@ from deploy.sweep.table import (
     pick_metrics,
     row_values,
 )
-from transport.errors import ConfigError
+from errors import ConfigError
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -8,9 +8,9 @@ from typing import Any
 
 import pytest
 
-from agents.law_args import LawOptions, add_law_arguments
+from agents.shell.law_args import LawOptions, add_law_arguments
 from deploy.sweep.spec import load_sweep, parse_sweep
-from transport.errors import ConfigError
+from errors import ConfigError
 
 pytestmark = pytest.mark.timeout(60)
 

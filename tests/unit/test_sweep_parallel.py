@@ -12,16 +12,16 @@ from pathlib import Path
 import pytest
 
 from deploy.cli import main
-from deploy.port_slots import PORTS_PER_SLOT, port_slot, slot_ports
-from deploy.ports import parse_port_range, ports_in_range
+from deploy.launch.port_slots import PORTS_PER_SLOT, port_slot, slot_ports
+from deploy.launch.ports import parse_port_range, ports_in_range
+from deploy.sweep.cell_runner import RUN_EXTRA_FLAGS, placement_flags
 from deploy.sweep.cluster import localise, pack, unpack
 from deploy.sweep.command import run_sweep
 from deploy.sweep.parallel import StopSignals
-from deploy.sweep.progress import SweepProgress
-from deploy.sweep.runner import RUN_EXTRA_FLAGS, placement_flags
 from deploy.sweep.spec import load_sweep
+from deploy.sweep.sweep_progress import SweepProgress
+from errors import DeployError
 from tests.unit.test_sweep import SWEEP, FakeRunner, rows, sweep_file
-from transport.errors import DeployError
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.core.profiles import TargetMotion
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
+from agents.scenario.target_motion import TargetMotion
 from agents.target import reference, tracking_command
 
 pytestmark = pytest.mark.timeout(30)

@@ -15,9 +15,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agents.follower.inputs import Latest
-from agents.follower.membership import setup_for
 from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
+from agents.membership.follower_place import setup_for
 
 PERIOD_S = 0.05
 TAU_S, ACCEL_TAU_S = 0.1, 0.5

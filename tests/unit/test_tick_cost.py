@@ -1,4 +1,4 @@
-"""agents.tick_cost: phase CPU between marks, and thread groups from a /proc task folder."""
+"""agents.shell.tick_cost: phase CPU between marks, and thread groups from a /proc task folder."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.tick_cost import ENV, PHASES, NoCost, TickCost, thread_cpu_ns, tick_cost
+from agents.shell.tick_cost import ENV, PHASES, NoCost, TickCost, thread_cpu_ns, tick_cost
 
 
 def task(tasks: Path, tid: int, comm: str, run_ns: int) -> None:

@@ -8,12 +8,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agents.follower.node import FollowerNode
-from agents.liveness import FLAP_MAX_CHANGES, FLAP_WINDOW_S, MembershipWatch, TokenSet
-from agents.scenario.file import load_scenario
+from agents.loading.scenario_file import load_scenario
+from agents.membership.liveness import FLAP_MAX_CHANGES, FLAP_WINDOW_S, MembershipWatch, TokenSet
 from tests.still_vehicle import still_vehicle
 from transport.bus import MAX_ALIVE_KEYS, AliveEvent, Received
 from transport.codec import encode
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.link_stats import LinkDecoder
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import FollowerState, Header
@@ -104,7 +104,7 @@ def test_a_leave_and_return_within_one_read_is_no_change() -> None:
 
 
 def test_a_follower_ignores_out_of_range_tokens_and_counts_them() -> None:
-    """Index >= n raised in agents.membership (a crash loop of every follower)."""
+    """Index >= n raised in agents.membership.ring (a crash loop of every follower)."""
     hub = MemoryHub()
     others = {i: MemoryBus(hub, f"f{i}") for i in range(1, N)}
     for i, b in others.items():
@@ -144,8 +144,8 @@ def test_alive_sets_and_link_tallies_stay_bounded() -> None:
 
 
 def test_the_simulators_sensor_model_ignores_out_of_range_tokens() -> None:
-    from agents.member_hold import SETTLE_S
-    from deploy.swarm_sim import SensorPublisher
+    from agents.membership.member_hold import SETTLE_S
+    from sim_backend.swarm_sim import SensorPublisher
 
     hub = MemoryHub()
     scenario = load_scenario("paper")
@@ -155,7 +155,7 @@ def test_the_simulators_sensor_model_ignores_out_of_range_tokens() -> None:
         rogue.declare_token(KEYS.alive("follower", i))
     for tail in ("4", "77", "²"):
         rogue.declare_token(f"{KEYS.prefix}/alive/follower/{tail}")
-    sensor._follow_membership(0.0)  # raised on index 4 (agents.membership)
+    sensor._follow_membership(0.0)  # raised on index 4 (agents.membership.ring)
     sensor._follow_membership(SETTLE_S)  # follower 2 vanished: a minority, settled
     assert sensor.members == {0, 1, 3}
     assert sensor.liveness.counters() == {"tokens_rejected": 3, "tokens_held": 0}

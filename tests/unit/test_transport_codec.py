@@ -9,11 +9,11 @@ import msgpack
 import numpy as np
 import pytest
 
+from errors import CodecError
 from transport import codec
 from transport.bus import Received
 from transport.codec import CODEC_VERSION, decode, encode
 from transport.decoder import Decoder
-from transport.errors import CodecError
 from transport.messages import (
     FollowerState,
     Header,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from transport.errors import ConfigError
-from transport.keys import KeyInfo, SwarmKeys, key_matches, parse_key, validate_concrete
+from errors import ConfigError
+from transport.key_exprs import KeyInfo, SwarmKeys, key_matches, parse_key, validate_concrete
 
 K = SwarmKeys("s1")
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
+from errors import TransportError
 from transport.bus import AliveEvent, Bus, drain_all, wait_until_alive
 from transport.codec import encode
 from transport.decoder import Decoder
-from transport.errors import TransportError
-from transport.keys import SwarmKeys
+from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
 from transport.messages import ProcessStatus, Stamper
 

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from errors import ConfigError
 from transport.codec import MAX_PAYLOAD_BYTES
-from transport.errors import ConfigError
 from transport.network_schema import ZENOH_RUNTIMES
 from transport.zenoh_config import (
     ACCEPT_PENDING,

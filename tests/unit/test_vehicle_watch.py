@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from agents.mavlink.adapter import VehicleState
-from agents.vehicle_loop import RECOVER_AFTER_S, VehicleWatch
+from agents.shell.vehicle_loop import RECOVER_AFTER_S, VehicleWatch
 
 FLYING = VehicleState((0.0, 0.0, 10.0), (0.0, 0.0, 0.0), 0.0, True, "OFFBOARD", True)
 

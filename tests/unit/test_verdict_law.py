@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 from rich.console import Console
 
-from deploy.verdict import print_verdict, read_verdict, verdict_json
+from deploy.report.verdict import print_verdict, read_verdict, verdict_json
 
 pytestmark = pytest.mark.timeout(30)
 

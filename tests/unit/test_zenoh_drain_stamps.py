@@ -3,7 +3,7 @@
 Zenoh fills a subscription's ring while the process drains it.  A process preempted in
 the middle of a drain (a starved recorder on 2 cores) used to stamp every sample with one
 clock reading from the start of the drain: samples that arrived later looked as if sent
-from the future and were refused (transport.checks).  The ring and the clock here are
+from the future and were refused (transport.message_checks).  The ring and the clock here are
 fakes: the ring lets time pass between two samples, as a preemption would."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 import pytest
 import zenoh
 
-from transport.checks import Limits, check
 from transport.codec import decode, encode
+from transport.message_checks import Limits, check
 from transport.messages import Header, ProcessStatus
 from transport.zenoh_bus import ZenohSubscription
 

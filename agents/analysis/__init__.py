@@ -1,0 +1,2 @@
+"""A run's analysis, the same for lock-step and networked runs: the series layout and the
+accuracy metrics."""
