@@ -12,11 +12,9 @@ law's own dynamics allow, and against what it knows itself, before its law sees 
             limit: past `rate_m`, refused.  A jump (an offset, a sum set at the bound),
             a random walk: all are caught within a few messages, and a liar back to the
             truth is taken back within `rate_tau_s * ln 2`;
-- frozen:   a value resent unchanged under a fresh stamp while its own rate says it
-            moves (a replayed or stale state): an honest sender integrates its rate
-            between two stamps, so an unmoved value is never honest.  `frozen_n`
-            such messages in a row are refused at once (the rate check alone needs
-            ~1 s, and never fires for a rate below `rate_m / rate_tau_s`);
+- frozen:   a value resent unchanged under a fresh stamp while its rate says it moves
+            (a replayed or stale state; an honest sender integrates between stamps):
+            `frozen_n` in a row are refused (the rate check never sees a slow one);
 - jump:     r_j against where it was last believed, held there, plus `slack_m_s` per
             second since (the targets' centre moves at most beta): a silence does not
             reset it, so going quiet buys a liar no fresh start;
@@ -276,7 +274,6 @@ class Plausibility:
         first = f"implausible_first_ms_f{sender}"
         if first not in c and self.origin_s is not None:
             c[first] = max(round((now_s - self.origin_s) * 1000.0), 1)
-
 
 
 def own_side(r: Sample | None, setup: Setup, targets: Mapping[int, Sample], now_s: float,
