@@ -34,10 +34,12 @@ from agents.shell.process import (
     stop_on_signals,
 )
 from agents.shell.process_options import BusOptions, add_bus_arguments
+from agents.weather.sensing import TargetSensor
 from sim_backend.kinematics import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from sim_backend.sensor_links import LinkBus, parse_sensor_link, sensor_buses
 from sim_backend.sim_values import parse_peer_hosts
+from sim_backend.weather import weather_of
 from transport.bus import Bus, Congestion
 from transport.codec import encode
 from transport.key_exprs import SwarmKeys
@@ -59,6 +61,7 @@ class SensorPublisher:
         seed: int = 0,
         late_s: Callable[[float], float] = lambda _t: 0.0,
         sensor_buses: Mapping[int, Bus | LinkBus] | None = None,
+        reported: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> None:
         self.n, self.m = scenario.n, scenario.m
         self.bus, self.keys, self.every = bus, keys, max(1, every_ticks)
@@ -83,6 +86,10 @@ class SensorPublisher:
         # state is stamped with the time it is true, not with when it was published, so a
         # late tick does not make the followers' finite-difference velocities jump.
         self.late_s = late_s
+        # [sensing] (agents.weather.sensing); None: every observer sees its targets exactly.
+        cfg = scenario.sensing
+        self.limited = None if cfg is None or cfg.is_perfect else TargetSensor(cfg)
+        self.reported = reported or (lambda pos_ned: pos_ned)  # the vehicles' GPS fixes
 
     def __call__(self, sim_time_s: float, state: FleetState) -> None:
         self.ticks += 1
@@ -101,6 +108,9 @@ class SensorPublisher:
         )
         self.truth_out.put(encode(truth))
         self._follow_membership(now)
+        if self.limited is not None:
+            self._sense(self.limited, now, state)
+            return
         noise_std = self.noise_std_m if self.noise_std_m > 0.0 else None
         for j, observers in enumerate(self.observers):
             for i in observers:
@@ -112,12 +122,30 @@ class SensorPublisher:
                 )
                 self.sensor_out[i].put(encode(msg))
 
+    def _sense(self, sensor: TargetSensor, now_s: float, state: FleetState) -> None:
+        """The limited sensor's observations: latent, missed beyond its range or by chance."""
+        true_s, pos, fixes = sensor.remember(now_s, ned_to_enu(state.pos_ned_m),
+                                             ned_to_enu(self.reported(state.pos_ned_m)))
+        std = sensor.cfg.noise_std_m or None
+        for j, observers in enumerate(self.observers):
+            for i in observers:
+                seen = sensor.observe(pos[i, :2], fixes[i, :2], pos[self.n + j, :2])
+                if seen is None:
+                    continue
+                msg = TargetObservation(
+                    self.sensor_stampers[i].header(now_s), i, j, vec2(seen), true_s, std)
+                self.sensor_out[i].put(encode(msg))
+
     def _follow_membership(self, now_s: float) -> None:
         members = self.hold.members(self.liveness.members(now_s), now_s)
         if members and members != self.members:
             self.members = members
             self.observers = list(membership(self.scenario, members).observers)
             log.info("members %s: observers %s", sorted(members), self.observers)
+
+    def sensing_counters(self) -> dict[str, int]:
+        """Observations the limited sensor did not make (none without `[sensing]`)."""
+        return {} if self.limited is None else dict(self.limited.counters)
 
     def close(self) -> None:
         self.liveness.close()
@@ -208,12 +236,14 @@ def run(opts: SwarmSimOptions) -> int:
     links = [parse_sensor_link(text, scenario.n) for text in opts.sensor_links]
     with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus, \
             sensor_buses(links, opts.bus, scenario.network) as linked:
-        sim = Simulator(spawn_points_ned(scenario), scenario.vehicle, scenario.home, cfg)
+        spawn = spawn_points_ned(scenario)
+        weather = weather_of(scenario, len(spawn))
+        sim = Simulator(spawn, scenario.vehicle, scenario.home, cfg, weather=weather)
         sensor = SensorPublisher(
             scenario, bus, keys,
             sensor_every_ticks(tick_hz, opts.sensor_hz or scenario.run.rate_hz),
             opts.noise_std_m, opts.seed, late_s=lambda t: sim.boot_time_s() - t,
-            sensor_buses=linked)
+            sensor_buses=linked, reported=None if weather is None else weather.reported_ned)
         status = StatusReporter(bus, keys, "sim", 0)
         sim.on_tick.append(sensor)
 
@@ -222,7 +252,7 @@ def run(opts: SwarmSimOptions) -> int:
             return {"ticks": st.ticks, "overruns": st.overruns, "catch_ups": st.catch_ups,
                     "caught_up_ticks": st.caught_up_ticks, "resyncs": st.resyncs,
                     **dict(sim.counters), **wrong_key_senders(sim.counters, scenario.n),
-                    **sensor.liveness.counters(),
+                    **sensor.liveness.counters(), **sensor.sensing_counters(),
                     "sensing_link_dropped": sum(b.dropped for b in set(linked.values()))}
 
         def report(_t: float, _s: FleetState) -> None:

@@ -14,6 +14,7 @@ import itertools
 from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from agents.analysis.geometry import as_complex, as_plane
 from agents.analysis.timeseries import RunSeries
@@ -22,8 +23,11 @@ from agents.lockstep import kernel as lockstep_kernel
 from agents.lockstep.estimator_weights import edge_fractions, observation_weights
 from agents.scenario.model import Scenario
 from agents.scenario.target_motion import TargetMotion
+from agents.weather.gusts import WindField, steady_leak
 
 ProgressFn = Callable[[float], None]
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
 ENGINES = ("auto", "python", "numba")
 CHUNKS = 100
 
@@ -58,13 +62,28 @@ def simulate_lockstep(
     est, cmd = np.zeros_like(pos), np.zeros_like(pos)
     args = (dt_s, substeps, *_graph_and_law(scenario, dt_s, substeps), as_complex(p_tilde),
             as_complex(p_tilde_rate), np.zeros(scenario.n, np.complex128),
-            np.zeros(scenario.n, np.complex128), pos, est, cmd)
+            np.zeros(scenario.n, np.complex128), pos, est, cmd, *lockstep_wind(scenario, t))
     bounds = np.linspace(0, steps + 1, min(CHUNKS, steps + 1) + 1).astype(int)
     for k0, k1 in itertools.pairwise(bounds):
         lockstep_kernel.run_steps(int(k0), int(k1), compiled, *args)
         if progress is not None:
             progress(k1 / (steps + 1))
     return RunSeries(t, as_plane(pos), as_plane(est), as_plane(cmd), targets)
+
+
+def lockstep_wind(scenario: Scenario, t: FloatArray) -> tuple[ComplexArray, float]:
+    """Each step's wind per follower as x + iy, and the share of it a vehicle lets through
+    (agents.weather.gusts); no rows without `[wind]`: the loop is then as it always was.
+    The field holds the targets' rows too, as the simulator's does, so a seed draws alike."""
+    wind = scenario.wind
+    if wind is None:
+        return np.zeros((0, scenario.n), np.complex128), 0.0
+    field = WindField(wind, scenario.n + scenario.m)
+    out = np.zeros((t.shape[0], scenario.n), np.complex128)
+    out[0] = as_complex(field.velocity()[: scenario.n])
+    for k in range(1, t.shape[0]):
+        out[k] = as_complex(field.advance(float(t[k] - t[k - 1]))[: scenario.n])
+    return out, steady_leak(wind.drag_1_s, scenario.vehicle.tau_s)
 
 
 def _graph_and_law(scenario: Scenario, dt_s: float, substeps: int) -> tuple[object, ...]:
