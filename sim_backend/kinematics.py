@@ -119,9 +119,11 @@ def _yaw_rate(state: FleetState, cmd: FleetCommand, p: ModelParams) -> FloatArra
 
 def pushed_by_air(vel_ned_m_s: FloatArray, air_ned_m_s: FloatArray, drag_1_s: float,
                   dt_s: float) -> FloatArray:
-    """The velocity after the air's drag has pulled it toward the air's own for dt_s: the
-    disturbance the velocity loop then has to reject (agents.weather.gusts)."""
-    return vel_ned_m_s + (air_ned_m_s - vel_ned_m_s) * (1.0 - math.exp(-dt_s * drag_1_s))
+    """The velocity after the wind's force has pushed it for dt_s: the disturbance the
+    velocity loop then rejects (agents.weather.gusts).  The force is linearised about
+    hover, drag x wind: the frame's drag at its own speed is part of the loop's lag
+    already, so still air pushes nothing."""
+    return vel_ned_m_s + air_ned_m_s * (1.0 - math.exp(-dt_s * drag_1_s))
 
 
 def step(state: FleetState, cmd: FleetCommand, p: ModelParams, dt_s: float,

@@ -42,7 +42,7 @@ def _steps(k0: int, k1: int, dt: float, substeps: int, law: FloatArray, tails: I
            wind: ComplexArray, leak: float) -> None:
     """Advance steps k0..k1-1 in place (`law`: `law_vector`; psi: the velocity stage's state,
     zero at order 1; `wind`: each step's wind per follower, of which the vehicle lets `leak`
-    of the relative part through, or no rows: still air).  Between control steps the
+    through, or no rows: still air).  Between control steps the
     estimator takes `substeps` steps, p~ moving linearly to its next sample."""
     n = phi.shape[0]
     r = np.zeros(n, np.complex128)
@@ -61,7 +61,7 @@ def _steps(k0: int, k1: int, dt: float, substeps: int, law: FloatArray, tails: I
                 psi[i] += dt_e * vrate[i]
             if wind.shape[0] > 0:
                 for i in range(n):
-                    pos[k + 1, i] += dt * leak * (wind[k, i] - cmd[k, i])
+                    pos[k + 1, i] += dt * leak * wind[k, i]
             for j in range(1, substeps):
                 for i in range(n):
                     r[i] = phi[i] + p_tilde[k, i] + (j * dt_e) * p_tilde_rate[k + 1, i]

@@ -22,8 +22,9 @@ class WindConfig:
     gust_tau_s: float = 2.0  # correlation time of the gusts
     per_vehicle: bool = True  # each vehicle its own gusts; false: one gust shared by all
     seed: int = 0
-    # How fast the air drags the airframe toward its own velocity: the disturbance the
-    # vehicle's velocity loop rejects through its lag (steady error ~ drag tau / (1 + drag tau)).
+    # The wind's push on the airframe, drag_1_s x wind (an acceleration, linearised about
+    # hover): the disturbance the vehicle's velocity loop rejects through its lag, leaving a
+    # steady velocity error of about drag_1_s x tau_s x wind (agents.weather.gusts).
     drag_1_s: float = 1.0
 
 

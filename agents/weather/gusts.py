@@ -51,14 +51,14 @@ class WindField:
 
 
 def steady_leak(drag_1_s: float, tau_s: float, dt_s: float | None = None) -> float:
-    """The share of the relative wind a first-order velocity loop of lag `tau_s` lets through
-    at steady state against a drag of `drag_1_s`: what lock-step's single integrators feel
-    (None: in continuous time; `dt_s`: the simulator's discrete step, sim_backend.kinematics,
-    which at 50 Hz lets a fifth less through)."""
+    """The share of the wind a first-order velocity loop of lag `tau_s` lets through at
+    steady state against the wind's push `drag_1_s` x wind: what lock-step's single
+    integrators feel (None: in continuous time, drag x tau; `dt_s`: the simulator's discrete
+    step, sim_backend.kinematics, which at 50 Hz lets a fifth less through)."""
     if dt_s is None:
-        return drag_1_s * tau_s / (1.0 + drag_1_s * tau_s)
-    pushed = (1.0 - math.exp(-dt_s * drag_1_s)) * math.exp(-dt_s / tau_s)
-    return pushed / (pushed + 1.0 - math.exp(-dt_s / tau_s))
+        return drag_1_s * tau_s
+    kept = math.exp(-dt_s / tau_s)
+    return (1.0 - math.exp(-dt_s * drag_1_s)) * kept / (1.0 - kept)
 
 
 def wind_ned(wind_enu: FloatArray) -> FloatArray:
