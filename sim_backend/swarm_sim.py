@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import signal
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ from agents.shell.process import (
 )
 from agents.shell.process_options import BusOptions, add_bus_arguments
 from agents.weather.sensing import TargetSensor
+from agents.weather.windows import WindSchedule, wind_begin_signal, wind_end_signal
 from sim_backend.kinematics import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from sim_backend.sensor_links import LinkBus, parse_sensor_link, sensor_buses
@@ -204,13 +206,15 @@ class SwarmSimOptions:
     signing_secret: str | None = None  # the run's MAVLink secret: a key per vehicle
     sensor_links: tuple[str, ...] = ()  # --sensor-link ENDPOINT=I,J (sim_backend.sensor_links)
     mav_peers: tuple[str, ...] = ()  # --mav-peers: each vehicle's agent's address
+    gust_windows: tuple[float, ...] | None = None  # --gust-window: the launcher's, in order
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SwarmSimOptions:
         return cls(BusOptions.from_namespace(args), args.rate_hz, args.telemetry_hz,
                    args.sensor_hz, args.noise_std_m, args.seed, args.base_port, args.mav_host,
                    args.send_base_port, args.signing_secret, tuple(args.sensor_link),
-                   parse_peer_hosts(args.mav_peers))
+                   parse_peer_hosts(args.mav_peers),
+                   None if args.gust_window is None else tuple(args.gust_window))
 
 
 def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> SimConfig:
@@ -228,6 +232,13 @@ def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> Sim
 
 
 
+def listen_for_wind(schedule: WindSchedule) -> None:
+    """The launcher opens and closes the timeline's gust windows by signals
+    (deploy.launch.fault_injector); the next tick flies the new strength."""
+    signal.signal(wind_begin_signal(), lambda *_a: schedule.begin())
+    signal.signal(wind_end_signal(), lambda *_a: schedule.end())
+
+
 def run(opts: SwarmSimOptions) -> int:
     scenario = load_run_scenario(opts.bus)
     tick_hz = opts.rate_hz or sim_tick_hz(scenario.run.rate_hz)
@@ -237,7 +248,9 @@ def run(opts: SwarmSimOptions) -> int:
     with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus, \
             sensor_buses(links, opts.bus, scenario.network) as linked:
         spawn = spawn_points_ned(scenario)
-        weather = weather_of(scenario, len(spawn))
+        weather = weather_of(scenario, len(spawn), opts.gust_windows)
+        if weather is not None and weather.schedule is not None:
+            listen_for_wind(weather.schedule)
         sim = Simulator(spawn, scenario.vehicle, scenario.home, cfg, weather=weather)
         sensor = SensorPublisher(
             scenario, bus, keys,
@@ -303,6 +316,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--sensor-link", action="append", default=[], metavar="ENDPOINT=I,J",
                         help="publish the observations of followers I,J (0-based) through a "
                         "session to this endpoint: another host's sensing endpoint")
+    parser.add_argument("--gust-window", type=float, action="append", default=None,
+                        metavar="STD_M_S", help="the gusts' strength in each of the timeline's "
+                        "wind windows, in time order (the launcher opens and closes them)")
     parser.add_argument("--base-port", type=int, default=14580)
     parser.add_argument("--mav-host", default="127.0.0.1", metavar="ADDR",
                         help="address the vehicles listen on (another host's agents: its "

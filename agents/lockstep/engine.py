@@ -23,7 +23,9 @@ from agents.lockstep import kernel as lockstep_kernel
 from agents.lockstep.estimator_weights import edge_fractions, observation_weights
 from agents.scenario.model import Scenario
 from agents.scenario.target_motion import TargetMotion
+from agents.scenario.weather import WindConfig
 from agents.weather.gusts import WindField, steady_leak
+from agents.weather.windows import gust_std_at, wind_windows
 
 ProgressFn = Callable[[float], None]
 FloatArray = NDArray[np.float64]
@@ -75,13 +77,15 @@ def lockstep_wind(scenario: Scenario, t: FloatArray) -> tuple[ComplexArray, floa
     """Each step's wind per follower as x + iy, and the share of it a vehicle lets through
     (agents.weather.gusts); no rows without `[wind]`: the loop is then as it always was.
     The field holds the targets' rows too, as the simulator's does, so a seed draws alike."""
-    wind = scenario.wind
+    windows = wind_windows(scenario.faults)
+    wind = scenario.wind or (WindConfig() if windows else None)
     if wind is None:
         return np.zeros((0, scenario.n), np.complex128), 0.0
     field = WindField(wind, scenario.n + scenario.m)
     out = np.zeros((t.shape[0], scenario.n), np.complex128)
     out[0] = as_complex(field.velocity()[: scenario.n])
     for k in range(1, t.shape[0]):
+        field.std_m_s = gust_std_at(windows, float(t[k]), wind.gust_std_m_s)
         out[k] = as_complex(field.advance(float(t[k] - t[k - 1]))[: scenario.n])
     return out, steady_leak(wind.drag_1_s, scenario.vehicle.tau_s)
 
