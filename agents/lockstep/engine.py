@@ -24,6 +24,7 @@ from agents.lockstep.estimator_weights import edge_fractions, observation_weight
 from agents.scenario.model import Scenario
 from agents.scenario.target_motion import TargetMotion
 from agents.scenario.weather import WindConfig
+from agents.weather.gps import GpsNoise
 from agents.weather.gusts import WindField, steady_leak
 from agents.weather.windows import gust_std_at, wind_windows
 
@@ -64,7 +65,8 @@ def simulate_lockstep(
     est, cmd = np.zeros_like(pos), np.zeros_like(pos)
     args = (dt_s, substeps, *_graph_and_law(scenario, dt_s, substeps), as_complex(p_tilde),
             as_complex(p_tilde_rate), np.zeros(scenario.n, np.complex128),
-            np.zeros(scenario.n, np.complex128), pos, est, cmd, *lockstep_wind(scenario, t))
+            np.zeros(scenario.n, np.complex128), pos, est, cmd, *lockstep_wind(scenario, t),
+            lockstep_gps(scenario, t))
     bounds = np.linspace(0, steps + 1, min(CHUNKS, steps + 1) + 1).astype(int)
     for k0, k1 in itertools.pairwise(bounds):
         lockstep_kernel.run_steps(int(k0), int(k1), compiled, *args)
@@ -88,6 +90,18 @@ def lockstep_wind(scenario: Scenario, t: FloatArray) -> tuple[ComplexArray, floa
         field.std_m_s = gust_std_at(windows, float(t[k]), wind.gust_std_m_s)
         out[k] = as_complex(field.advance(float(t[k] - t[k - 1]))[: scenario.n])
     return out, steady_leak(wind.drag_1_s, scenario.vehicle.tau_s)
+
+
+def lockstep_gps(scenario: Scenario, t: FloatArray) -> ComplexArray:
+    """Each step's GPS error per follower as x + iy (agents.weather.gps), drawn as the
+    simulator draws it for its vehicles; no rows when the vehicles report exactly."""
+    if not scenario.vehicle.gps_noisy:
+        return np.zeros((0, scenario.n), np.complex128)
+    gps = GpsNoise(scenario.vehicle, scenario.n + scenario.m)
+    out = np.zeros((t.shape[0], scenario.n), np.complex128)
+    for k in range(1, t.shape[0]):
+        out[k] = as_complex(gps.advance(float(t[k] - t[k - 1]))[: scenario.n])
+    return out
 
 
 def _graph_and_law(scenario: Scenario, dt_s: float, substeps: int) -> tuple[object, ...]:

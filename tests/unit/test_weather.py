@@ -234,3 +234,26 @@ def test_lockstep_flies_in_the_same_wind_and_is_unchanged_without_it() -> None:
     assert np.array_equal(b.follower_pos_m, c.follower_pos_m)  # seeded
     drift = np.abs(b.follower_pos_m - a.follower_pos_m).max()
     assert 0.01 < drift < 2.0
+
+
+def test_lockstep_laws_see_gps_noise_and_the_truth_is_judged() -> None:
+    from agents.lockstep.engine import simulate_lockstep
+
+    calm = simulate_lockstep(parse_scenario(PAPER), 0.02, 3.0, engine="python")
+    noisy_sc = parse_scenario(windy("[vehicle]\ngps_noise_std_m = 0.3\ngps_seed = 1"))
+    noisy = simulate_lockstep(noisy_sc, 0.02, 3.0, engine="python")
+    assert np.array_equal(calm.follower_pos_m[:2], noisy.follower_pos_m[:2])  # same start
+    assert not np.array_equal(calm.command_m_s, noisy.command_m_s)  # the law saw the noise
+
+
+def test_lockstep_opens_a_gust_window_at_its_time() -> None:
+    from agents.lockstep.engine import lockstep_wind
+
+    sc = parse_scenario(windy('[wind]\ngust_std_m_s = 0.0\n[[faults]]\nat_s = 2.0\n'
+                              'action = "wind"\nduration_s = 2.0\ngust_std_m_s = 3.0'))
+    t = np.arange(301) * 0.02
+    wind, _ = lockstep_wind(sc, t)
+    assert np.all(wind[t < 2.0] == 0.0)  # calm until the window opens
+    inside = np.abs(wind[(t > 2.5) & (t < 4.0)]).max()
+    assert inside > 0.5
+    assert np.abs(wind[-1]).max() < inside  # after it, the gusts die down at their tau
