@@ -96,3 +96,12 @@ def test_no_weather_flags_no_change() -> None:
 def test_bad_weather_flags_are_refused_naming_the_flag(argv: tuple[str, str], flag: str) -> None:
     with pytest.raises(ScenarioError, match=flag):
         flags(*argv)
+
+
+def test_enclose_run_takes_the_weather_by_name() -> None:
+    from enclose.api import launch_options
+
+    opts = launch_options("paper", {"wind": (2, 1), "gust": 0.5, "gps_noise": 0.3})
+    assert (opts.network.weather.wind, opts.network.weather.gust,
+            opts.network.weather.gps_noise) == ((2.0, 1.0), 0.5, 0.3)
+    assert launch_options("paper", {}).network.weather.given is False
