@@ -21,6 +21,7 @@ from agents.analysis.timeseries import RunSeries
 from agents.law.sig import rate_cap
 from agents.lockstep import kernel as lockstep_kernel
 from agents.lockstep.estimator_weights import edge_fractions, observation_weights
+from agents.lockstep.sensing import held_p_tilde, sensed_targets
 from agents.scenario.model import Scenario
 from agents.scenario.target_motion import TargetMotion
 from agents.scenario.weather import WindConfig
@@ -56,8 +57,12 @@ def simulate_lockstep(
     steps = round(duration_s / dt_s)
     t = np.arange(steps + 1, dtype=np.float64) * dt_s
     targets, _ = TargetMotion(scenario, horizon_s=duration_s).states(t)
-    # Observations are exact here, so p~ and its finite-difference rate are precomputed.
-    p_tilde = np.einsum("ij,kjd->kid", observation_weights(scenario.observation()), targets)
+    # Observations do not depend on the followers here (exact, or agents.lockstep.sensing),
+    # so p~ and its finite-difference rate are precomputed.
+    weights = observation_weights(scenario.observation())
+    held = sensed_targets(scenario, t, targets)  # [sensing]; None: exact observations
+    p_tilde = (np.einsum("ij,kjd->kid", weights, targets) if held is None
+               else held_p_tilde(held, weights))
     p_tilde_rate = np.zeros_like(p_tilde)
     p_tilde_rate[1:] = np.diff(p_tilde, axis=0) / dt_s
     pos = np.zeros(p_tilde.shape[:2], np.complex128)

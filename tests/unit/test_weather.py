@@ -257,3 +257,20 @@ def test_lockstep_opens_a_gust_window_at_its_time() -> None:
     inside = np.abs(wind[(t > 2.5) & (t < 4.0)]).max()
     assert inside > 0.5
     assert np.abs(wind[-1]).max() < inside  # after it, the gusts die down at their tau
+
+
+def test_lockstep_holds_what_its_sensor_missed() -> None:
+    from agents.lockstep.engine import simulate_lockstep
+    from agents.lockstep.sensing import sensed_targets
+
+    sc = parse_scenario(windy("[sensing]\ndetect_prob = 0.5\nseed = 2"))
+    t = np.arange(101) * 0.02
+    targets = np.cumsum(np.ones((101, sc.m, 2)), axis=0)  # every target moves every step
+    held = sensed_targets(sc, t, targets)
+    assert held is not None
+    i, j = sc.targets[0].observed_by[0], 0
+    moved = np.any(np.diff(held[:, i, j], axis=0) != 0.0, axis=1)
+    assert 0.3 < moved.mean() < 0.7  # about half the steps bring a new observation
+    assert sensed_targets(parse_scenario(PAPER), t, targets) is None
+    run = simulate_lockstep(sc, 0.02, 3.0, engine="python")
+    assert np.all(np.isfinite(run.estimate_m))
