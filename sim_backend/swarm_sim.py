@@ -232,9 +232,17 @@ def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> Sim
 
 
 
-def listen_for_wind(schedule: WindSchedule) -> None:
+def listen_for_wind(schedule: WindSchedule | None) -> None:
     """The launcher opens and closes the timeline's gust windows by signals
-    (deploy.launch.fault_injector); the next tick flies the new strength."""
+    (deploy.launch.fault_injector); the next tick flies the new strength.  Without windows
+    a signal is logged and ignored: its default action would end the simulator."""
+    if schedule is None:
+        def ignored(*_a: object) -> None:
+            log.warning("a gust window was signalled, but this simulator was given none")
+
+        signal.signal(wind_begin_signal(), ignored)
+        signal.signal(wind_end_signal(), ignored)
+        return
     signal.signal(wind_begin_signal(), lambda *_a: schedule.begin())
     signal.signal(wind_end_signal(), lambda *_a: schedule.end())
 
@@ -249,8 +257,7 @@ def run(opts: SwarmSimOptions) -> int:
             sensor_buses(links, opts.bus, scenario.network) as linked:
         spawn = spawn_points_ned(scenario)
         weather = weather_of(scenario, len(spawn), opts.gust_windows)
-        if weather is not None and weather.schedule is not None:
-            listen_for_wind(weather.schedule)
+        listen_for_wind(None if weather is None else weather.schedule)
         sim = Simulator(spawn, scenario.vehicle, scenario.home, cfg, weather=weather)
         sensor = SensorPublisher(
             scenario, bus, keys,

@@ -117,3 +117,25 @@ def test_the_live_view_draws_the_mean_wind_as_an_arrow() -> None:
     windy = scene_update(truth, {}, [], 10.0, wind_m_s=(0.0, 2.0))
     # The bindings' messages are opaque: the arrow shows as its own entity in the bytes.
     assert b"wind" in windy.encode() and b"wind" not in calm.encode()
+
+
+def test_a_simulator_without_windows_ignores_the_window_signals() -> None:
+    import os
+    import signal
+
+    from agents.weather.windows import wind_begin_signal, wind_end_signal
+    from sim_backend.swarm_sim import listen_for_wind
+
+    before = [signal.getsignal(s) for s in (wind_begin_signal(), wind_end_signal())]
+    try:
+        listen_for_wind(None)
+        os.kill(os.getpid(), wind_begin_signal())  # its default action would end the process
+        sched = WindSchedule((2.0,), 0.0)
+        listen_for_wind(sched)
+        os.kill(os.getpid(), wind_begin_signal())
+        assert sched.std_m_s == 2.0
+        os.kill(os.getpid(), wind_end_signal())
+        assert sched.std_m_s == 0.0
+    finally:
+        for s, h in zip((wind_begin_signal(), wind_end_signal()), before, strict=True):
+            signal.signal(s, h)
