@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from agents.shell.law_args import LawOptions
+    from agents.shell.weather_args import WeatherOptions
     from deploy.commands.replay import FollowerReplay
     from deploy.launch.launch_options import LaunchOptions
 
@@ -73,7 +74,8 @@ def run(scenario: ScenarioLike = None, **overrides: Any) -> Run:
     none), figures (False: none drawn), law and law_params (`law_options`), the network's
     (estimator, estimator_order, link, zenoh_runtime, agent_sched, impair_seed,
     latency_stamps) and its impairments
-    (loss, delay_ms, ...: agents.scenario.network.IMPAIRMENT_KEYS)."""
+    (loss, delay_ms, ...: agents.scenario.network.IMPAIRMENT_KEYS), and the weather's
+    (wind: a speed toward +x or (x, y) in m/s, gust, gps_noise: docs/weather.md)."""
     from deploy.commands.run import RunOptions
     from deploy.commands.run import run as run_command
 
@@ -94,18 +96,35 @@ def launch_options(scenario_ref: str, overrides: Mapping[str, Any]) -> LaunchOpt
     from deploy.launch.launch_options import LaunchOptions
     from deploy.launch.live_args import LiveOptions
 
-    network_keys = {f.name for f in dataclasses.fields(NetworkOptions)} - {"impairment"}
-    _check_keys("enclose.run", overrides,
-                {*RUN_KEYS, *LAUNCH_KEYS, *LAW_KEYS, *network_keys, *IMPAIRMENT_KEYS})
+    network_keys = {f.name for f in dataclasses.fields(NetworkOptions)} - {"impairment",
+                                                                           "weather"}
+    _check_keys("enclose.run", overrides, {*RUN_KEYS, *LAUNCH_KEYS, *LAW_KEYS, *network_keys,
+                                           *IMPAIRMENT_KEYS, *WEATHER_KEYS})
     launch = {k: overrides[k] for k in LAUNCH_KEYS if k in overrides}
     live = launch.get("live")
     launch["live"] = LiveOptions() if live is True else (live or None)
     launch["faults"] = tuple(launch.get("faults", ()))
     impairment = tuple((k, overrides[k]) for k in IMPAIRMENT_KEYS if k in overrides)
     network = NetworkOptions(**{k: overrides[k] for k in network_keys if k in overrides},
-                             impairment=impairment)
+                             impairment=impairment, weather=weather_options(overrides))
     law = law_options(overrides.get("law"), overrides.get("law_params"))
     return LaunchOptions(scenario=scenario_ref, network=network, law=law, **launch)
+
+
+WEATHER_KEYS = ("wind", "gust", "gps_noise")
+
+
+def weather_options(overrides: Mapping[str, Any]) -> WeatherOptions:
+    """--wind, --gust and --gps-noise from `enclose.run`'s keyword overrides."""
+    import argparse
+
+    from agents.shell.weather_args import WeatherOptions
+
+    wind = overrides.get("wind")
+    if isinstance(wind, list | tuple):
+        wind = ",".join(str(v) for v in wind)
+    return WeatherOptions.from_namespace(argparse.Namespace(
+        wind=wind, gust=overrides.get("gust"), gps_noise=overrides.get("gps_noise")))
 
 
 def law_options(law: str | LawOptions | None,

@@ -117,15 +117,29 @@ def _yaw_rate(state: FleetState, cmd: FleetCommand, p: ModelParams) -> FloatArra
     return np.clip(rate, -p.max_yaw_rate_rad_s, p.max_yaw_rate_rad_s)
 
 
-def step(state: FleetState, cmd: FleetCommand, p: ModelParams, dt_s: float) -> FleetState:
-    """Advance every vehicle by dt_s; inputs are not modified."""
+def pushed_by_air(vel_ned_m_s: FloatArray, air_ned_m_s: FloatArray, drag_1_s: float,
+                  dt_s: float) -> FloatArray:
+    """The velocity after the wind's force has pushed it for dt_s: the disturbance the
+    velocity loop then rejects (agents.weather.gusts).  The force is linearised about
+    hover, drag x wind: the frame's drag at its own speed is part of the loop's lag
+    already, so still air pushes nothing."""
+    return vel_ned_m_s + air_ned_m_s * (1.0 - math.exp(-dt_s * drag_1_s))
+
+
+def step(state: FleetState, cmd: FleetCommand, p: ModelParams, dt_s: float,
+         air_ned_m_s: FloatArray | None = None, drag_1_s: float = 0.0) -> FleetState:
+    """Advance every vehicle by dt_s; inputs are not modified.  `air_ned_m_s`: the wind
+    each vehicle is in (None: still air, and not a single operation more)."""
     want = wanted_velocity(state, cmd, p)
+    vel0 = state.vel_ned_m_s
+    if air_ned_m_s is not None:
+        vel0 = pushed_by_air(vel0, air_ned_m_s, drag_1_s, dt_s)
     # Exact discretisation of the first-order lag: stable for any dt, not only dt << tau.
-    dv = (want - state.vel_ned_m_s) * (1.0 - math.exp(-dt_s / p.tau_s))
+    dv = (want - vel0) * (1.0 - math.exp(-dt_s / p.tau_s))
     max_dv = p.max_accel_m_s2 * dt_s
     dv = _limit_xy(dv, max_dv)
     dv[:, 2] = np.clip(dv[:, 2], -max_dv, max_dv)
-    vel = state.vel_ned_m_s + dv
+    vel = vel0 + dv
     # A multirotor on the ground does not slide: only a climb command frees it (PX4 lifts
     # off in offboard only with vz < 0).  Decided before integrating, so it cannot creep.
     stuck = (state.pos_ned_m[:, 2] >= 0.0) & (want[:, 2] >= 0.0)

@@ -36,6 +36,7 @@ from sim_backend.sim_values import LoopStats, SimConfig, Snapshot
 from sim_backend.sim_values import grid_spawn_ned as grid_spawn_ned  # re-exported (importers)
 from sim_backend.sim_values import spawn_points_ned as spawn_points_ned  # re-exported
 from sim_backend.telemetry import Row
+from sim_backend.weather import SimWeather
 
 log = logging.getLogger(__name__)
 TickHook = Callable[[float, kinematics.FleetState], None]
@@ -56,7 +57,8 @@ class Simulator:
     """N vehicles (sysid i+1) stepped together, each behind its own UDP socket."""
 
     def __init__(self, spawn_ned_m: np.ndarray, vehicle: VehicleConfig, home: HomeConfig,
-                 cfg: SimConfig, clock: Callable[[], float] = time.monotonic) -> None:
+                 cfg: SimConfig, clock: Callable[[], float] = time.monotonic,
+                 weather: SimWeather | None = None) -> None:
         if cfg.signing_secret is not None and cfg.signing_key is not None:
             raise SimulatorError("signing: a run secret (a key per vehicle) or one key, not both")
         if cfg.flavour not in FLAVOURS:
@@ -69,6 +71,7 @@ class Simulator:
         if not 0 < cfg.telemetry_hz <= cfg.rate_hz:
             raise SimulatorError("telemetry rate must be > 0 and not above the tick rate")
         self.cfg = cfg
+        self.weather = weather  # None: still air and exact positions (sim_backend.weather)
         self.dt_s = 1.0 / cfg.rate_hz
         self.params = kinematics.ModelParams.from_vehicle(vehicle)
         self.state = kinematics.FleetState.on_ground(spawn_ned_m)
@@ -160,7 +163,7 @@ class Simulator:
                 changed.append((i, ap.control()))
         if changed:
             self._write_control(changed)
-        self.state = kinematics.step(self.state, self.command, self.params, self.dt_s)
+        self.state = self._step()
         self.sim_time_s = round(self.sim_time_s + self.dt_s, 9)
         self._rows = self._build_rows()
         for i, ep in enumerate(self.endpoints):
@@ -175,6 +178,11 @@ class Simulator:
             hook(self.sim_time_s, self.state)
         self.stats.ticks += 1
         self._new_budgets()
+
+    def _step(self) -> kinematics.FleetState:
+        if self.weather is None:
+            return kinematics.step(self.state, self.command, self.params, self.dt_s)
+        return self.weather.step(self.state, self.command, self.params, self.dt_s)
 
     def _new_budgets(self) -> None:
         """A new tick: every vehicle's receive budget afresh (first the datagram the last
@@ -211,8 +219,9 @@ class Simulator:
         roll, pitch = kinematics.tilt_rad(s.acc_ned_m_s2, s.yaw_rad)
         on_ground = kinematics.landed(s).tolist()
         ms = round(self.sim_time_s * 1000.0)
+        pos = s.pos_ned_m if self.weather is None else self.weather.reported_ned(s.pos_ned_m)
         return [Row(ms, tuple(p), tuple(v), r, q, y, w, g)
-                for p, v, r, q, y, w, g in zip(s.pos_ned_m.tolist(), s.vel_ned_m_s.tolist(),
+                for p, v, r, q, y, w, g in zip(pos.tolist(), s.vel_ned_m_s.tolist(),
                                                 roll.tolist(), pitch.tolist(), s.yaw_rad.tolist(),
                                                 s.yaw_rate_rad_s.tolist(), on_ground, strict=True)]
 
@@ -315,7 +324,7 @@ class Simulator:
         self.stats.caught_up_ticks += behind
         self.stats.max_late_s = max(self.stats.max_late_s, behind * self.dt_s)
         for _ in range(behind):  # the commands in force, as a real airframe flies them
-            self.state = kinematics.step(self.state, self.command, self.params, self.dt_s)
+            self.state = self._step()
             self.sim_time_s = round(self.sim_time_s + self.dt_s, 9)
         self._rows = self._build_rows()
 

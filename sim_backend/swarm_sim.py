@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import signal
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -34,10 +35,13 @@ from agents.shell.process import (
     stop_on_signals,
 )
 from agents.shell.process_options import BusOptions, add_bus_arguments
+from agents.weather.sensing import TargetSensor
+from agents.weather.windows import WindSchedule, wind_begin_signal, wind_end_signal
 from sim_backend.kinematics import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from sim_backend.sensor_links import LinkBus, parse_sensor_link, sensor_buses
 from sim_backend.sim_values import parse_peer_hosts
+from sim_backend.weather import weather_of
 from transport.bus import Bus, Congestion
 from transport.codec import encode
 from transport.key_exprs import SwarmKeys
@@ -59,6 +63,7 @@ class SensorPublisher:
         seed: int = 0,
         late_s: Callable[[float], float] = lambda _t: 0.0,
         sensor_buses: Mapping[int, Bus | LinkBus] | None = None,
+        reported: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> None:
         self.n, self.m = scenario.n, scenario.m
         self.bus, self.keys, self.every = bus, keys, max(1, every_ticks)
@@ -83,6 +88,10 @@ class SensorPublisher:
         # state is stamped with the time it is true, not with when it was published, so a
         # late tick does not make the followers' finite-difference velocities jump.
         self.late_s = late_s
+        # [sensing] (agents.weather.sensing); None: every observer sees its targets exactly.
+        cfg = scenario.sensing
+        self.limited = None if cfg is None or cfg.is_perfect else TargetSensor(cfg)
+        self.reported = reported or (lambda pos_ned: pos_ned)  # the vehicles' GPS fixes
 
     def __call__(self, sim_time_s: float, state: FleetState) -> None:
         self.ticks += 1
@@ -101,6 +110,9 @@ class SensorPublisher:
         )
         self.truth_out.put(encode(truth))
         self._follow_membership(now)
+        if self.limited is not None:
+            self._sense(self.limited, now, state)
+            return
         noise_std = self.noise_std_m if self.noise_std_m > 0.0 else None
         for j, observers in enumerate(self.observers):
             for i in observers:
@@ -112,12 +124,30 @@ class SensorPublisher:
                 )
                 self.sensor_out[i].put(encode(msg))
 
+    def _sense(self, sensor: TargetSensor, now_s: float, state: FleetState) -> None:
+        """The limited sensor's observations: latent, missed beyond its range or by chance."""
+        true_s, pos, fixes = sensor.remember(now_s, ned_to_enu(state.pos_ned_m),
+                                             ned_to_enu(self.reported(state.pos_ned_m)))
+        std = sensor.cfg.noise_std_m or None
+        for j, observers in enumerate(self.observers):
+            for i in observers:
+                seen = sensor.observe(pos[i, :2], fixes[i, :2], pos[self.n + j, :2])
+                if seen is None:
+                    continue
+                msg = TargetObservation(
+                    self.sensor_stampers[i].header(now_s), i, j, vec2(seen), true_s, std)
+                self.sensor_out[i].put(encode(msg))
+
     def _follow_membership(self, now_s: float) -> None:
         members = self.hold.members(self.liveness.members(now_s), now_s)
         if members and members != self.members:
             self.members = members
             self.observers = list(membership(self.scenario, members).observers)
             log.info("members %s: observers %s", sorted(members), self.observers)
+
+    def sensing_counters(self) -> dict[str, int]:
+        """Observations the limited sensor did not make (none without `[sensing]`)."""
+        return {} if self.limited is None else dict(self.limited.counters)
 
     def close(self) -> None:
         self.liveness.close()
@@ -176,13 +206,15 @@ class SwarmSimOptions:
     signing_secret: str | None = None  # the run's MAVLink secret: a key per vehicle
     sensor_links: tuple[str, ...] = ()  # --sensor-link ENDPOINT=I,J (sim_backend.sensor_links)
     mav_peers: tuple[str, ...] = ()  # --mav-peers: each vehicle's agent's address
+    gust_windows: tuple[float, ...] | None = None  # --gust-window: the launcher's, in order
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SwarmSimOptions:
         return cls(BusOptions.from_namespace(args), args.rate_hz, args.telemetry_hz,
                    args.sensor_hz, args.noise_std_m, args.seed, args.base_port, args.mav_host,
                    args.send_base_port, args.signing_secret, tuple(args.sensor_link),
-                   parse_peer_hosts(args.mav_peers))
+                   parse_peer_hosts(args.mav_peers),
+                   None if args.gust_window is None else tuple(args.gust_window))
 
 
 def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> SimConfig:
@@ -200,6 +232,21 @@ def sim_config(opts: SwarmSimOptions, scenario: Scenario, tick_hz: float) -> Sim
 
 
 
+def listen_for_wind(schedule: WindSchedule | None) -> None:
+    """The launcher opens and closes the timeline's gust windows by signals
+    (deploy.launch.fault_injector); the next tick flies the new strength.  Without windows
+    a signal is logged and ignored: its default action would end the simulator."""
+    if schedule is None:
+        def ignored(*_a: object) -> None:
+            log.warning("a gust window was signalled, but this simulator was given none")
+
+        signal.signal(wind_begin_signal(), ignored)
+        signal.signal(wind_end_signal(), ignored)
+        return
+    signal.signal(wind_begin_signal(), lambda *_a: schedule.begin())
+    signal.signal(wind_end_signal(), lambda *_a: schedule.end())
+
+
 def run(opts: SwarmSimOptions) -> int:
     scenario = load_run_scenario(opts.bus)
     tick_hz = opts.rate_hz or sim_tick_hz(scenario.run.rate_hz)
@@ -208,12 +255,15 @@ def run(opts: SwarmSimOptions) -> int:
     links = [parse_sensor_link(text, scenario.n) for text in opts.sensor_links]
     with stop_on_signals() as stop, open_bus(opts.bus, scenario.network) as bus, \
             sensor_buses(links, opts.bus, scenario.network) as linked:
-        sim = Simulator(spawn_points_ned(scenario), scenario.vehicle, scenario.home, cfg)
+        spawn = spawn_points_ned(scenario)
+        weather = weather_of(scenario, len(spawn), opts.gust_windows)
+        listen_for_wind(None if weather is None else weather.schedule)
+        sim = Simulator(spawn, scenario.vehicle, scenario.home, cfg, weather=weather)
         sensor = SensorPublisher(
             scenario, bus, keys,
             sensor_every_ticks(tick_hz, opts.sensor_hz or scenario.run.rate_hz),
             opts.noise_std_m, opts.seed, late_s=lambda t: sim.boot_time_s() - t,
-            sensor_buses=linked)
+            sensor_buses=linked, reported=None if weather is None else weather.reported_ned)
         status = StatusReporter(bus, keys, "sim", 0)
         sim.on_tick.append(sensor)
 
@@ -222,7 +272,7 @@ def run(opts: SwarmSimOptions) -> int:
             return {"ticks": st.ticks, "overruns": st.overruns, "catch_ups": st.catch_ups,
                     "caught_up_ticks": st.caught_up_ticks, "resyncs": st.resyncs,
                     **dict(sim.counters), **wrong_key_senders(sim.counters, scenario.n),
-                    **sensor.liveness.counters(),
+                    **sensor.liveness.counters(), **sensor.sensing_counters(),
                     "sensing_link_dropped": sum(b.dropped for b in set(linked.values()))}
 
         def report(_t: float, _s: FleetState) -> None:
@@ -273,6 +323,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--sensor-link", action="append", default=[], metavar="ENDPOINT=I,J",
                         help="publish the observations of followers I,J (0-based) through a "
                         "session to this endpoint: another host's sensing endpoint")
+    parser.add_argument("--gust-window", type=float, action="append", default=None,
+                        metavar="STD_M_S", help="the gusts' strength in each of the timeline's "
+                        "wind windows, in time order (the launcher opens and closes them)")
     parser.add_argument("--base-port", type=int, default=14580)
     parser.add_argument("--mav-host", default="127.0.0.1", metavar="ADDR",
                         help="address the vehicles listen on (another host's agents: its "

@@ -29,6 +29,7 @@ from agents.scenario.tables import (
     parse_targets,
     parse_vehicle,
 )
+from agents.scenario.weather import parse_sensing, parse_wind
 from errors import InadmissibleError, ScenarioError
 
 DEFAULT_SCENARIO = "paper"
@@ -111,6 +112,8 @@ def build_scenario(doc: Table, default_name: str = "scenario",
         network=net,
         faults=parse_faults(doc.get("faults"), n, len(targets)),
         law=parse_law(table_of(doc, "law"), base),
+        wind=parse_wind(doc.get("wind")),
+        sensing=parse_sensing(doc.get("sensing")),
     )
     check_admissible(scenario, whole_run)
     make_law(scenario)  # the law checks its own table now, before any process starts

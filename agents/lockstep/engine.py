@@ -14,16 +14,24 @@ import itertools
 from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from agents.analysis.geometry import as_complex, as_plane
 from agents.analysis.timeseries import RunSeries
 from agents.law.sig import rate_cap
 from agents.lockstep import kernel as lockstep_kernel
 from agents.lockstep.estimator_weights import edge_fractions, observation_weights
+from agents.lockstep.sensing import held_p_tilde, sensed_targets
 from agents.scenario.model import Scenario
 from agents.scenario.target_motion import TargetMotion
+from agents.scenario.weather import WindConfig
+from agents.weather.gps import GpsNoise
+from agents.weather.gusts import WindField, steady_leak
+from agents.weather.windows import gust_std_at, wind_windows
 
 ProgressFn = Callable[[float], None]
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
 ENGINES = ("auto", "python", "numba")
 CHUNKS = 100
 
@@ -49,8 +57,12 @@ def simulate_lockstep(
     steps = round(duration_s / dt_s)
     t = np.arange(steps + 1, dtype=np.float64) * dt_s
     targets, _ = TargetMotion(scenario, horizon_s=duration_s).states(t)
-    # Observations are exact here, so p~ and its finite-difference rate are precomputed.
-    p_tilde = np.einsum("ij,kjd->kid", observation_weights(scenario.observation()), targets)
+    # Observations do not depend on the followers here (exact, or agents.lockstep.sensing),
+    # so p~ and its finite-difference rate are precomputed.
+    weights = observation_weights(scenario.observation())
+    held = sensed_targets(scenario, t, targets)  # [sensing]; None: exact observations
+    p_tilde = (np.einsum("ij,kjd->kid", weights, targets) if held is None
+               else held_p_tilde(held, weights))
     p_tilde_rate = np.zeros_like(p_tilde)
     p_tilde_rate[1:] = np.diff(p_tilde, axis=0) / dt_s
     pos = np.zeros(p_tilde.shape[:2], np.complex128)
@@ -58,13 +70,43 @@ def simulate_lockstep(
     est, cmd = np.zeros_like(pos), np.zeros_like(pos)
     args = (dt_s, substeps, *_graph_and_law(scenario, dt_s, substeps), as_complex(p_tilde),
             as_complex(p_tilde_rate), np.zeros(scenario.n, np.complex128),
-            np.zeros(scenario.n, np.complex128), pos, est, cmd)
+            np.zeros(scenario.n, np.complex128), pos, est, cmd, *lockstep_wind(scenario, t),
+            lockstep_gps(scenario, t))
     bounds = np.linspace(0, steps + 1, min(CHUNKS, steps + 1) + 1).astype(int)
     for k0, k1 in itertools.pairwise(bounds):
         lockstep_kernel.run_steps(int(k0), int(k1), compiled, *args)
         if progress is not None:
             progress(k1 / (steps + 1))
     return RunSeries(t, as_plane(pos), as_plane(est), as_plane(cmd), targets)
+
+
+def lockstep_wind(scenario: Scenario, t: FloatArray) -> tuple[ComplexArray, float]:
+    """Each step's wind per follower as x + iy, and the share of it a vehicle lets through
+    (agents.weather.gusts); no rows without `[wind]`: the loop is then as it always was.
+    The field holds the targets' rows too, as the simulator's does, so a seed draws alike."""
+    windows = wind_windows(scenario.faults)
+    wind = scenario.wind or (WindConfig() if windows else None)
+    if wind is None:
+        return np.zeros((0, scenario.n), np.complex128), 0.0
+    field = WindField(wind, scenario.n + scenario.m)
+    out = np.zeros((t.shape[0], scenario.n), np.complex128)
+    out[0] = as_complex(field.velocity()[: scenario.n])
+    for k in range(1, t.shape[0]):
+        field.std_m_s = gust_std_at(windows, float(t[k]), wind.gust_std_m_s)
+        out[k] = as_complex(field.advance(float(t[k] - t[k - 1]))[: scenario.n])
+    return out, steady_leak(wind.drag_1_s, scenario.vehicle.tau_s)
+
+
+def lockstep_gps(scenario: Scenario, t: FloatArray) -> ComplexArray:
+    """Each step's GPS error per follower as x + iy (agents.weather.gps), drawn as the
+    simulator draws it for its vehicles; no rows when the vehicles report exactly."""
+    if not scenario.vehicle.gps_noisy:
+        return np.zeros((0, scenario.n), np.complex128)
+    gps = GpsNoise(scenario.vehicle, scenario.n + scenario.m)
+    out = np.zeros((t.shape[0], scenario.n), np.complex128)
+    for k in range(1, t.shape[0]):
+        out[k] = as_complex(gps.advance(float(t[k] - t[k - 1]))[: scenario.n])
+    return out
 
 
 def _graph_and_law(scenario: Scenario, dt_s: float, substeps: int) -> tuple[object, ...]:

@@ -38,10 +38,13 @@ HAVE_NUMBA = importlib.util.find_spec("numba") is not None
 def _steps(k0: int, k1: int, dt: float, substeps: int, law: FloatArray, tails: IntArray,
            heads: IntArray, fractions: FloatArray, succ: IntArray, angles: FloatArray,
            p_tilde: ComplexArray, p_tilde_rate: ComplexArray, phi: ComplexArray,
-           psi: ComplexArray, pos: ComplexArray, est: ComplexArray, cmd: ComplexArray) -> None:
+           psi: ComplexArray, pos: ComplexArray, est: ComplexArray, cmd: ComplexArray,
+           wind: ComplexArray, leak: float, gps: ComplexArray) -> None:
     """Advance steps k0..k1-1 in place (`law`: `law_vector`; psi: the velocity stage's state,
-    zero at order 1).  Between control steps the estimator takes `substeps` steps, p~
-    moving linearly to its next sample."""
+    zero at order 1; `wind`: each step's wind per follower, of which the vehicle lets `leak`
+    through, or no rows: still air; `gps`: the error of each step's reported positions, the
+    law's view of them, or no rows: exact).  Between control steps the
+    estimator takes `substeps` steps, p~ moving linearly to its next sample."""
     n = phi.shape[0]
     r = np.zeros(n, np.complex128)
     rate, vrate, rv = np.zeros_like(r), np.zeros_like(r), np.zeros_like(r)
@@ -50,13 +53,16 @@ def _steps(k0: int, k1: int, dt: float, substeps: int, law: FloatArray, tails: I
         for i in range(n):
             r[i] = phi[i] + p_tilde[k, i]
         _rates(r, psi, p_tilde_rate[k], law, tails, heads, fractions, rate, vrate, rv)
-        _commands(k, dt, law, succ, angles, r, rate, p_tilde_rate[k], pos, cmd)
+        _commands(k, dt, law, succ, angles, r, rate, p_tilde_rate[k], pos, cmd, gps)
         est[k, :] = r
         if k + 1 < pos.shape[0]:
             for i in range(n):
                 pos[k + 1, i] = pos[k, i] + dt * cmd[k, i]
                 phi[i] += dt_e * rate[i]
                 psi[i] += dt_e * vrate[i]
+            if wind.shape[0] > 0:
+                for i in range(n):
+                    pos[k + 1, i] += dt * leak * wind[k, i]
             for j in range(1, substeps):
                 for i in range(n):
                     r[i] = phi[i] + p_tilde[k, i] + (j * dt_e) * p_tilde_rate[k + 1, i]
@@ -69,12 +75,17 @@ def _steps(k0: int, k1: int, dt: float, substeps: int, law: FloatArray, tails: I
 
 def _commands(k: int, dt: float, law: FloatArray, succ: IntArray, angles: FloatArray,
               r: ComplexArray, rate: ComplexArray, p_tilde_rate: ComplexArray,
-              pos: ComplexArray, cmd: ComplexArray) -> None:
+              pos: ComplexArray, cmd: ComplexArray, gps: ComplexArray) -> None:
     """Every follower's command at step k into cmd[k] (dr_i/dt = dPhi_i/dt + dp~_i/dt;
-    lock-step data is never old, so the successor's age is 0)."""
+    lock-step data is never old, so the successor's age is 0), from the positions as the
+    vehicles report them."""
     for i in range(r.shape[0]):
+        own, ahead = pos[k, i], pos[k, succ[i]]
+        if gps.shape[0] > 0:
+            own += gps[k, i]
+            ahead += gps[k, succ[i]]
         u, _, _ = enclosing_control(
-            pos[k, i], pos[k, succ[i]], r[i], rate[i] + p_tilde_rate[i], angles[i],
+            own, ahead, r[i], rate[i] + p_tilde_rate[i], angles[i],
             law[4], 1.0 / law[5], law[6], 1.0 / law[7], law[8], law[9], law[10], law[11],
             dt, 0.0)
         cmd[k, i] = u

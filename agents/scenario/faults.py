@@ -2,7 +2,7 @@
 
     [[faults]]
     at_s = 30.0               # experiment time (after the start word)
-    action = "kill"           # kill | pause | restart | leave | lie
+    action = "kill"           # kill | pause | restart | leave | lie | wind
     target = "follower-1"     # follower-K, target-K (1-based, as in the file) | recorder | sim
     duration_s = 2.0          # pause, lie: how long (required); restart, leave: back after
     # mode = "offset"         # lie only: offset | bound | walk | stale (agents.follower.lie)
@@ -15,6 +15,8 @@ insider within its own rights; agents.follower.lie), started and ended by a sign
 On the command line (`enclose run --fault`, and `fault` in a sweep) a fault is
 "AT_S:ACTION:TARGET[:DURATION_S[:MODE]]", e.g. "30:kill:follower-1" or
 "20:lie:follower-2:30:offset"; "none" is no fault.
+wind: a gust window in the simulator (target sim, the default): for duration_s the gusts
+have the strength gust_std_m_s (m/s) instead of `[wind]`'s ("20:wind:sim:10:2.0").
 The network faults (partition, isolate, degrade) share the table: agents.scenario.net_faults.
 """
 
@@ -28,8 +30,8 @@ from typing import Any
 from errors import ScenarioError
 from transport.network_schema import NET_FAULT_ACTIONS
 
-FAULT_ACTIONS = ("kill", "pause", "restart", "leave", "lie")
-FAULT_KEYS = ("at_s", "action", "target", "duration_s", "mode")
+FAULT_ACTIONS = ("kill", "pause", "restart", "leave", "lie", "wind")
+FAULT_KEYS = ("at_s", "action", "target", "duration_s", "mode", "gust_std_m_s")
 # What a lying follower publishes (agents.follower.lie): its estimate offset, its link sums
 # at the declared bound, a random walk on both, or its whole state frozen at the onset.
 LIE_MODES = ("offset", "bound", "walk", "stale")
@@ -43,6 +45,7 @@ class FaultSpec:
     process: str  # the launcher's (0-based) process name: follower-0 is the file's follower-1
     duration_s: float | None = None
     mode: str | None = None  # lie: one of LIE_MODES
+    gust_std_m_s: float | None = None  # wind: the gusts' strength in the window
 
 
 def is_net_action(raw: Any) -> bool:
@@ -64,14 +67,35 @@ def parse_fault_table(raw: Any, where: str, n: int, m: int) -> FaultSpec:
     action = raw.get("action")
     if action not in FAULT_ACTIONS:
         raise ScenarioError(f"{where}.action", f"must be one of {FAULT_ACTIONS}, got {action!r}")
-    process = _process(raw.get("target"), f"{where}.target", n, m)
+    process = _process(raw.get("target", "sim" if action == "wind" else None),
+                       f"{where}.target", n, m)
     duration = _seconds(raw.get("duration_s"), f"{where}.duration_s", required=False)
     if action == "pause" and duration is None:
         raise ScenarioError(f"{where}.duration_s", "a pause needs its duration")
     if action == "kill" and duration is not None:
         raise ScenarioError(f"{where}.duration_s", "a kill has no duration (see --restart)")
     mode = _lie_mode(raw, where, action, process, duration)
-    return FaultSpec(at_s, action, process, duration, mode)
+    return FaultSpec(at_s, action, process, duration, mode,
+                     _gust(raw, where, action, process, duration))
+
+
+def _gust(raw: dict[str, Any], where: str, action: str, process: str,
+          duration: float | None) -> float | None:
+    """A wind window's gust strength, checked with its target and duration; None otherwise."""
+    gust = raw.get("gust_std_m_s")
+    if action != "wind":
+        if gust is not None:
+            raise ScenarioError(f"{where}.gust_std_m_s", f"is no setting of a {action}")
+        return None
+    if process != "sim":
+        raise ScenarioError(f"{where}.target", "the wind blows in the simulator: sim")
+    if not duration:
+        raise ScenarioError(f"{where}.duration_s", "a wind window needs its duration (> 0)")
+    if isinstance(gust, bool) or not isinstance(gust, int | float) or not math.isfinite(gust):
+        raise ScenarioError(f"{where}.gust_std_m_s", f"must be a number of m/s, got {gust!r}")
+    if gust < 0:
+        raise ScenarioError(f"{where}.gust_std_m_s", f"must be >= 0, got {gust}")
+    return float(gust)
 
 
 def _lie_mode(raw: dict[str, Any], where: str, action: str, process: str,
@@ -113,7 +137,9 @@ def parse_fault_flag(text: str, n: int, m: int, where: str = "--fault") -> Fault
                              "target": parts[2]}
     if len(parts) >= 4:
         table["duration_s"] = _number(parts[3], where)
-    if len(parts) == 5:
+    if len(parts) == 5 and parts[1] == "wind":
+        table["gust_std_m_s"] = _number(parts[4], where)
+    elif len(parts) == 5:
         table["mode"] = parts[4]
     return parse_fault_table(table, where, n, m)
 

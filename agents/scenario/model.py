@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from agents.scenario.faults import FaultSpec
+from agents.scenario.weather import SensingConfig, WindConfig
 from transport.network_schema import NetworkConfig
 
 # numpy only where the lock-step engine asks for matrices: a follower process loads a
@@ -134,6 +135,15 @@ class VehicleConfig:
     max_speed_z_m_s: float = 3.0
     max_accel_m_s2: float = 20.0
     flavour: str = "px4"
+    # What the vehicle's telemetry reports of its position (agents.weather.gps): white
+    # noise plus a slow random-walk bias, seeded; 0 and 0: the true position, exactly.
+    gps_noise_std_m: float = 0.0
+    gps_bias_walk_m_s: float = 0.0
+    gps_seed: int = 0
+
+    @property
+    def gps_noisy(self) -> bool:
+        return self.gps_noise_std_m > 0.0 or self.gps_bias_walk_m_s > 0.0
 
 
 @dataclass(frozen=True)
@@ -184,6 +194,8 @@ class Scenario:
     network: NetworkConfig = field(default_factory=NetworkConfig)
     faults: tuple[FaultSpec, ...] = ()  # injected by the launcher (agents.scenario.faults)
     law: LawSpec = field(default_factory=LawSpec)  # [law]: what each follower flies
+    wind: WindConfig | None = None  # [wind] (agents.scenario.weather): None, still air
+    sensing: SensingConfig | None = None  # [sensing]: None, every target seen exactly
 
     @property
     def n(self) -> int:

@@ -33,6 +33,7 @@ from agents.scenario.model import (
     full_turn_ok,
     successor_from_order,
 )
+from agents.scenario.weather import non_negative, seed_of
 from errors import InadmissibleError, ScenarioError
 
 
@@ -196,7 +197,10 @@ def parse_vehicle(t: Table) -> VehicleConfig:
         raise ScenarioError("vehicle.flavour", f"must be 'px4' or 'ardupilot', got {flavour!r}")
     fields = ("altitude_m", "tau_s", "max_speed_xy_m_s", "max_speed_z_m_s", "max_accel_m_s2")
     vals = {k: positive(t, k, "vehicle", getattr(d, k)) for k in fields}
-    return VehicleConfig(flavour=flavour, **vals)
+    gps = {k: non_negative(t, k, "vehicle", getattr(d, k))
+           for k in ("gps_noise_std_m", "gps_bias_walk_m_s")}
+    return VehicleConfig(flavour=flavour, gps_seed=seed_of(t, "vehicle", "gps_seed"),
+                         **vals, **gps)
 
 
 def parse_home(t: Table) -> HomeConfig:

@@ -5,12 +5,18 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from agents.scenario.checks import check_estimator_order
 from agents.scenario.model import ESTIMATORS, Scenario
 from agents.scenario.net_faults import parse_net_fault_flag
 from agents.scenario.network import IMPAIRMENT_KEYS, impairment
+from agents.shell.weather_args import (
+    WeatherOptions,
+    add_weather_arguments,
+    apply_weather_arguments,
+    weather_overrides,
+)
 from errors import ScenarioError
 from transport.network_schema import AGENT_SCHEDS, LINK_PROTOCOLS, LOSS_MODELS, ZENOH_RUNTIMES
 
@@ -50,6 +56,8 @@ def add_network_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--latency-stamps", action="store_true", default=None,
                    help="stamp every sample's arrival: one-way latency per link in the "
                         "followers' status (lat_p50_us_f<j>; bench/bench_latency.py)")
+    # The weather's flags travel with the network's: to every process and sweep cell.
+    add_weather_arguments(parser)
 
 
 @dataclass(frozen=True)
@@ -66,6 +74,8 @@ class NetworkOptions:
     latency_stamps: bool = False
     net_faults: tuple[str, ...] = ()  # --net-fault texts
     os_cut: tuple[int, ...] = ()  # --os-cut: faults the OS cuts (their numbers)
+    weather: WeatherOptions = field(default_factory=WeatherOptions)  # --wind, --gust, ...
+
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> NetworkOptions:
@@ -75,7 +85,8 @@ class NetworkOptions:
                    impair_seed=getattr(args, "impair_seed", None),
                    latency_stamps=bool(getattr(args, "latency_stamps", None)),
                    net_faults=tuple(getattr(args, "net_fault", None) or ()),
-                   os_cut=_numbers(getattr(args, "os_cut", None)))
+                   os_cut=_numbers(getattr(args, "os_cut", None)),
+                   weather=WeatherOptions.from_namespace(args))
 
 
 def _numbers(text: str | None) -> tuple[int, ...]:
@@ -102,11 +113,13 @@ def network_overrides(opts: NetworkOptions) -> list[str]:
         argv += ["--net-fault", text]
     if opts.os_cut:
         argv += ["--os-cut", ",".join(str(k) for k in opts.os_cut)]
+    argv += weather_overrides(opts.weather)
     return argv + (["--latency-stamps"] if opts.latency_stamps else [])
 
 
 def apply_network_arguments(scenario: Scenario, opts: NetworkOptions) -> Scenario:
     """`scenario` with the flags applied to its network (and to every per-link override)."""
+    scenario = apply_weather_arguments(scenario, opts.weather)
     given = dict(opts.impairment)
     net = scenario.network
     if given:

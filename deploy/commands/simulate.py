@@ -21,6 +21,11 @@ from agents.lockstep.any_law import simulate_law
 from agents.lockstep.engine import ENGINES, simulate_lockstep
 from agents.scenario.model import Scenario
 from agents.shell.law_args import LawOptions, add_law_arguments, apply_law_arguments
+from agents.shell.weather_args import (
+    WeatherOptions,
+    add_weather_arguments,
+    apply_weather_arguments,
+)
 from deploy.launch.launch_options import add_figures_argument
 from deploy.report.run_report import write_run_outputs
 from deploy.report.rundir import RunInfo
@@ -68,6 +73,7 @@ def register(sub: Any) -> None:
     add_figures_argument(parser)
     add_json_argument(parser)
     add_law_arguments(parser)
+    add_weather_arguments(parser)
     parser.set_defaults(func=_main)
 
 
@@ -105,13 +111,14 @@ class SimulateOptions:
     law: LawOptions = field(default_factory=LawOptions)  # --law, --law-param
     through_interface: bool = False  # the paper's law through the interface too
     figures: bool = True
+    weather: WeatherOptions = field(default_factory=WeatherOptions)  # --wind, --gust, ...
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> SimulateOptions:
         return cls(args.scenario, args.dt, args.duration, args.out, args.engine,
                    args.estimator_dt, not args.no_progress, args.json,
                    LawOptions.from_namespace(args), args.through_interface,
-                   not args.no_figures)
+                   not args.no_figures, WeatherOptions.from_namespace(args))
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -120,6 +127,7 @@ def _main(args: argparse.Namespace) -> int:
 
 def simulate(opts: SimulateOptions) -> int:
     scenario = apply_law_arguments(load_scenario(opts.scenario), opts.law)
+    scenario = apply_weather_arguments(scenario, opts.weather)
     dt = scenario.run.dt_s if opts.dt_s is None else opts.dt_s
     duration = scenario.run.duration_s if opts.duration_s is None else opts.duration_s
     if not 0.0 < dt < duration:

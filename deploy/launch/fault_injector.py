@@ -17,6 +17,7 @@ from typing import Any
 
 from agents.follower.lie import begin_signal, end_signal
 from agents.scenario.faults import FaultSpec
+from agents.weather.windows import wind_begin_signal, wind_end_signal
 from deploy.procs.supervisor import Child, Supervisor
 
 log = logging.getLogger("enclose.run")
@@ -64,6 +65,9 @@ class FaultRunner:
             self._signal(child, signal.SIGCONT)
             self.paused.discard(name)
             self._event(t, name, "resumed")
+        elif what == "calm":
+            self._signal(child, wind_end_signal())
+            self._event(t, name, "gust window ended")
         elif what == "truth":
             self._signal(child, end_signal())
             self._event(t, name, "lie ended")
@@ -80,6 +84,8 @@ class FaultRunner:
 
     def _inject(self, child: Child, fault: FaultSpec, t: float) -> None:
         mode = {} if fault.mode is None else {"mode": fault.mode}
+        if fault.gust_std_m_s is not None:
+            mode["gust_std_m_s"] = str(fault.gust_std_m_s)
         self._event(t, child.name, "fault", action=fault.action, duration_s=fault.duration_s,
                     pid=child.pid, **mode)
         if child.poll() is not None:
@@ -90,6 +96,9 @@ class FaultRunner:
         elif fault.action == "lie":  # the process lies itself (agents.follower.lie)
             self._signal(child, begin_signal(fault.mode or ""))
             self._todo.append((t + (fault.duration_s or 0.0), "truth", child.name, fault))
+        elif fault.action == "wind":  # the simulator changes its gusts (agents.weather)
+            self._signal(child, wind_begin_signal())
+            self._todo.append((t + (fault.duration_s or 0.0), "calm", child.name, fault))
         elif fault.action == "pause":
             self._signal(child, signal.SIGSTOP)
             self.paused.add(child.name)

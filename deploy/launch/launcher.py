@@ -13,11 +13,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from agents.scenario.faults import parse_fault_flag
+from agents.scenario.faults import FaultSpec, parse_fault_flag
 from agents.scenario.model import Scenario
 from agents.shell.law_args import law_overrides
 from agents.shell.network_args import network_overrides
 from agents.shell.phases import mark
+from agents.weather.windows import window_strengths
 from deploy.json_files import write_json_atomic
 from deploy.launch.fault_injector import FaultRunner
 from deploy.launch.launch_end import exit_code, launch_report, stop_in_order
@@ -45,6 +46,12 @@ START_DELAY_S = 1.0
 PROGRESS_PERIOD_S = 2.0
 START_REPEAT_S = 1.0  # the start word again, for processes (re)started after it
 STARTUP_RESTARTS = 2  # per process before the start: a third death there is not bad luck
+
+
+def gust_window_argv(faults: tuple[FaultSpec, ...]) -> list[str]:
+    """The simulator's --gust-window flags: the strengths of the wind windows the fault
+    injector will open (the scenario's and --fault's), in time order."""
+    return [arg for s in window_strengths(faults) for arg in ("--gust-window", repr(s))]
 
 
 class Launch:
@@ -104,7 +111,8 @@ class Launch:
             "sim", "sim_backend.swarm_sim",
             [*c, "--listen", self.endpoint, "--base-port", str(self.vehicle_base),
              "--send-base-port", str(self.adapter_base),
-             "--noise-std-m", str(self.opts.noise_std_m), *self.secrets.args_for("sim")],
+             "--noise-std-m", str(self.opts.noise_std_m), *self.secrets.args_for("sim"),
+             *gust_window_argv(self.faults)],
             fork=True,
         )
         joins = [*c, "--connect", self.endpoint]

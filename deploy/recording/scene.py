@@ -38,6 +38,8 @@ TOO_CLOSE_RGBA = (0.95, 0.05, 0.05, 1.0)
 TARGET_RGBA = (1.00, 0.45, 0.10, 1.0)
 ESTIMATE_RGBA = (0.60, 0.30, 0.90, 0.9)
 CIRCLE_RGBA = (0.60, 0.60, 0.60, 0.8)
+WIND_RGBA = (0.30, 0.80, 0.90, 0.9)
+WIND_ARROW_M_PER_M_S = 2.0  # the wind arrow's length per m/s of mean wind
 HEALTH_RGBA = {
     "good": (0.10, 0.80, 0.20, 1.0),
     "degraded": (1.00, 0.75, 0.00, 1.0),
@@ -156,11 +158,28 @@ def _links(truth: TruthSnapshot, links: Sequence[LinkView],
     return _entity("links", stamp, lines=[line] if points else [])
 
 
+def wind_arrow(wind_m_s: tuple[float, float], cx: float, cy: float, rho_m: float,
+               z: float, stamp: fm.Timestamp) -> fm.SceneEntity:
+    """The mean wind as an arrow outside the circle, pointing where the air goes."""
+    speed = math.hypot(*wind_m_s)
+    yaw = math.atan2(wind_m_s[1], wind_m_s[0])
+    x, y = cx - rho_m * 1.5, cy + rho_m * 1.5
+    pose = fm.Pose(position=fm.Vector3(x=x, y=y, z=z),
+                   orientation=fm.Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0),
+                                             w=math.cos(yaw / 2.0)))
+    arrow = fm.ArrowPrimitive(pose=pose, shaft_length=WIND_ARROW_M_PER_M_S * speed,
+                              shaft_diameter=0.3, head_length=1.0, head_diameter=0.8,
+                              color=_color(WIND_RGBA))
+    return _entity("wind", stamp, arrows=[arrow],
+                   texts=[_label(f"wind {speed:.3g} m/s", x, y, z)])
+
+
 def scene_update(truth: TruthSnapshot, states: Mapping[int, FollowerState],
                  links: Sequence[LinkView], rho_d_m: float,
-                 close: frozenset[int] = frozenset()) -> fm.SceneUpdate:
+                 close: frozenset[int] = frozenset(),
+                 wind_m_s: tuple[float, float] | None = None) -> fm.SceneUpdate:
     """The whole scene at the truth's instant (its sender stamp); `close`: the vehicles
-    drawn red (too_close)."""
+    drawn red (too_close); `wind_m_s`: the scenario's mean wind, drawn as an arrow."""
     stamp = timestamp(truth.header.stamp_s)
     cx, cy = centre_m(truth)
     zs = [p[2] for p in truth.follower_pos_m]
@@ -177,4 +196,6 @@ def scene_update(truth: TruthSnapshot, states: Mapping[int, FollowerState],
         _entity("circle", stamp, lines=[circle]),
         _links(truth, links, stamp),
     ]
+    if wind_m_s is not None:
+        entities.append(wind_arrow(wind_m_s, cx, cy, rho_d_m, altitude_m, stamp))
     return fm.SceneUpdate(entities=entities)

@@ -184,7 +184,8 @@ class LiveView:
                       f"({self.info.safety_distance_m:g} m)", fm.LogLevel.Error, recv_s,
                       "safety")
         self._too_close = bool(pairs)
-        scene = scene_update(truth, self.states, drawn, self.info.rho_d_m, close)
+        scene = scene_update(truth, self.states, drawn, self.info.rho_d_m, close,
+                             self.info.wind_m_s)
         out.append(ViewFrame(SCENE_TOPIC, SCHEMAS[SCENE_TOPIC], scene.encode(), log_ns))
         errors = errors_now(truth, self.states, self.info)
         if errors is not None:

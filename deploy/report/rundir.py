@@ -15,6 +15,7 @@ import numpy as np
 from agents.analysis.metrics import ErrorSeries, Metrics
 from agents.analysis.timeseries import FloatArray, RunSeries, decimated_rows
 from agents.scenario.model import Scenario
+from deploy.report.weather import weather_text
 from deploy.version import enclose_version
 from errors import EncloseError
 
@@ -42,6 +43,8 @@ class RunInfo:
     safety_distance_m: float = 1.0
     # The network faults: (label, at_s, end_s) in experiment time (transport.network_schema)
     net_faults: tuple[tuple[str, float, float], ...] = ()
+    weather: str = ""  # the wind, GPS noise and sensor (deploy.report.weather); "": none
+    wind_m_s: tuple[float, float] | None = None  # the mean wind, for the live view's arrow
 
     @staticmethod
     def from_scenario(scenario: Scenario, kind: str, duration_s: float) -> RunInfo:
@@ -60,6 +63,8 @@ class RunInfo:
             law=scenario.law.ref,
             safety_distance_m=scenario.run.safety_distance_m,
             net_faults=tuple((f.label(), f.at_s, f.end_s) for f in scenario.network.faults),
+            weather=weather_text(scenario),
+            wind_m_s=None if scenario.wind is None else scenario.wind.mean_m_s,
         )
 
 
@@ -196,7 +201,10 @@ def write_metrics(run_dir: Path, metrics: Metrics, info: RunInfo, extra: dict[st
         for k, v in payload.items()
     }
     (run_dir / METRICS_FILE).write_text(json.dumps(clean, indent=2) + "\n")
-    (run_dir / RUN_FILE).write_text(json.dumps(info.__dict__, indent=2) + "\n")
+    # Without weather run.json is what it was before the weather existed.
+    fields = {k: v for k, v in info.__dict__.items()
+              if k not in ("weather", "wind_m_s") or v}
+    (run_dir / RUN_FILE).write_text(json.dumps(fields, indent=2) + "\n")
 
 
 def read_info(run_dir: Path) -> RunInfo:
@@ -207,6 +215,9 @@ def read_info(run_dir: Path) -> RunInfo:
         raw["angles_rad"] = tuple(raw["angles_rad"])
         raw["net_faults"] = tuple((str(a), float(b), float(c))
                                   for a, b, c in raw.get("net_faults", ()))
+        if raw.get("wind_m_s") is not None:
+            x, y = raw["wind_m_s"]
+            raw["wind_m_s"] = (float(x), float(y))
         return RunInfo(**raw)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise EncloseError(f"{path} is missing or malformed: {exc}") from exc

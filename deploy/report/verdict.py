@@ -21,6 +21,7 @@ from deploy.json_files import read_json
 from deploy.report.cpu_load import load_line, memory_line, overrun_line
 from deploy.report.liars import liar_lines
 from deploy.report.refusals import launch_refusals, refusal_text
+from deploy.report.weather import weather_lines
 
 # metrics.json key -> (label, unit, run.json key of its bound)
 BOUNDED = (
@@ -80,6 +81,7 @@ class Verdict:
     law: str | None = None  # the followers' law and how often it failed in flight
     network: tuple[str, ...] = ()  # each network fault: its window, recovery, closest approach
     liars: tuple[str, ...] = ()  # followers refused as implausible (deploy.report.liars)
+    weather: tuple[str, ...] = ()  # wind, GPS noise, sensing and its misses (deploy.report.weather)
 
     @property
     def inside(self) -> bool:
@@ -206,6 +208,7 @@ def read_verdict(run_dir: Path, title: str, note: str = "") -> Verdict:
         bool(launch), load_line(load), overrun_line(ticks), memory_line(load),
         silent_followers(metrics), recording_line(metrics), launch_refusals(launch),
         law_line(info, metrics, launch), network_lines(metrics), liar_lines(launch),
+        weather_lines(info, launch),
     )
 
 
@@ -240,6 +243,7 @@ def verdict_json(v: Verdict) -> dict[str, Any]:
         "law": v.law,
         "network": list(v.network),
         "liars": list(v.liars),
+        "weather": list(v.weather),
         "run_dir": str(v.run_dir),
     }}
 
@@ -274,6 +278,7 @@ def print_verdict(console: Console, v: Verdict) -> None:
     rows += [("law", v.law)] if v.law else []
     rows += [("network", line) for line in v.network]
     rows += [("liars", line) for line in v.liars]
+    rows += [("weather", line) for line in v.weather]
     if v.silent:
         n = len(v.metrics.get("followers") or {}) or None
         rows.append(("silent", silent_text(v.silent, n)))

@@ -17,12 +17,14 @@ from agents.scenario.network import IMPAIRMENT_KEYS, choice, impairment
 from deploy.procs.restarts import RESTART_POLICIES
 from deploy.sweep.laws import check_laws, is_law_key, law_flags, law_keys, law_value
 from deploy.sweep.values import Value, format_value
+from deploy.sweep.weather_axes import WEATHER_KEYS, weather_value
 from errors import ConfigError, ScenarioError
 from transport.network_schema import LINK_PROTOCOLS, LinkImpairment
 
 # The network flags of `enclose run`, as sweep keys (--impair-seed comes from seed0 + repeat).
 # `fault` ("AT_S:ACTION:TARGET[:DURATION_S]" or "none") and `restart` sweep like them.
-AXIS_KEYS: tuple[str, ...] = ("estimator", "link", *IMPAIRMENT_KEYS, "fault", "restart", "law")
+AXIS_KEYS: tuple[str, ...] = ("estimator", "link", *IMPAIRMENT_KEYS, "fault", "restart", "law",
+                              *WEATHER_KEYS)
 TOP_KEYS = ("scenario", "duration_s", "out", "repeats", "seed0", "grid", "fixed", "heatmap")
 
 
@@ -238,6 +240,8 @@ def _value(key: str, raw: Any, where: str) -> Value:
             return str(raw)
         if is_law_key(key):
             return law_value(key, raw, where)
+        if key in WEATHER_KEYS:
+            return weather_value(key, raw, where)
         checked = impairment({key: raw}, "x", LinkImpairment())
     except ScenarioError as exc:
         raise ConfigError(where, exc.reason) from exc

@@ -1,0 +1,42 @@
+"""Lock-step's limited sensor (`[sensing]`): the same `TargetSensor` as the simulator's, in
+the same draw order (target by target, each target's observers in turn), so a seed misses
+the same share.  A missed observation holds the follower's last one of that target, as a
+follower holds a lost message.  Range is not modelled here: lock-step computes the
+followers' positions inside its loop, after the observations are drawn."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.scenario.model import Scenario
+from agents.weather.sensing import TargetSensor
+
+FloatArray = NDArray[np.float64]
+
+
+def sensed_targets(scenario: Scenario, t: FloatArray,
+                   targets: FloatArray) -> FloatArray | None:
+    """(k, n, m, 2): what each follower holds of each target at each step (NaN for a target
+    it does not observe); None without a limited sensor (exact observations)."""
+    cfg = scenario.sensing
+    if cfg is None or cfg.is_perfect:
+        return None
+    sensor = TargetSensor(cfg)
+    held = np.full((t.shape[0], scenario.n, scenario.m, 2), np.nan)
+    last = np.full((scenario.n, scenario.m, 2), np.nan)
+    zero = np.zeros(2)
+    for k in range(t.shape[0]):
+        _, seen_now, _ = sensor.remember(float(t[k]), targets[k], targets[k])
+        for j, spec in enumerate(scenario.targets):
+            for i in spec.observed_by:
+                seen = sensor.observe(zero, zero, seen_now[j])
+                if seen is not None or np.isnan(last[i, j, 0]):
+                    last[i, j] = seen_now[j] if seen is None else seen
+        held[k] = last
+    return held
+
+
+def held_p_tilde(held: FloatArray, weights: FloatArray) -> FloatArray:
+    """(k, n, 2) p~ from what each follower holds: W @ held over its observed targets."""
+    return np.einsum("ij,kijd->kid", weights, np.nan_to_num(held))
