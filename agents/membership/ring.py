@@ -28,6 +28,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from agents.membership.graph_weights import edge_fraction, observation_weight
 from agents.scenario.model import Scenario
 
 # numpy only for the lock-step engine's matrices: the follower process forms its ring
@@ -56,14 +57,13 @@ class Membership:
                                                                      if b == i}))
 
     def edge_fraction(self, i: int, j: int) -> float:
-        """agents.lockstep.estimator_weights.edge_fractions of the edge i -> j:
-        1 / max(deg_i, deg_j)."""
-        return 1.0 / max(len(self.neighbours(i)), len(self.neighbours(j)))
+        """The edge i -> j's graph_weights.edge_fraction."""
+        return edge_fraction(len(self.neighbours(i)), len(self.neighbours(j)))
 
     def weight_row(self, i: int) -> tuple[float, ...]:
         """Follower i's row of W (m,): p~_i = row @ targets, over the members only."""
-        m = len(self.observers)
-        return tuple(len(self.members) / m / len(obs) if i in obs else 0.0
+        n, m = len(self.members), len(self.observers)
+        return tuple(observation_weight(n, m, len(obs)) if i in obs else 0.0
                      for obs in self.observers)
 
     def adjacency(self) -> FloatArray:
