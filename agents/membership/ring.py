@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from agents.membership.graph_weights import edge_fraction, observation_weight
-from agents.scenario.model import Scenario
+from agents.scenario.model import Scenario, adjacency_matrix
 
 # numpy only for the lock-step engine's matrices: the follower process forms its ring
 # from `weight_row` and `edge_fraction` and must not import numpy (issue 15).
@@ -68,12 +68,7 @@ class Membership:
 
     def adjacency(self) -> FloatArray:
         """(n_total, n_total) 0/1 adjacency; rows of absent followers are zero."""
-        import numpy as np
-
-        adj = np.zeros((self.n_total, self.n_total))
-        for a, b in self.edges:
-            adj[a, b] = adj[b, a] = 1.0
-        return adj
+        return adjacency_matrix(self.n_total, self.edges)
 
     def weights(self) -> FloatArray:
         """(n_total, m) W with p~_i = W[i] @ targets, over the members only."""
