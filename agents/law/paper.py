@@ -30,7 +30,7 @@ from agents.law.carry import REBASE_TAU_S, next_carry
 from agents.law.consensus import EstimatorParams, link_balance
 from agents.law.enclosing import ControlGains
 from agents.law.interface import FieldSpec, Inputs, Law, Output, Peer, Setup, reference
-from agents.law.paper_wiring import command, estimator_flow, gains_of
+from agents.law.paper_wiring import command, estimator_flows, gains_of
 from agents.law.scenario_params import control_gains, estimator_params
 from agents.law.velocity_stage import fed_flow, lap_velocity
 from errors import ScenarioError
@@ -162,8 +162,7 @@ class PaperLaw(Law[PaperState]):
             phi = state.phi_m + dt * state.phi_rate_m_s
         carry = next_carry(state.carry_m, phi + p_tilde, inputs.rebase_to, dt)
         gains, r_own = state.derived.gains, phi + p_tilde + carry
-        flows = [estimator_flow(r_own, r_j, gains, f)
-                 for r_j, f in zip(r_nbrs, fractions, strict=False)]
+        flows = estimator_flows(r_own, r_nbrs, fractions, gains)
         if not all(live):
             flows = [f if ok else 0j for f, ok in zip(flows, live, strict=False)]
         vel_sums, vel_rates, rv = state.vel_sums_m_s, state.vel_rates_m_s2, state.rv_m_s
@@ -202,9 +201,8 @@ class PaperLaw(Law[PaperState]):
                 theirs.append(value + rate * (min(now_s, stamp + hold) - stamp))
             rv_nbrs.append(fields.get("rv_m_s"))
         rv = lap_velocity(link_balance(sums, theirs), p_tilde_rate)
-        gains = state.derived.gains
-        flows = [estimator_flow(rv, rv if v is None else v, gains, f)
-                 for v, f in zip(rv_nbrs, fractions, strict=False)]
+        flows = estimator_flows(rv, [rv if v is None else v for v in rv_nbrs], fractions,
+                                state.derived.gains)
         return sums, tuple([f if ok else 0j for f, ok in zip(flows, live, strict=False)]), rv
 
     def _command(self, state: PaperState, inputs: Inputs, r: complex, dr: complex) -> complex:
