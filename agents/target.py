@@ -17,6 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from agents.mavlink.adapter import MavlinkAdapter
+from agents.mavlink.vehicle import Vehicle
 from agents.scenario.model import Scenario
 from agents.scenario.target_motion import TargetMotion
 from agents.shell.process import StatusReporter, load_run_scenario, process_main
@@ -62,7 +63,7 @@ def reference(
 
 class TargetNode:
     def __init__(
-        self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter, swarm: str
+        self, scenario: Scenario, index: int, bus: Bus, vehicle: Vehicle, swarm: str
     ) -> None:
         self.index, self.bus, self.vehicle = index, bus, vehicle
         self.motion = TargetMotion(scenario, horizon_s=scenario.run.duration_s + 60.0)

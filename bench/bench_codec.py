@@ -5,12 +5,16 @@
 For FollowerState (a robust ring follower: the paper law's link sums and rates on 2
 links; "FollowerState rv": the same with the second-order estimator's rv_m_s and
 velocity-stage sums and rates),
-TargetObservation and TruthSnapshot (16 followers, 2 targets), prints the time per call of
+TargetObservation and TruthSnapshot (16 followers, 2 targets), and the low-rate
+ProcessStatus (1 Hz per process), ClockProbe (4 Hz per host) and RunControl (twice a run),
+prints the time per call of
 - `encode(msg)`;
 - `decode(payload)`;
 - the whole receive path: `encode(msg)` plus `LinkDecoder(limits=DEFAULT_LIMITS,
   senders=...).decode()` of a `Received` on the message's key (codec, key checks, clock mapping,
-  plausibility checks, sequence tracking, per-link tally), as a follower/recorder runs it.
+  plausibility checks, sequence tracking, per-link tally), as a follower/recorder runs it;
+- `encode_reference` and `decode_reference`: the schema walk alone, what a message without
+  a fast twin (transport.codec_fast.TWINS) costs, so that a twin is kept only where it pays.
 Each figure is the best of `repeats` runs of `calls` calls, in CPU time of this process
 (process_time: other processes on the machine disturb it less than wall time), the least
 disturbed by other load on the machine; the load average is printed with them.
@@ -27,21 +31,24 @@ from collections.abc import Callable
 
 from transport.access import sender_ids
 from transport.bus import Received
-from transport.codec import decode, encode
+from transport.codec import decode, decode_reference, encode, encode_reference
 from transport.key_exprs import SwarmKeys
 from transport.link_stats import LinkDecoder
 from transport.message_checks import DEFAULT_LIMITS
 from transport.messages import (
+    ClockProbe,
     FollowerState,
     Header,
     Message,
+    ProcessStatus,
+    RunControl,
     TargetObservation,
     TruthSnapshot,
 )
 
 KEYS = SwarmKeys("bench")
 N_FOLLOWERS = 16
-SENDERS = sender_ids(N_FOLLOWERS, 2)  # as every process decodes: the scenario's senders only
+SENDERS = sender_ids(N_FOLLOWERS, 2, 2)  # as every process decodes: the scenario's senders only
 
 
 def follower_state(seq: int, now_s: float) -> FollowerState:
@@ -72,11 +79,29 @@ def truth_snapshot(seq: int, now_s: float) -> TruthSnapshot:
                          ((1.0, 2.0), (3.0, 4.0)), ((0.1, 0.0), (0.0, 0.1)))
 
 
+def process_status(seq: int, now_s: float) -> ProcessStatus:
+    counters = {f"counter_{k}": k for k in range(24)}  # a follower's status, about its size
+    return ProcessStatus(Header("follower-3", seq, now_s - 0.002), "follower", 3, "running",
+                         counters, "")
+
+
+def clock_probe(seq: int, now_s: float) -> ClockProbe:
+    echoes = tuple((f"router-{k}", now_s - 0.01 * k, now_s - 0.005 * k) for k in range(3))
+    return ClockProbe(Header("router-0", seq, now_s - 0.002), now_s - 100.0, echoes)
+
+
+def run_control(seq: int, now_s: float) -> RunControl:
+    return RunControl(Header("launcher-0", seq, now_s - 0.002), "start", now_s + 2.0, 60.0)
+
+
 CASES: dict[str, tuple[Callable[[int, float], Message], str]] = {
     "FollowerState": (follower_state, KEYS.follower_state(3)),
     "FollowerState rv": (follower_state_rv, KEYS.follower_state(3)),
     "TargetObservation": (target_observation, KEYS.sensor_targets(3)),
     "TruthSnapshot": (truth_snapshot, KEYS.truth()),
+    "ProcessStatus": (process_status, KEYS.status("follower", 3)),
+    "ClockProbe": (clock_probe, KEYS.clock("router", 0)),
+    "RunControl": (run_control, KEYS.control()),
 }
 
 
@@ -111,9 +136,19 @@ def measure(make: Callable[[int, float], Message], key: str, calls: int,
             if dec.decode(Received(key, encode(m), now_s)) is None:
                 raise AssertionError(f"dropped: {dec.dropped}")
 
+    def run_encode_reference() -> None:
+        for m in msgs:
+            encode_reference(m)
+
+    def run_decode_reference() -> None:
+        for p in payloads:
+            decode_reference(p)
+
     return {"encode": best_us(run_encode, calls, repeats),
             "decode": best_us(run_decode, calls, repeats),
-            "receive": best_us(run_receive, calls, repeats)}
+            "receive": best_us(run_receive, calls, repeats),
+            "encode_ref": best_us(run_encode_reference, calls, repeats),
+            "decode_ref": best_us(run_decode_reference, calls, repeats)}
 
 
 def main() -> int:
@@ -123,10 +158,12 @@ def main() -> int:
     args = ap.parse_args()
     print(f"load average (1 min) {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "
           f"best of {args.repeats} x {args.calls} calls")
-    print(f"{'message':<18} {'encode µs':>10} {'decode µs':>10} {'receive µs':>11}")
+    print(f"{'message':<18} {'encode µs':>10} {'decode µs':>10} {'receive µs':>11}"
+          f" {'walk enc µs':>12} {'walk dec µs':>12}")
     for name, (make, key) in CASES.items():
         r = measure(make, key, args.calls, args.repeats)
-        print(f"{name:<18} {r['encode']:>10.2f} {r['decode']:>10.2f} {r['receive']:>11.2f}")
+        print(f"{name:<18} {r['encode']:>10.2f} {r['decode']:>10.2f} {r['receive']:>11.2f}"
+              f" {r['encode_ref']:>12.2f} {r['decode_ref']:>12.2f}")
     return 0
 
 

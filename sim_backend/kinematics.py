@@ -24,14 +24,17 @@ GRAVITY_M_S2 = 9.80665
 LANDED_EPS_M = 0.02
 
 
+_VEHICLE = VehicleConfig()  # the limits' defaults are the scenario's, written there once
+
+
 @dataclass(frozen=True)
 class ModelParams:
     """Limits and loop constants of the kinematic model."""
 
-    tau_s: float = 0.05
-    max_speed_xy_m_s: float = 12.0
-    max_speed_z_m_s: float = 3.0
-    max_accel_m_s2: float = 20.0
+    tau_s: float = _VEHICLE.tau_s
+    max_speed_xy_m_s: float = _VEHICLE.max_speed_xy_m_s
+    max_speed_z_m_s: float = _VEHICLE.max_speed_z_m_s
+    max_accel_m_s2: float = _VEHICLE.max_accel_m_s2
     pos_gain_1_s: float = 2.0
     land_speed_m_s: float = 0.7
     tau_yaw_s: float = 0.2

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import math
 import struct
-from typing import NamedTuple
+from collections.abc import Callable
+from operator import itemgetter
+from typing import Any, NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -15,7 +17,7 @@ from agents.mavlink.modes import (
     autopilot_of_flavour,
     encode_custom_mode,
 )
-from agents.mavlink.wire import encode, encode_fields, encode_payload
+from agents.mavlink.wire import encode_fields, encode_payload
 from agents.scenario.model import HomeConfig
 
 MSG_HEARTBEAT = 0
@@ -74,14 +76,6 @@ def local_of_geodetic(home: HomeConfig, lat_deg: float, lon_deg: float) -> tuple
     return north_m, math.radians(lon_deg - home.lon_deg) * east_radius_m
 
 
-def heartbeat(mav: mavlink2.MAVLink, flavour: str, mode: str,
-              armed: bool) -> mavlink2.MAVLink_message:
-    base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-    return mav.heartbeat_encode(MAV_TYPE_QUADROTOR, autopilot_of_flavour(flavour), base,
-                                encode_custom_mode(flavour, mode),
-                                MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY)
-
-
 def landed_state(row: Row, mode: str, armed: bool) -> int:
     if row.landed:
         return LANDED_ON_GROUND
@@ -118,94 +112,122 @@ def fast_bytes(mav: mavlink2.MAVLink, msg_id: int, row: Row, home: HomeConfig) -
                          round(-row.pos[2] * 1000.0), *vel_cm, hdg)
 
 
-def home_position(mav: mavlink2.MAVLink, row: Row, home: HomeConfig,
-                  home_ned_m: tuple[float, float, float]) -> mavlink2.MAVLink_message:
-    lat, lon = geodetic(home, home_ned_m[0], home_ned_m[1])
-    alt_mm = round((home.alt_m - home_ned_m[2]) * 1000.0)
-    return mav.home_position_encode(lat, lon, alt_mm, *home_ned_m, [1.0, 0.0, 0.0, 0.0],
-                                    0.0, 0.0, 0.0, row.time_boot_ms * 1000)
+class Layout:
+    """How a message class's declaration-order fields become its struct's arguments: the
+    missing extension fields' zeros, the wire order, arrays flattened.  Derived from the
+    class once, so that the bytes are packed without a message object (several times
+    faster) from the same description the object is built from."""
+
+    def __init__(self, cls: type[mavlink2.MAVLink_message]) -> None:
+        self.cls, self.msg_id, self.crc_extra = cls, cls.id, cls.crc_extra
+        self.pack = cls.unpacker.pack
+        length = dict(zip(cls.ordered_fieldnames, cls.array_lengths, strict=True))
+        self.zeros = tuple([0] * length[name] if length[name] else 0
+                           for name in cls.fieldnames)
+        self.order = itemgetter(*(cls.fieldnames.index(name)
+                                  for name in cls.ordered_fieldnames))
+        # A message without arrays, described in full, is one reorder from its struct.
+        self.payload: Callable[[tuple[Any, ...]], bytes] = (
+            self._flat if any(cls.array_lengths) else self._plain)
+
+    def full(self, values: tuple[Any, ...]) -> tuple[Any, ...]:
+        return values if len(values) == len(self.zeros) else values + self.zeros[len(values):]
+
+    def _plain(self, values: tuple[Any, ...]) -> bytes:
+        payload: bytes = self.pack(*self.order(self.full(values)))
+        return payload
+
+    def _flat(self, values: tuple[Any, ...]) -> bytes:
+        ordered = self.order(self.full(values))
+        payload: bytes = self.pack(*(x for v in ordered
+                                     for x in (v if isinstance(v, list) else (v,))))
+        return payload
 
 
-def _gps_raw_int(mav: mavlink2.MAVLink, row: Row, home: HomeConfig) -> mavlink2.MAVLink_message:
-    lat, lon = geodetic(home, row.pos[0], row.pos[1])
-    speed_cm_s = min(65534, round(math.hypot(row.vel[0], row.vel[1]) * 100.0))
-    course = round(math.degrees(math.atan2(row.vel[1], row.vel[0])) * 100.0) % 36000
-    # 3D fix, HDOP/VDOP 0.8, 12 satellites: what a healthy SITL GPS reports.
-    return mav.gps_raw_int_encode(row.time_boot_ms * 1000, 3, lat, lon,
-                                  round((home.alt_m - row.pos[2]) * 1000.0), 80, 80,
-                                  speed_cm_s, course, 12)
+HEARTBEAT = Layout(mavlink2.MAVLink_heartbeat_message)
+SYS_STATUS = Layout(mavlink2.MAVLink_sys_status_message)
+EXTENDED_SYS_STATE = Layout(mavlink2.MAVLink_extended_sys_state_message)
+GPS_RAW_INT = Layout(mavlink2.MAVLink_gps_raw_int_message)
+VFR_HUD = Layout(mavlink2.MAVLink_vfr_hud_message)
+HOME_POSITION = Layout(mavlink2.MAVLink_home_position_message)
+BATTERY_STATUS = Layout(mavlink2.MAVLink_battery_status_message)
+AUTOPILOT_VERSION = Layout(mavlink2.MAVLink_autopilot_version_message)
+Fields = tuple[Layout, tuple[Any, ...]]
 
 
-def _vfr_hud(mav: mavlink2.MAVLink, row: Row, home: HomeConfig,
-             armed: bool) -> mavlink2.MAVLink_message:
-    speed = math.hypot(row.vel[0], row.vel[1])
-    heading = round(math.degrees(row.yaw)) % 360
-    return mav.vfr_hud_encode(speed, speed, heading, 50 if armed else 0,
-                              home.alt_m - row.pos[2], -row.vel[2])
+def status_fields(msg_id: int, row: Row, home: HomeConfig, flavour: str, mode: str,
+                  armed: bool, sysid: int, home_ned_m: tuple[float, float, float],
+                  ) -> Fields | None:
+    """The one description of the low-rate messages: a message's layout and its fields in
+    declaration order (as its `*_encode` takes them; extension fields left off are 0), or
+    None for an id this module does not produce."""
+    if msg_id == MSG_HEARTBEAT:
+        base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+        return HEARTBEAT, (MAV_TYPE_QUADROTOR, autopilot_of_flavour(flavour), base,
+                           encode_custom_mode(flavour, mode),
+                           MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY, 3)
+    if msg_id == MSG_SYS_STATUS:
+        return SYS_STATUS, (SENSORS_OK, SENSORS_OK, SENSORS_OK, 200, 16200, -1, 100, 0, 0, 0, 0,
+                            0, 0, 0, 0, 0)
+    if msg_id == MSG_EXTENDED_SYS_STATE:
+        return EXTENDED_SYS_STATE, (0, landed_state(row, mode, armed))
+    if msg_id == MSG_GPS_RAW_INT:
+        lat, lon = geodetic(home, row.pos[0], row.pos[1])
+        speed_cm_s = min(65534, round(math.hypot(row.vel[0], row.vel[1]) * 100.0))
+        course = round(math.degrees(math.atan2(row.vel[1], row.vel[0])) * 100.0) % 36000
+        # 3D fix, HDOP/VDOP 0.8, 12 satellites: what a healthy SITL GPS reports.
+        return GPS_RAW_INT, (row.time_boot_ms * 1000, 3, lat, lon,
+                             round((home.alt_m - row.pos[2]) * 1000.0), 80, 80, speed_cm_s,
+                             course, 12, 0, 0, 0, 0, 0, 0)
+    if msg_id == MSG_VFR_HUD:
+        speed = math.hypot(row.vel[0], row.vel[1])
+        return VFR_HUD, (speed, speed, round(math.degrees(row.yaw)) % 360, 50 if armed else 0,
+                         home.alt_m - row.pos[2], -row.vel[2])
+    return _rare_fields(msg_id, row, home, flavour, sysid, home_ned_m)
+
+
+def _rare_fields(msg_id: int, row: Row, home: HomeConfig, flavour: str, sysid: int,
+                 home_ned_m: tuple[float, float, float]) -> Fields | None:
+    """status_fields of the messages sent once or every few seconds."""
+    if msg_id == MSG_HOME_POSITION:
+        lat, lon = geodetic(home, home_ned_m[0], home_ned_m[1])
+        alt_mm = round((home.alt_m - home_ned_m[2]) * 1000.0)
+        return HOME_POSITION, (lat, lon, alt_mm, *home_ned_m, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0,
+                               0.0, row.time_boot_ms * 1000)
+    if msg_id == MSG_BATTERY_STATUS:
+        return BATTERY_STATUS, (0, 1, 1, 32767, [16200] + [65535] * 9, -1, -1, -1, 100)
+    if msg_id == MSG_AUTOPILOT_VERSION:
+        caps = CAPABILITIES | PARAM_ENCODING[flavour]
+        return AUTOPILOT_VERSION, (caps, SW_VERSION[flavour], 0, 0, 0, [0] * 8, [0] * 8,
+                                   [0] * 8, 0x26AC, 0x0011, sysid)
+    return None
+
+
+# Produced by status_fields; the first five are streamed at 1-5 Hz.
+STATUS_IDS = frozenset({MSG_HEARTBEAT, MSG_SYS_STATUS, MSG_EXTENDED_SYS_STATE, MSG_GPS_RAW_INT,
+                        MSG_VFR_HUD, MSG_HOME_POSITION, MSG_BATTERY_STATUS,
+                        MSG_AUTOPILOT_VERSION})
 
 
 def status_message(mav: mavlink2.MAVLink, msg_id: int, row: Row, home: HomeConfig, flavour: str,
                    mode: str, armed: bool, sysid: int,
                    home_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
                    ) -> mavlink2.MAVLink_message | None:
-    """A low-rate message object, or None for an id this module does not produce."""
-    if msg_id == MSG_HEARTBEAT:
-        return heartbeat(mav, flavour, mode, armed)
-    if msg_id == MSG_HOME_POSITION:
-        return home_position(mav, row, home, home_ned_m)
-    if msg_id == MSG_SYS_STATUS:
-        return mav.sys_status_encode(SENSORS_OK, SENSORS_OK, SENSORS_OK, 200, 16200, -1, 100,
-                                     0, 0, 0, 0, 0, 0)
-    if msg_id == MSG_EXTENDED_SYS_STATE:
-        return mav.extended_sys_state_encode(0, landed_state(row, mode, armed))
-    if msg_id == MSG_GPS_RAW_INT:
-        return _gps_raw_int(mav, row, home)
-    if msg_id == MSG_VFR_HUD:
-        return _vfr_hud(mav, row, home, armed)
-    if msg_id == MSG_BATTERY_STATUS:
-        return mav.battery_status_encode(0, 1, 1, 32767, [16200] + [65535] * 9, -1, -1, -1, 100)
-    if msg_id == MSG_AUTOPILOT_VERSION:
-        caps = CAPABILITIES | PARAM_ENCODING[flavour]
-        return mav.autopilot_version_encode(caps, SW_VERSION[flavour], 0, 0, 0,
-                                            [0] * 8, [0] * 8, [0] * 8, 0x26AC, 0x0011, sysid)
-    return None
-
-
-# Produced by status_message; the first five are streamed at 1-5 Hz and packed by
-# status_bytes without message objects.
-STATUS_IDS = frozenset({MSG_HEARTBEAT, MSG_SYS_STATUS, MSG_EXTENDED_SYS_STATE, MSG_GPS_RAW_INT,
-                        MSG_VFR_HUD, MSG_HOME_POSITION, MSG_BATTERY_STATUS,
-                        MSG_AUTOPILOT_VERSION})
+    """status_fields as a message object, or None for an id this module does not produce."""
+    got = status_fields(msg_id, row, home, flavour, mode, armed, sysid, home_ned_m)
+    if got is None:
+        return None
+    layout, values = got
+    return layout.cls(*layout.full(values))
 
 
 def status_bytes(mav: mavlink2.MAVLink, msg_id: int, row: Row, home: HomeConfig, flavour: str,
                  mode: str, armed: bool, sysid: int,
                  home_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> bytes | None:
-    """`status_message` packed as the next frame of `mav` (the same bytes; fields of the
-    struct-packed ones in wire order), or None for an id this module does not produce."""
-    if msg_id == MSG_HEARTBEAT:
-        base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-        return encode_fields(mav, mavlink2.MAVLink_heartbeat_message,
-                             encode_custom_mode(flavour, mode), MAV_TYPE_QUADROTOR,
-                             autopilot_of_flavour(flavour), base,
-                             MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY, 3)
-    if msg_id == MSG_SYS_STATUS:
-        return encode_fields(mav, mavlink2.MAVLink_sys_status_message, SENSORS_OK, SENSORS_OK,
-                             SENSORS_OK, 200, 16200, -1, 0, 0, 0, 0, 0, 0, 100, 0, 0, 0)
-    if msg_id == MSG_EXTENDED_SYS_STATE:
-        return encode_fields(mav, mavlink2.MAVLink_extended_sys_state_message, 0,
-                             landed_state(row, mode, armed))
-    if msg_id == MSG_GPS_RAW_INT:
-        lat, lon = geodetic(home, row.pos[0], row.pos[1])
-        speed_cm_s = min(65534, round(math.hypot(row.vel[0], row.vel[1]) * 100.0))
-        course = round(math.degrees(math.atan2(row.vel[1], row.vel[0])) * 100.0) % 36000
-        return encode_fields(mav, mavlink2.MAVLink_gps_raw_int_message, row.time_boot_ms * 1000,
-                             lat, lon, round((home.alt_m - row.pos[2]) * 1000.0), 80, 80,
-                             speed_cm_s, course, 3, 12, 0, 0, 0, 0, 0, 0)
-    if msg_id == MSG_VFR_HUD:
-        speed = math.hypot(row.vel[0], row.vel[1])
-        return encode_fields(mav, mavlink2.MAVLink_vfr_hud_message, speed, speed,
-                             home.alt_m - row.pos[2], -row.vel[2],
-                             round(math.degrees(row.yaw)) % 360, 50 if armed else 0)
-    msg = status_message(mav, msg_id, row, home, flavour, mode, armed, sysid, home_ned_m)
-    return None if msg is None else encode(mav, msg)
+    """status_fields packed as the next frame of `mav` (the bytes `status_message` packs),
+    or None for an id this module does not produce."""
+    got = status_fields(msg_id, row, home, flavour, mode, armed, sysid, home_ned_m)
+    if got is None:
+        return None
+    layout, values = got
+    return encode_payload(mav, layout.msg_id, layout.crc_extra, layout.payload(values))

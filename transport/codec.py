@@ -29,7 +29,6 @@ import msgpack
 
 from errors import CodecError
 from transport import codec_fast
-from transport.codec_twins import TWINS
 from transport.law_fields import MAX_FIELDS, MAX_LINKS, MAX_NAME, LawValue
 from transport.messages import (
     PROCESS_STATES,
@@ -218,7 +217,7 @@ _PACKERS = _Packers()
 
 
 def signature(fields: tuple[Field, ...]) -> str:
-    """A schema's fields as codec_twins.TWINS spells them."""
+    """A schema's fields as codec_fast.TWINS spells them."""
     return " ".join(f"{f.name}:{f.kind}" + (f"@{f.since}" if f.since > 1 else "") for f in fields)
 
 
@@ -231,7 +230,7 @@ def _fast_twins() -> tuple[dict[type, codec_fast.Encoder], _Decoders]:
     decoders: _Decoders = {}
     if CODEC_VERSION != codec_fast.VERSION:
         return encoders, decoders
-    for cls, (twin_tag, twin_fields, enc, dec) in TWINS.items():
+    for cls, (twin_tag, twin_fields, enc, dec) in codec_fast.TWINS.items():
         tag, fields = SCHEMAS[cls]
         if (tag, signature(fields)) == (twin_tag, twin_fields):
             encoders[cls] = enc

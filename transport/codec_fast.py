@@ -17,9 +17,12 @@ a sum that overflowed from finite terms only sends the message to the reference.
 
 Decoded messages are built without their dataclass `__init__` (transport.fastbuild).
 
-Each twin is written for one schema: `transport.codec_twins.TWINS` says which, and the
-codec uses a twin only while SCHEMAS still says exactly that (and CODEC_VERSION is
-`VERSION`); a schema change without a new twin is slow, never wrong.
+Each twin is written for one schema: `TWINS` below says which, and the codec uses a twin
+only while SCHEMAS still says exactly that (and CODEC_VERSION is `VERSION`); a schema
+change without a new twin is slow, never wrong.  Only the messages sent at the control
+rate have a twin: for the low-rate ones (ProcessStatus at 1 Hz, ClockProbe at 4 Hz per
+host, RunControl twice a run) the schema walk costs a few µs a second
+(`python bench/bench_codec.py`: its "walk" columns).
 """
 
 from __future__ import annotations
@@ -260,3 +263,18 @@ def dec_truth_snapshot(o: Wire) -> TruthSnapshot | None:
         "follower_pos_m": tuple(map(tuple, fp)), "follower_vel_m_s": tuple(map(tuple, fv)),
         "target_pos_m": tuple(map(tuple, tp)), "target_vel_m_s": tuple(map(tuple, tv))})
     return m
+
+
+# Each twin pair and the schema it implements: tag, then `name:kind` per field in order
+# (`@n`: since codec version n), as in codec.SCHEMAS.
+TWINS: dict[type, tuple[int, str, Encoder, Decoder]] = {
+    FollowerState: (1, "index:int r_m:vec2 dr_m_s:vec2 pos_m:vec2 vel_m_s:vec2 u_m_s:vec2 "
+                    "vehicle_stamp_s:float law:law@4",
+                    enc_follower_state, dec_follower_state),
+    TargetObservation: (2, "observer_index:int target_index:int pos_m:vec2 "
+                        "observed_stamp_s:float noise_std_m:opt_float",
+                        enc_target_observation, dec_target_observation),
+    TruthSnapshot: (3, "sim_time_s:float follower_pos_m:vec3s follower_vel_m_s:vec3s "
+                    "target_pos_m:vec2s target_vel_m_s:vec2s",
+                    enc_truth_snapshot, dec_truth_snapshot),
+}

@@ -22,7 +22,8 @@ from agents.follower.plausible import gate_limits, own_side
 from agents.follower.runner import LawRunner
 from agents.law.interface import Law, Output, Sample
 from agents.loading.law_loader import make_law
-from agents.mavlink.adapter import MavlinkAdapter, VehicleState
+from agents.mavlink.vehicle import Vehicle
+from agents.mavlink.vehicle_types import VehicleState
 from agents.membership.follower_place import setup_for, stand_ins
 from agents.membership.liveness import MembershipWatch
 from agents.membership.member_hold import MemberHold
@@ -60,7 +61,7 @@ class FollowerNode:
     """All of one follower's state; `tick` is the loop body, the only place with side effects."""
 
     def __init__(
-        self, scenario: Scenario, index: int, bus: Bus, vehicle: MavlinkAdapter, swarm: str,
+        self, scenario: Scenario, index: int, bus: Bus, vehicle: Vehicle, swarm: str,
         joining: bool = False, law: Law[Any] | None = None,
     ) -> None:
         self.scenario = scenario

@@ -35,16 +35,6 @@ def link_flow(r_self_m: complex, r_nbr_m: complex, k_e: float, inv_alpha1: float
                    limited_sig(gap.imag, inv_alpha1, k_e, rate_cap_per_s))
 
 
-def consensus_flows(r_self_m: complex, r_nbrs_m: Sequence[complex], fractions: Sequence[float],
-                    k_e: float, inv_alpha1: float, rate_cap_per_s: float) -> list[complex]:
-    """`link_flow` on each of one follower's links (`fractions`: their edge fractions,
-    which scale the cap: Metropolis-like weights keep the capped regime a stable average)."""
-    flows = []
-    for r_j, fraction in zip(r_nbrs_m, fractions):  # noqa: B905 (numba compiles it: no strict)
-        flows.append(link_flow(r_self_m, r_j, k_e, inv_alpha1, rate_cap_per_s * fraction))
-    return flows
-
-
 def link_balance(own_sums_m: Sequence[complex], their_sums_m: Sequence[complex]) -> complex:
     """Phi of the robust estimator: half the difference of each link's two running sums.
 

@@ -11,7 +11,8 @@ last known), and a missing successor drops the spacing term (radius and rotation
 as if it were where it should be) instead of chasing a stale bearing.
 
 The equations are agents.law's, each written once (consensus, velocity_stage, enclosing,
-sig; the lock-step engine compiles the same functions; the carry of agents.law.carry);
+sig; the carry of agents.law.carry), and wired to the gains once (agents.law.paper_wiring:
+the lock-step kernel compiles the same wiring);
 plane vectors are complex x + iy
 (numpy's per-call cost was most of a step's at 2-vectors, issue 15).  Its options come
 from the scenario: [network] estimator ("paper" or "robust") and [gains] (estimator_order
@@ -26,11 +27,11 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
 from agents.law.carry import REBASE_TAU_S, next_carry
-from agents.law.consensus import EstimatorParams, consensus_flows, link_balance
-from agents.law.enclosing import ControlGains, enclosing_control
+from agents.law.consensus import EstimatorParams, link_balance
+from agents.law.enclosing import ControlGains
 from agents.law.interface import FieldSpec, Inputs, Law, Output, Peer, Setup, reference
+from agents.law.paper_wiring import command, estimator_flows, gains_of
 from agents.law.scenario_params import control_gains, estimator_params
-from agents.law.sig import rate_cap
 from agents.law.velocity_stage import fed_flow, lap_velocity
 from errors import ScenarioError
 
@@ -66,14 +67,16 @@ class Derived:
 
     nbr_steps: tuple[tuple[int, float], ...]  # (neighbour, edge fraction * estimator step)
     rotation: complex  # e^(i angle): a missing successor stands where it should be
+    gains: tuple[float, ...]  # agents.law.paper_wiring.gains_of, at this estimator step
 
     @staticmethod
-    def of(setup: Setup) -> Derived:
+    def of(setup: Setup, estimator: EstimatorParams, control: ControlGains) -> Derived:
         step = setup.est_period_s
         return Derived(
             tuple((j, f * step) for j, f in zip(setup.neighbours, setup.nbr_fractions,
                                                 strict=True)),
-            complex(math.cos(setup.angle_rad), math.sin(setup.angle_rad)))
+            complex(math.cos(setup.angle_rad), math.sin(setup.angle_rad)),
+            gains_of(estimator, control, step))
 
 
 class PaperState(NamedTuple):
@@ -115,7 +118,7 @@ class PaperLaw(Law[PaperState]):
                    scenario.network.estimator == "robust", scenario.gains.lead_s)
 
     def start(self, setup: Setup) -> PaperState:
-        return PaperState(Derived.of(setup))
+        return PaperState(Derived.of(setup, self.estimator, self.control))
 
     def regroup(self, state: PaperState, old: Setup, new: Setup) -> PaperState:
         """Ages of peers kept, link sums of links kept (a new link's start at zero)."""
@@ -128,7 +131,7 @@ class PaperLaw(Law[PaperState]):
             return tuple(per_old[kept[j]] if j in kept else 0j for j in new.neighbours)
 
         s = state
-        return s._replace(derived=Derived.of(new),
+        return s._replace(derived=Derived.of(new, self.estimator, self.control),
                           peer_age_s={j: a for j, a in s.peer_age_s.items() if j in peers},
                           link_sums_m=per_new_link(s.link_sums_m),
                           link_rates_m_s=per_new_link(s.link_rates_m_s),
@@ -158,9 +161,8 @@ class PaperLaw(Law[PaperState]):
         else:
             phi = state.phi_m + dt * state.phi_rate_m_s
         carry = next_carry(state.carry_m, phi + p_tilde, inputs.rebase_to, dt)
-        est = self.estimator
-        flows = consensus_flows(phi + p_tilde + carry, r_nbrs, fractions, est.k_e,
-                                1.0 / est.alpha1, rate_cap(est.step_fraction, setup.est_period_s))
+        gains, r_own = state.derived.gains, phi + p_tilde + carry
+        flows = estimator_flows(r_own, r_nbrs, fractions, gains)
         if not all(live):
             flows = [f if ok else 0j for f, ok in zip(flows, live, strict=False)]
         vel_sums, vel_rates, rv = state.vel_sums_m_s, state.vel_rates_m_s2, state.rv_m_s
@@ -199,10 +201,8 @@ class PaperLaw(Law[PaperState]):
                 theirs.append(value + rate * (min(now_s, stamp + hold) - stamp))
             rv_nbrs.append(fields.get("rv_m_s"))
         rv = lap_velocity(link_balance(sums, theirs), p_tilde_rate)
-        est = self.estimator
-        flows = consensus_flows(rv, [rv if v is None else v for v in rv_nbrs], fractions,
-                                est.k_e, 1.0 / est.alpha1,
-                                rate_cap(est.step_fraction, inputs.setup.est_period_s))
+        flows = estimator_flows(rv, [rv if v is None else v for v in rv_nbrs], fractions,
+                                state.derived.gains)
         return sums, tuple([f if ok else 0j for f, ok in zip(flows, live, strict=False)]), rv
 
     def _command(self, state: PaperState, inputs: Inputs, r: complex, dr: complex) -> complex:
@@ -216,12 +216,8 @@ class PaperLaw(Law[PaperState]):
             succ_pos = succ.value + succ.rate * (at_s - succ.stamp_s)
         else:  # missing: where it should be, so that only radius and rotation act
             succ_pos = r_at + (own_pos - r_at) * state.derived.rotation
-        c = self.control
-        u, _, _ = enclosing_control(own_pos, succ_pos, r_at, dr, setup.angle_rad, c.k_z,
-                                    1.0 / c.alpha2, c.k_d, 1.0 / c.alpha3, c.rho_d_m,
-                                    c.w_d_rad_s, c.step_fraction, c.spacing_gain_age,
-                                    setup.period_s, state.peer_age_s[setup.successor])
-        return u
+        return command(own_pos, succ_pos, r_at, dr, setup.angle_rad, state.derived.gains,
+                       setup.period_s, state.peer_age_s[setup.successor])
 
     def _fields(self, state: PaperState) -> dict[str, object]:
         fields: dict[str, object] = {}

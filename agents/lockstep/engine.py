@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from agents.analysis.geometry import as_complex, as_plane
 from agents.analysis.timeseries import RunSeries
-from agents.law.sig import rate_cap
+from agents.law.scenario_params import control_gains, estimator_params
 from agents.lockstep import kernel as lockstep_kernel
 from agents.lockstep.estimator_weights import edge_fractions, observation_weights
 from agents.lockstep.sensing import held_p_tilde, sensed_targets
@@ -112,13 +112,11 @@ def lockstep_gps(scenario: Scenario, t: FloatArray) -> ComplexArray:
 def _graph_and_law(scenario: Scenario, dt_s: float, substeps: int) -> tuple[object, ...]:
     """The kernel's law vector, the graph's directed edges and their fractions, the
     successors and the desired angles."""
-    g, pat = scenario.gains, scenario.pattern
+    pat = scenario.pattern
     adjacency = scenario.adjacency()
     tails, heads = np.nonzero(adjacency)
-    law = lockstep_kernel.law_vector(
-        g.k_e, g.alpha1, rate_cap(g.est_step_fraction, dt_s / substeps), g.estimator_order,
-        g.k_z, g.alpha2, g.k_d, g.alpha3, pat.rho_d_m, pat.w_d_rad_s, g.step_fraction,
-        g.spacing_gain_age or 0.0)
+    law = lockstep_kernel.law_vector(estimator_params(scenario), control_gains(scenario),
+                                     dt_s / substeps)
     return (law, tails, heads, edge_fractions(adjacency, tails, heads),
             np.asarray(scenario.successor), np.asarray(pat.angles_rad, np.float64))
 

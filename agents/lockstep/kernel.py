@@ -1,10 +1,11 @@
 """The lock-step loop's steps, on the law's one source (agents.law), compiled by numba.
 
 `simulate_lockstep` hands a whole run's arrays to `run_steps`, plane vectors as complex
-x + iy, and it advances them in place.  The loop calls the law's own functions: with
-numba installed they are compiled into it (`compiled_steps`: cached on disk, and compiled
-again when any of their sources changes); without, the same code runs as plain Python,
-correct and about a hundred times slower.
+x + iy, and it advances them in place.  The loop calls the law's own functions, wired to
+the gains as the follower's law wires them (agents.law.paper_wiring): with numba
+installed they are compiled into it (`compiled_steps`: cached on disk, and compiled again
+when any of their sources changes); without, the same code runs as plain Python, correct
+and about a hundred times slower.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.law.consensus import link_flow
-from agents.law.enclosing import enclosing_control, spacing_step_s
+from agents.law.consensus import EstimatorParams, link_flow
+from agents.law.enclosing import ControlGains, enclosing_control, spacing_step_s
+from agents.law.paper_wiring import command, estimator_flow, gains_of, second_order
 from agents.law.sig import limited_sig, rate_cap
 from agents.law.velocity_stage import fed_flow, lap_velocity
 
@@ -84,11 +86,8 @@ def _commands(k: int, dt: float, law: FloatArray, succ: IntArray, angles: FloatA
         if gps.shape[0] > 0:
             own += gps[k, i]
             ahead += gps[k, succ[i]]
-        u, _, _ = enclosing_control(
-            own, ahead, r[i], rate[i] + p_tilde_rate[i], angles[i],
-            law[4], 1.0 / law[5], law[6], 1.0 / law[7], law[8], law[9], law[10], law[11],
-            dt, 0.0)
-        cmd[k, i] = u
+        cmd[k, i] = command(own, ahead, r[i], rate[i] + p_tilde_rate[i], angles[i], law,
+                            dt, 0.0)
 
 
 def _rates(r: ComplexArray, psi: ComplexArray, p_tilde_rate: ComplexArray, law: FloatArray,
@@ -96,7 +95,7 @@ def _rates(r: ComplexArray, psi: ComplexArray, p_tilde_rate: ComplexArray, law: 
            vrate: ComplexArray, rv: ComplexArray) -> None:
     """dPhi/dt into `rate` and, at order 2, dPsi/dt into `vrate` (rv: scratch for rv_i)."""
     _consensus(r, law, tails, heads, fractions, rate)
-    if law[3] > 1.5:
+    if second_order(law):
         for i in range(r.shape[0]):
             rv[i] = lap_velocity(psi[i], p_tilde_rate[i])
         _consensus(rv, law, tails, heads, fractions, vrate)
@@ -107,25 +106,23 @@ def _rates(r: ComplexArray, psi: ComplexArray, p_tilde_rate: ComplexArray, law: 
 def _consensus(r: ComplexArray, law: FloatArray, tails: IntArray, heads: IntArray,
                fractions: FloatArray, out: ComplexArray) -> None:
     """Every follower's sum of link flows of `r` into `out`."""
-    k_e, inv_alpha1, cap = law[0], 1.0 / law[1], law[2]
     out[:] = 0j
     for e in range(tails.shape[0]):
         i = tails[e]
-        out[i] += link_flow(r[i], r[heads[e]], k_e, inv_alpha1, cap * fractions[e])
+        out[i] += estimator_flow(r[i], r[heads[e]], law, fractions[e])
 
 
-def law_vector(k_e: float, alpha1: float, estimator_cap_per_s: float, order: int, k_z: float,
-               alpha2: float, k_d: float, alpha3: float, rho_d_m: float, w_d_rad_s: float,
-               step_fraction: float, spacing_gain_age: float) -> FloatArray:
-    """The law's parameters as `_steps` reads them (one float array: one compiled signature)."""
-    return np.array([k_e, alpha1, estimator_cap_per_s, order, k_z, alpha2, k_d, alpha3,
-                     rho_d_m, w_d_rad_s, step_fraction, spacing_gain_age], dtype=np.float64)
+def law_vector(estimator: EstimatorParams, control: ControlGains,
+               est_period_s: float) -> FloatArray:
+    """The law's gains (agents.law.paper_wiring.gains_of) as `_steps` reads them: one float
+    array, one compiled signature."""
+    return np.array(gains_of(estimator, control, est_period_s), dtype=np.float64)
 
 
 # Every function `_steps` calls, directly or not: numba compiles a call to a plain Python
 # function only once it is registered (`compiled_steps`), and the cache digests their files.
 _LAW = (limited_sig, rate_cap, spacing_step_s, link_flow, lap_velocity, fed_flow,
-        enclosing_control)
+        enclosing_control, second_order, estimator_flow, command)
 _LOOP = (_consensus, _rates, _commands)
 
 

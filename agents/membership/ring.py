@@ -28,7 +28,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from agents.scenario.model import Scenario
+from agents.membership.graph_weights import edge_fraction, observation_weight
+from agents.scenario.model import Scenario, adjacency_matrix
 
 # numpy only for the lock-step engine's matrices: the follower process forms its ring
 # from `weight_row` and `edge_fraction` and must not import numpy (issue 15).
@@ -56,24 +57,18 @@ class Membership:
                                                                      if b == i}))
 
     def edge_fraction(self, i: int, j: int) -> float:
-        """agents.lockstep.estimator_weights.edge_fractions of the edge i -> j:
-        1 / max(deg_i, deg_j)."""
-        return 1.0 / max(len(self.neighbours(i)), len(self.neighbours(j)))
+        """The edge i -> j's graph_weights.edge_fraction."""
+        return edge_fraction(len(self.neighbours(i)), len(self.neighbours(j)))
 
     def weight_row(self, i: int) -> tuple[float, ...]:
         """Follower i's row of W (m,): p~_i = row @ targets, over the members only."""
-        m = len(self.observers)
-        return tuple(len(self.members) / m / len(obs) if i in obs else 0.0
+        n, m = len(self.members), len(self.observers)
+        return tuple(observation_weight(n, m, len(obs)) if i in obs else 0.0
                      for obs in self.observers)
 
     def adjacency(self) -> FloatArray:
         """(n_total, n_total) 0/1 adjacency; rows of absent followers are zero."""
-        import numpy as np
-
-        adj = np.zeros((self.n_total, self.n_total))
-        for a, b in self.edges:
-            adj[a, b] = adj[b, a] = 1.0
-        return adj
+        return adjacency_matrix(self.n_total, self.edges)
 
     def weights(self) -> FloatArray:
         """(n_total, m) W with p~_i = W[i] @ targets, over the members only."""

@@ -9,7 +9,7 @@ error names the offending field.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -207,12 +207,7 @@ class Scenario:
 
     def adjacency(self) -> FloatArray:
         """Symmetric 0/1 follower adjacency matrix a_ij."""
-        import numpy as np
-
-        adj = np.zeros((self.n, self.n))
-        for i, j in self.edges:
-            adj[i, j] = adj[j, i] = 1.0
-        return adj
+        return adjacency_matrix(self.n, self.edges)
 
     def observation(self) -> FloatArray:
         """(n, m) 0/1 matrix: follower i observes target j."""
@@ -301,3 +296,14 @@ def successor_is_cycle(successor: tuple[int, ...]) -> bool:
 
 def full_turn_ok(angles_rad: tuple[float, ...]) -> bool:
     return abs(sum(angles_rad) - 2.0 * math.pi) <= 1e-6
+
+
+def adjacency_matrix(n: int, edges: Iterable[tuple[int, int]]) -> FloatArray:
+    """(n, n) symmetric 0/1 adjacency of undirected `edges`; numpy imported here only (a
+    follower process forms its ring without it)."""
+    import numpy as np
+
+    adj = np.zeros((n, n))
+    for i, j in edges:
+        adj[i, j] = adj[j, i] = 1.0
+    return adj

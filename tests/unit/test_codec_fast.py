@@ -128,11 +128,13 @@ def same_decode(payload: bytes) -> Any:
     return fast
 
 
-def test_every_message_type_has_a_live_twin() -> None:
-    """A schema change without a new twin would silently fall back to the slow path."""
-    assert set(codec.FAST_ENCODERS) == set(codec.SCHEMAS)
-    assert {tag for tag, _ in codec.SCHEMAS.values()} == set(codec.FAST_DECODERS)
-    for msg in SAMPLES:
+def test_every_control_rate_message_has_a_live_twin() -> None:
+    """A schema change without a new twin would silently fall back to the slow path.  The
+    low-rate messages have none: the schema walk is cheap enough at their rate."""
+    fast = {FollowerState, TargetObservation, TruthSnapshot}
+    assert set(codec.FAST_ENCODERS) == fast
+    assert {codec.SCHEMAS[cls][0] for cls in fast} == set(codec.FAST_DECODERS)
+    for msg in (m for m in SAMPLES if type(m) in fast):
         wire = codec.FAST_ENCODERS[type(msg)](msg)
         assert wire is not None, type(msg).__name__
         obj = msgpack.unpackb(encode(msg))

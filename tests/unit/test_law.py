@@ -17,12 +17,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.law.consensus import EstimatorParams, consensus_flows, link_balance, link_flow
+from agents.law.consensus import EstimatorParams, link_balance, link_flow
 from agents.law.enclosing import TWO_PI, ControlGains, enclosing_control, spacing_step_s
+from agents.law.paper_wiring import estimator_flow, gains_of
 from agents.law.sig import NO_CAP_PER_S, limited_sig, rate_cap
 from agents.law.target_velocity import finite_difference_velocity, lag_free_velocity
 from agents.law.velocity_stage import fed_flow, lap_velocity
-from agents.lockstep.kernel import _rates
+from agents.lockstep.kernel import _rates, law_vector
 from tests.reference import law as ref
 
 TOL = {"rtol": 1e-12, "atol": 1e-12}
@@ -80,7 +81,8 @@ def test_one_followers_flows_and_link_balance(r: complex, nbrs: list[complex], a
     n = len(nbrs)
     edges = ref.Edges(np.zeros(n, np.intp), np.arange(1, n + 1), np.array(fractions))
     expected = ref.edge_flows(r_all, edges, EstimatorParams(k_e, a, f), step)
-    got = consensus_flows(r, nbrs, fractions, k_e, 1.0 / a, rate_cap(f, step))
+    gains = gains_of(EstimatorParams(k_e, a, f), ControlGains(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), step)
+    got = [estimator_flow(r, r_j, gains, fr) for r_j, fr in zip(nbrs, fractions, strict=True)]
     np.testing.assert_allclose(plane(got), expected, **TOL)
     theirs = nbrs[::-1]
     np.testing.assert_allclose(plane([link_balance(got, theirs)])[0],
@@ -94,8 +96,7 @@ def test_the_swarms_rates_are_the_papers_and_the_flows_cancel(n: int, order: int
     edges = ref.Edges.of(adj)
     for step_fraction in (0.0, 0.5):
         params = EstimatorParams(6.0, 7.0 / 3.0, step_fraction, order)
-        cap = rate_cap(step_fraction, 0.02)
-        law = np.array([6.0, 7.0 / 3.0, cap, order])
+        law = law_vector(params, ControlGains(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), 0.02)
         for _ in range(10):
             scale = RNG.choice([1e-4, 1.0, 100.0])
             r, psi, p_rate = (RNG.normal(size=(n, 2)) * scale for _ in range(3))

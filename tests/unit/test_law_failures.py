@@ -8,16 +8,15 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping
-from typing import Any, cast
+from typing import cast
 
-import numpy as np
 import pytest
 
 from agents.follower.node import FollowerNode
 from agents.law.interface import Inputs, Output
 from agents.law.paper import PaperLaw, PaperState
 from agents.loading.scenario_file import load_scenario
-from agents.mavlink.adapter import MavlinkAdapter, VehicleState
+from tests.still_vehicle import StillVehicle
 from transport.codec import decode, encode
 from transport.key_exprs import SwarmKeys
 from transport.memory_bus import MemoryBus, MemoryHub
@@ -56,23 +55,7 @@ class Flaky(PaperLaw):
         return new, out
 
 
-class Vehicle:
-    """Telemetry at (8, 0) at 10 m, fresh; keeps every setpoint it is sent."""
-
-    def __init__(self) -> None:
-        self.setpoints: list[tuple[float, float, float]] = []
-
-    def poll(self) -> VehicleState:
-        return cast(Any, type("S", (), {
-            "pos_enu_m": np.array([8.0, 0.0, 10.0]), "vel_enu_m_s": np.zeros(3),
-            "stamp_s": 0.0, "link_ok": True}))()
-
-    def send_velocity_enu(self, v: tuple[float, float, float]) -> bool:
-        self.setpoints.append(v)
-        return True
-
-
-def fly(bad: Mapping[int, str], ticks: int = 8) -> tuple[FollowerNode, Vehicle, list[int]]:
+def fly(bad: Mapping[int, str], ticks: int = 8) -> tuple[FollowerNode, StillVehicle, list[int]]:
     """Follower 0 of the paper's case flying Flaky(bad) for `ticks` ticks, its neighbours
     1 and 3 and its target heard before each; returns how many states it published by
     each tick."""
@@ -80,8 +63,8 @@ def fly(bad: Mapping[int, str], ticks: int = 8) -> tuple[FollowerNode, Vehicle, 
     bus, peers = MemoryBus(hub, "f0"), MemoryBus(hub, "peers")
     for i in range(4):
         peers.declare_token(KEYS.alive("follower", i))
-    vehicle = Vehicle()
-    node = FollowerNode(PAPER, 0, bus, cast(MavlinkAdapter, vehicle), "bad", law=Flaky(bad))
+    vehicle = StillVehicle((8.0, 0.0, 10.0))  # fresh, at (8, 0) at 10 m
+    node = FollowerNode(PAPER, 0, bus, vehicle, "bad", law=Flaky(bad))
     out = peers.subscribe(KEYS.follower_state(0))
     node.start_s = bus.now_s() - 5.0  # running, at the start together with its ring
     published: list[int] = []
@@ -140,7 +123,7 @@ def test_published_law_fields_carry_the_declared_values() -> None:
     that knows the law."""
     hub = MemoryHub()
     bus, other = MemoryBus(hub, "f0"), MemoryBus(hub, "f1")
-    node = FollowerNode(PAPER, 0, bus, cast(MavlinkAdapter, Vehicle()), "bad")
+    node = FollowerNode(PAPER, 0, bus, StillVehicle((8.0, 0.0, 10.0)), "bad")
     sub = other.subscribe(KEYS.follower_state(0))
     node.tick(bus.now_s())  # before the start: its standing estimate, no law fields
     (received,) = sub.drain()
