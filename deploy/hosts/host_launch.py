@@ -28,7 +28,7 @@ from deploy.hosts.deployment import Deployment
 from deploy.hosts.host_cut import HostCut, cuttable
 from deploy.hosts.host_keys import HostSecrets, write_swarm_keys
 from deploy.launch.launch_options import LaunchOptions
-from deploy.launch.launcher import Launch
+from deploy.launch.launcher import Launch, gust_window_argv
 from deploy.launch.run_secrets import RunSecrets
 from sim_backend.sensor_links import SensorLink
 from transport.clock import clock_env
@@ -140,7 +140,8 @@ class HostLaunch(Launch):
                 *argv, "--mav-host", "0.0.0.0", "--base-port", str(self.vehicle_base),
                 "--send-base-port", str(self.adapter_base), "--mav-peers",
                 ",".join(self.dep.mav_peers(self.scenario.n, self.scenario.m)),
-                "--noise-std-m", str(self.opts.noise_std_m), *self.sensor_link_argv()],
+                "--noise-std-m", str(self.opts.noise_std_m), *self.sensor_link_argv(),
+                *gust_window_argv(self.faults)],
                 prefix=pre)
         elif name == "recorder":
             self.sup.start(name, "deploy.recording.recorder",

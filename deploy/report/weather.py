@@ -42,9 +42,21 @@ def weather_lines(info: Mapping[str, Any], launch: Mapping[str, Any]) -> tuple[s
     text = info.get("weather")
     if isinstance(text, str) and text:
         lines.append(text)
+    windows = [f for f in launch.get("faults") or () if isinstance(f, Mapping)
+               and f.get("action") == "wind"]
+    if windows:  # the scenario's and --fault's, as the launcher opened them
+        lines.append("gust windows: " + ", ".join(
+            f"{_num(w.get('gust_std_m_s'))} m/s from {_num(w.get('at_s'))} s for "
+            f"{_num(w.get('duration_s'))} s" for w in windows))
     status = launch.get("status_at_stop") or launch.get("status")
     sim = status.get("sim-0") if isinstance(status, Mapping) else None
     if isinstance(sim, Mapping) and any(k in sim for k in MISSED_KEYS):
         missed, far = (sim.get(k) if isinstance(sim.get(k), int) else 0 for k in MISSED_KEYS)
         lines.append(f"observations not made: {missed} missed, {far} out of range")
     return tuple(lines)
+
+
+def _num(value: object) -> str:
+    """A number from launch.json as the verdict prints it; '?' for anything else."""
+    ok = isinstance(value, int | float) and not isinstance(value, bool)
+    return f"{value:g}" if ok else "?"

@@ -16,6 +16,7 @@ from agents.shell.network_args import (
 )
 from agents.weather.windows import WindSchedule, gust_std_at, window_strengths
 from deploy.launch.launcher import gust_window_argv
+from deploy.report.weather import weather_lines
 from errors import ScenarioError
 
 PAPER = shipped_text("paper")
@@ -139,3 +140,17 @@ def test_a_simulator_without_windows_ignores_the_window_signals() -> None:
     finally:
         for s, h in zip((wind_begin_signal(), wind_end_signal()), before, strict=True):
             signal.signal(s, h)
+
+
+def test_the_verdict_names_every_gust_window_the_launcher_opened() -> None:
+    """A window given by --fault only is in no scenario: the verdict reads launch.json's."""
+    launch = {"faults": [
+        {"at_s": 5.0, "action": "wind", "process": "sim", "duration_s": 5.0,
+         "gust_std_m_s": 3.0},
+        {"at_s": 8.0, "action": "pause", "process": "follower-1", "duration_s": 2.0},
+        {"at_s": "x", "action": "wind", "process": "sim", "duration_s": None,
+         "gust_std_m_s": True},
+    ]}
+    lines = weather_lines({}, launch)
+    assert lines == ("gust windows: 3 m/s from 5 s for 5 s, ? m/s from ? s for ? s",)
+    assert weather_lines({}, {"faults": "garbage"}) == ()
