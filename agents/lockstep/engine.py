@@ -21,7 +21,7 @@ from agents.analysis.timeseries import RunSeries
 from agents.law.scenario_params import control_gains, estimator_params
 from agents.lockstep import kernel as lockstep_kernel
 from agents.lockstep.estimator_weights import edge_fractions, observation_weights
-from agents.lockstep.sensing import held_p_tilde, sensed_targets
+from agents.lockstep.sensing import RangedSensing, held_p_tilde, sensed_targets
 from agents.scenario.model import Scenario
 from agents.scenario.target_motion import TargetMotion
 from agents.scenario.weather import WindConfig
@@ -68,16 +68,36 @@ def simulate_lockstep(
     pos = np.zeros(p_tilde.shape[:2], np.complex128)
     pos[0] = as_complex(np.asarray(scenario.follower_pos_m, np.float64))
     est, cmd = np.zeros_like(pos), np.zeros_like(pos)
-    args = (dt_s, substeps, *_graph_and_law(scenario, dt_s, substeps), as_complex(p_tilde),
-            as_complex(p_tilde_rate), np.zeros(scenario.n, np.complex128),
-            np.zeros(scenario.n, np.complex128), pos, est, cmd, *lockstep_wind(scenario, t),
-            lockstep_gps(scenario, t))
+    pt, pt_rate, gps = as_complex(p_tilde), as_complex(p_tilde_rate), lockstep_gps(scenario, t)
+    args = (dt_s, substeps, *_graph_and_law(scenario, dt_s, substeps), pt, pt_rate,
+            np.zeros(scenario.n, np.complex128), np.zeros(scenario.n, np.complex128), pos,
+            est, cmd, *lockstep_wind(scenario, t), gps)
+    ranged = _ranged(scenario, weights, substeps)
     bounds = np.linspace(0, steps + 1, min(CHUNKS, steps + 1) + 1).astype(int)
     for k0, k1 in itertools.pairwise(bounds):
-        lockstep_kernel.run_steps(int(k0), int(k1), compiled, *args)
+        if ranged is None:
+            lockstep_kernel.run_steps(int(k0), int(k1), compiled, *args)
+        else:
+            for k in range(int(k0), int(k1)):
+                # p~ of step k from where the followers are at step k, then that one step
+                reported = pos[k] + gps[k] if len(gps) else pos[k]
+                pt[k] = as_complex(ranged.p_tilde(float(t[k]), targets[k], as_plane(pos[k]),
+                                                  as_plane(reported)))
+                pt_rate[k] = (pt[k] - pt[k - 1]) / dt_s if k > 0 else 0j
+                lockstep_kernel.run_steps(k, k + 1, compiled, *args)
         if progress is not None:
             progress(k1 / (steps + 1))
     return RunSeries(t, as_plane(pos), as_plane(est), as_plane(cmd), targets)
+
+
+def _ranged(scenario: Scenario, weights: FloatArray, substeps: int) -> RangedSensing | None:
+    """A sensor with a range: drawn step by step from the followers' positions."""
+    cfg = scenario.sensing
+    if cfg is None or cfg.is_perfect or cfg.max_range_m is None:
+        return None
+    if substeps > 1:  # the estimator's substeps read the next step's p~ rate
+        raise ValueError("a sensor with max_range_m runs lock-step with no faster estimator")
+    return RangedSensing(scenario, weights)
 
 
 def lockstep_wind(scenario: Scenario, t: FloatArray) -> tuple[ComplexArray, float]:

@@ -274,3 +274,20 @@ def test_lockstep_holds_what_its_sensor_missed() -> None:
     assert sensed_targets(parse_scenario(PAPER), t, targets) is None
     run = simulate_lockstep(sc, 0.02, 3.0, engine="python")
     assert np.all(np.isfinite(run.estimate_m))
+
+
+def test_lockstep_senses_within_range_from_where_each_follower_is() -> None:
+    """A range no follower reaches draws as no range at all (the same draws, bit for bit);
+    a short one keeps far targets unseen, and the run differs."""
+    from agents.analysis.timeseries import RunSeries
+    from agents.lockstep.engine import simulate_lockstep
+
+    def run(extra: str) -> RunSeries:
+        sc = parse_scenario(windy(f"[sensing]\ndetect_prob = 0.8\nseed = 3\n{extra}"))
+        return simulate_lockstep(sc, 0.02, 3.0, engine="python")
+
+    free, far, near = run(""), run("max_range_m = 1e6"), run("max_range_m = 12")
+    assert np.array_equal(free.estimate_m, far.estimate_m)
+    assert np.array_equal(free.follower_pos_m, far.follower_pos_m)
+    assert not np.array_equal(free.estimate_m, near.estimate_m)
+    assert np.all(np.isfinite(near.estimate_m))
