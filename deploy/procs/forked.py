@@ -46,7 +46,7 @@ TASKS = Path("/proc/self/task")
 def fork_is_safe() -> bool:
     """True while this process runs no thread but the main one and holds no Zenoh
     session.  Threads are counted by the kernel too (`only_thread`), not only Python's:
-    Zenoh's runtime threads outlive the last session a process closed (a process that ran
+    Zenoh's runtime threads outlive the last Zenoh session a process closed (a process that ran
     `enclose.run` before, as a pytest worker does), and a child forked beside them inherits
     a runtime whose threads it does not have: its `zenoh.open` hangs for good."""
     from transport.zenoh_bus import ZenohBus

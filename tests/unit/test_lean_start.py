@@ -231,7 +231,7 @@ def test_no_latency_without_arrival_stamps() -> None:
 
 
 def test_no_fork_beside_a_thread_python_does_not_know(tmp_path: Path) -> None:
-    """Threads Python does not see (Zenoh's runtime, alive after its last session): the
+    """Threads Python does not see (Zenoh's runtime, alive after its last Zenoh session): the
     kernel's task list decides."""
     from deploy.procs.forked import only_thread
 
