@@ -36,7 +36,7 @@ from sim_backend.sim_values import LoopStats, SimConfig, Snapshot
 from sim_backend.sim_values import grid_spawn_ned as grid_spawn_ned  # re-exported (importers)
 from sim_backend.sim_values import spawn_points_ned as spawn_points_ned  # re-exported
 from sim_backend.telemetry import Row
-from sim_backend.weather import SimWeather
+from sim_backend.vehicle_weather import SimWeather
 
 log = logging.getLogger(__name__)
 TickHook = Callable[[float, kinematics.FleetState], None]
@@ -71,7 +71,7 @@ class Simulator:
         if not 0 < cfg.telemetry_hz <= cfg.rate_hz:
             raise SimulatorError("telemetry rate must be > 0 and not above the tick rate")
         self.cfg = cfg
-        self.weather = weather  # None: still air and exact positions (sim_backend.weather)
+        self.weather = weather  # None: still air and exact positions (sim_backend.vehicle_weather)
         self.dt_s = 1.0 / cfg.rate_hz
         self.params = kinematics.ModelParams.from_vehicle(vehicle)
         self.state = kinematics.FleetState.on_ground(spawn_ned_m)

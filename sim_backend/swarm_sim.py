@@ -35,13 +35,13 @@ from agents.shell.process import (
     stop_on_signals,
 )
 from agents.shell.process_options import BusOptions, add_bus_arguments
-from agents.weather.sensing import TargetSensor
+from agents.weather.target_sensor import TargetSensor
 from agents.weather.windows import WindSchedule, wind_begin_signal, wind_end_signal
 from sim_backend.kinematics import FleetState
 from sim_backend.runtime import SimConfig, Simulator, spawn_points_ned
 from sim_backend.sensor_links import LinkBus, parse_sensor_link, sensor_buses
 from sim_backend.sim_values import parse_peer_hosts
-from sim_backend.weather import weather_of
+from sim_backend.vehicle_weather import weather_of
 from transport.bus import Bus, Congestion
 from transport.codec import encode
 from transport.key_exprs import SwarmKeys
@@ -88,7 +88,7 @@ class SensorPublisher:
         # state is stamped with the time it is true, not with when it was published, so a
         # late tick does not make the followers' finite-difference velocities jump.
         self.late_s = late_s
-        # [sensing] (agents.weather.sensing); None: every observer sees its targets exactly.
+        # [sensing] (agents.weather.target_sensor); None: every observer sees its targets exactly.
         cfg = scenario.sensing
         self.limited = None if cfg is None or cfg.is_perfect else TargetSensor(cfg)
         self.reported = reported or (lambda pos_ned: pos_ned)  # the vehicles' GPS fixes

@@ -29,7 +29,7 @@ from agents.scenario.tables import (
     parse_targets,
     parse_vehicle,
 )
-from agents.scenario.weather import parse_sensing, parse_wind
+from agents.scenario.weather_tables import parse_sensing, parse_wind
 from errors import InadmissibleError, ScenarioError
 
 DEFAULT_SCENARIO = "paper"

@@ -21,10 +21,10 @@ from agents.analysis.timeseries import RunSeries
 from agents.law.scenario_params import control_gains, estimator_params
 from agents.lockstep import kernel as lockstep_kernel
 from agents.lockstep.estimator_weights import edge_fractions, observation_weights
-from agents.lockstep.sensing import RangedSensing, held_p_tilde, sensed_targets
+from agents.lockstep.held_observations import RangedSensing, held_p_tilde, sensed_targets
 from agents.scenario.model import Scenario
 from agents.scenario.target_motion import TargetMotion
-from agents.scenario.weather import WindConfig
+from agents.scenario.weather_tables import WindConfig
 from agents.weather.gps import GpsNoise
 from agents.weather.gusts import WindField, steady_leak
 from agents.weather.windows import gust_std_at, wind_windows
@@ -57,8 +57,9 @@ def simulate_lockstep(
     steps = round(duration_s / dt_s)
     t = np.arange(steps + 1, dtype=np.float64) * dt_s
     targets, _ = TargetMotion(scenario, horizon_s=duration_s).states(t)
-    # Observations do not depend on the followers here (exact, or agents.lockstep.sensing),
-    # so p~ and its finite-difference rate are precomputed.
+    # Observations without a sensor range do not depend on the followers (exact, or
+    # agents.lockstep.held_observations): p~ and its rate are precomputed; with one, each
+    # step draws them from where the followers are (`_ranged`).
     weights = observation_weights(scenario.observation())
     held = sensed_targets(scenario, t, targets)  # [sensing]; None: exact observations
     p_tilde = (np.einsum("ij,kjd->kid", weights, targets) if held is None

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from agents.scenario.faults import FaultSpec
-from agents.scenario.weather import SensingConfig, WindConfig
+from agents.scenario.weather_tables import SensingConfig, WindConfig
 from transport.network_schema import NetworkConfig
 
 # numpy only where the lock-step engine asks for matrices: a follower process loads a
@@ -194,7 +194,7 @@ class Scenario:
     network: NetworkConfig = field(default_factory=NetworkConfig)
     faults: tuple[FaultSpec, ...] = ()  # injected by the launcher (agents.scenario.faults)
     law: LawSpec = field(default_factory=LawSpec)  # [law]: what each follower flies
-    wind: WindConfig | None = None  # [wind] (agents.scenario.weather): None, still air
+    wind: WindConfig | None = None  # [wind] (agents.scenario.weather_tables): None, still air
     sensing: SensingConfig | None = None  # [sensing]: None, every target seen exactly
 
     @property

@@ -33,7 +33,7 @@ from agents.scenario.model import (
     full_turn_ok,
     successor_from_order,
 )
-from agents.scenario.weather import non_negative, seed_of
+from agents.scenario.weather_tables import non_negative, seed_of
 from errors import InadmissibleError, ScenarioError
 
 

@@ -5,7 +5,7 @@ flags, their typed `WeatherOptions`, and how they change a scenario.
 `--wind SPEED` (toward +x, east) or `--wind X,Y` sets the mean wind in m/s, `--gust STD`
 the gusts' standard deviation in m/s, `--gps-noise STD` the vehicles' GPS noise in m.
 Absent, the scenario's own tables apply; given, a scenario without `[wind]` gets one with
-its other settings at their defaults (agents.scenario.weather).
+its other settings at their defaults (agents.scenario.weather_tables).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass
 
 from agents.scenario.model import Scenario
-from agents.scenario.weather import WindConfig
+from agents.scenario.weather_tables import WindConfig
 from errors import ScenarioError
 
 

@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.scenario.weather import WindConfig
+from agents.scenario.weather_tables import WindConfig
 
 FloatArray = NDArray[np.float64]
 

@@ -15,7 +15,7 @@ import numpy as np
 from agents.analysis.metrics import ErrorSeries, Metrics
 from agents.analysis.timeseries import FloatArray, RunSeries, decimated_rows
 from agents.scenario.model import Scenario
-from deploy.report.weather import weather_text
+from deploy.report.weather_report import weather_text
 from deploy.version import enclose_version
 from errors import EncloseError
 
@@ -43,7 +43,7 @@ class RunInfo:
     safety_distance_m: float = 1.0
     # The network faults: (label, at_s, end_s) in experiment time (transport.network_schema)
     net_faults: tuple[tuple[str, float, float], ...] = ()
-    weather: str = ""  # the wind, GPS noise and sensor (deploy.report.weather); "": none
+    weather: str = ""  # the wind, GPS noise and sensor (deploy.report.weather_report); "": none
     wind_m_s: tuple[float, float] | None = None  # the mean wind, for the live view's arrow
 
     @staticmethod

@@ -21,7 +21,7 @@ from deploy.json_files import read_json
 from deploy.report.cpu_load import load_line, memory_line, overrun_line
 from deploy.report.liars import liar_lines
 from deploy.report.refusals import launch_refusals, refusal_text
-from deploy.report.weather import weather_lines
+from deploy.report.weather_report import weather_lines
 
 # metrics.json key -> (label, unit, run.json key of its bound)
 BOUNDED = (
@@ -81,7 +81,8 @@ class Verdict:
     law: str | None = None  # the followers' law and how often it failed in flight
     network: tuple[str, ...] = ()  # each network fault: its window, recovery, closest approach
     liars: tuple[str, ...] = ()  # followers refused as implausible (deploy.report.liars)
-    weather: tuple[str, ...] = ()  # wind, GPS noise, sensing and its misses (deploy.report.weather)
+    # wind, GPS noise, sensing and its misses (deploy.report.weather_report)
+    weather: tuple[str, ...] = ()
 
     @property
     def inside(self) -> bool:

@@ -12,10 +12,10 @@ from hypothesis import strategies as st
 
 from agents.loading.scenario_file import parse_scenario, shipped_text
 from agents.scenario.model import VehicleConfig
-from agents.scenario.weather import SensingConfig, WindConfig, parse_sensing, parse_wind
+from agents.scenario.weather_tables import SensingConfig, WindConfig, parse_sensing, parse_wind
 from agents.weather.gps import GpsNoise
 from agents.weather.gusts import WindField, gust_step, steady_leak
-from agents.weather.sensing import TargetSensor
+from agents.weather.target_sensor import TargetSensor
 from errors import ScenarioError
 from sim_backend import kinematics
 from sim_backend.kinematics import FleetCommand, FleetState, ModelParams
@@ -109,7 +109,7 @@ def test_gps_noise_has_its_std_and_its_bias_walks() -> None:
 
 
 def test_the_simulator_reports_noisy_positions_and_keeps_the_truth() -> None:
-    from sim_backend.weather import weather_of
+    from sim_backend.vehicle_weather import weather_of
 
     sc = parse_scenario(windy("").replace("[vehicle]", "[vehicle]\ngps_noise_std_m = 0.3")
                         if "[vehicle]" in PAPER else windy("[vehicle]\ngps_noise_std_m = 0.3"))
@@ -124,7 +124,7 @@ def test_the_simulator_reports_noisy_positions_and_keeps_the_truth() -> None:
 
 
 def test_no_weather_tables_no_weather() -> None:
-    from sim_backend.weather import weather_of
+    from sim_backend.vehicle_weather import weather_of
 
     assert weather_of(parse_scenario(PAPER), 3) is None
 
@@ -261,7 +261,7 @@ def test_lockstep_opens_a_gust_window_at_its_time() -> None:
 
 def test_lockstep_holds_what_its_sensor_missed() -> None:
     from agents.lockstep.engine import simulate_lockstep
-    from agents.lockstep.sensing import sensed_targets
+    from agents.lockstep.held_observations import sensed_targets
 
     sc = parse_scenario(windy("[sensing]\ndetect_prob = 0.5\nseed = 2"))
     t = np.arange(101) * 0.02

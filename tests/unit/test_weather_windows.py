@@ -16,7 +16,7 @@ from agents.shell.network_args import (
 )
 from agents.weather.windows import WindSchedule, gust_std_at, window_strengths
 from deploy.launch.launcher import gust_window_argv
-from deploy.report.weather import weather_lines
+from deploy.report.weather_report import weather_lines
 from errors import ScenarioError
 
 PAPER = shipped_text("paper")

@@ -14,7 +14,7 @@ from collections import Counter, deque
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.scenario.weather import SensingConfig
+from agents.scenario.weather_tables import SensingConfig
 
 FloatArray = NDArray[np.float64]
 

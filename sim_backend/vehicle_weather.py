@@ -7,7 +7,7 @@ simulator steps exactly as before, with no draw and no work per tick.
 from __future__ import annotations
 
 from agents.scenario.model import Scenario
-from agents.scenario.weather import WindConfig
+from agents.scenario.weather_tables import WindConfig
 from agents.weather.gps import GpsNoise
 from agents.weather.gusts import WindField, wind_ned
 from agents.weather.windows import WindSchedule, window_strengths

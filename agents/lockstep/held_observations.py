@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.scenario.model import Scenario
-from agents.weather.sensing import TargetSensor
+from agents.weather.target_sensor import TargetSensor
 
 FloatArray = NDArray[np.float64]
 
