@@ -26,16 +26,23 @@ def sensed_targets(scenario: Scenario, t: FloatArray,
     sensor = TargetSensor(cfg)
     held = np.full((t.shape[0], scenario.n, scenario.m, 2), np.nan)
     last = np.full((scenario.n, scenario.m, 2), np.nan)
-    zero = np.zeros(2)
+    zeros = np.zeros((scenario.n, 2))  # no range: where the observer is does not matter
     for k in range(t.shape[0]):
-        _, seen_now, _ = sensor.remember(float(t[k]), targets[k], targets[k])
-        for j, spec in enumerate(scenario.targets):
-            for i in spec.observed_by:
-                seen = sensor.observe(zero, zero, seen_now[j])
-                if seen is not None or np.isnan(last[i, j, 0]):
-                    last[i, j] = seen_now[j] if seen is None else seen
+        _hold(scenario, sensor, float(t[k]), targets[k], zeros, zeros, last)
         held[k] = last
     return held
+
+
+def _hold(scenario: Scenario, sensor: TargetSensor, t_s: float, targets: FloatArray,
+          true_m: FloatArray, reported_m: FloatArray, last: FloatArray) -> None:
+    """One step's draws into `last` (n, m, 2), in the simulator's order: what each follower
+    sees of each target it observes, its last observation where it misses one."""
+    _, seen_now, _ = sensor.remember(t_s, targets, targets)
+    for j, spec in enumerate(scenario.targets):
+        for i in spec.observed_by:
+            seen = sensor.observe(true_m[i], reported_m[i], seen_now[j])
+            if seen is not None or np.isnan(last[i, j, 0]):
+                last[i, j] = seen_now[j] if seen is None else seen
 
 
 class RangedSensing:
@@ -50,14 +57,8 @@ class RangedSensing:
     def p_tilde(self, t_s: float, targets: FloatArray, true_m: FloatArray,
                 reported_m: FloatArray) -> FloatArray:
         """(n, 2) p~ at `t_s` from the followers' true and reported positions (n, 2)."""
-        _, seen_now, _ = self.sensor.remember(t_s, targets, targets)
-        last = self.last
-        for j, spec in enumerate(self.scenario.targets):
-            for i in spec.observed_by:
-                seen = self.sensor.observe(true_m[i], reported_m[i], seen_now[j])
-                if seen is not None or np.isnan(last[i, j, 0]):
-                    last[i, j] = seen_now[j] if seen is None else seen
-        return np.einsum("ij,ijd->id", self.weights, np.nan_to_num(last))
+        _hold(self.scenario, self.sensor, t_s, targets, true_m, reported_m, self.last)
+        return np.einsum("ij,ijd->id", self.weights, np.nan_to_num(self.last))
 
 
 def held_p_tilde(held: FloatArray, weights: FloatArray) -> FloatArray:
