@@ -18,8 +18,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlparse
 
-from deploy.recording.live_defaults import DEFAULT_HOST, DEFAULT_PORT
-from deploy.recording.progress import PROGRESS_FILE
+from deploy.recording.live_defaults import DEFAULT_HOST, DEFAULT_PORT, PROGRESS_FILE
 
 log = logging.getLogger("enclose.run")
 URL_WAIT_S = 2.0

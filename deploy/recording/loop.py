@@ -23,9 +23,10 @@ from deploy.procs.forked import trim_heap
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.backlog import Backlog
 from deploy.recording.links import FINAL_STATES, link_report, unreadable_links
+from deploy.recording.live_defaults import PROGRESS_FILE
 from deploy.recording.live_server import LiveServer
 from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
-from deploy.recording.progress import PROGRESS_FILE, behind_s, live_errors
+from deploy.recording.progress import behind_s, live_errors
 from deploy.recording.queues import STEP_BATCH, drain_into, queue_capacities
 from deploy.recording.resume import newest_part, read_back
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView

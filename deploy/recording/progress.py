@@ -18,7 +18,6 @@ from agents.analysis.metrics import error_series, worst
 from deploy.recording.assembler import RunAssembler
 from deploy.report.rundir import RunInfo
 
-PROGRESS_FILE = "progress.json"
 WINDOW_S = 1.0
 
 
