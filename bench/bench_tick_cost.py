@@ -1,8 +1,10 @@
 """What a tick costs, phase by phase, over all of a process's threads (issue 50).
 
     python bench/bench_tick_cost.py [--case paper] [--duration 60] [--repeat 5] [--insecure]
+                                    [ENCLOSE_RUN_ARG ...]
 
-Runs `enclose run CASE` (the secure default unless --insecure) with ENCLOSE_TICK_COST set:
+Runs `enclose run CASE` (the secure default unless --insecure; any other argument is passed
+on, e.g. `--zenoh-runtime one_thread`, for an A/B) with ENCLOSE_TICK_COST set:
 every follower and target then measures, from the start word to its last status, the CPU
 of its loop thread per phase (agents.shell.tick_cost.PHASES) and of its threads by group (the
 loop's, Zenoh's runtime, the rest), and reports them in its status.  Printed per tick, in
@@ -52,9 +54,10 @@ def median_row(rows: list[dict[str, float]]) -> dict[str, float]:
     return {k: statistics.median(r[k] for r in rows) for k in ROWS}
 
 
-def run_once(case: str, duration_s: float, insecure: bool, out: Path) -> dict[str, object]:
+def run_once(case: str, duration_s: float, insecure: bool, out: Path,
+             extra: list[str]) -> dict[str, object]:
     cmd = [str(ROOT / ".venv" / "bin" / "enclose"), "run", case, "--duration", str(duration_s),
-           "--no-live", "--no-figures", "--out", str(out)]
+           "--no-live", "--no-figures", "--out", str(out), *extra]
     if insecure:
         cmd.append("--insecure")
     env = {**os.environ, ENV: "1"}
@@ -93,13 +96,14 @@ def show(label: str, rows: list[dict[str, float]]) -> None:
         print(f"  {k:14s} {statistics.median(vals):8.1f}  [{min(vals):7.1f} - {max(vals):7.1f}]")
 
 
-def main(case: str, duration_s: float, repeat: int, insecure: bool) -> int:
+def main(case: str, duration_s: float, repeat: int, insecure: bool,
+         extra: list[str]) -> int:
     per_run: list[dict[str, float]] = []
     per_run_targets: list[dict[str, float]] = []
     sims, recs, busy = [], [], []
     with tempfile.TemporaryDirectory(prefix="tick-cost-") as tmp:
         for k in range(repeat):
-            res = run_once(case, duration_s, insecure, Path(tmp) / f"run-{k}")
+            res = run_once(case, duration_s, insecure, Path(tmp) / f"run-{k}", extra)
             followers: list = res["followers"]  # type: ignore[assignment]
             if not followers:
                 print(f"run {k + 1}: no cost counters: {res['verdict']}", file=sys.stderr)
@@ -117,7 +121,7 @@ def main(case: str, duration_s: float, repeat: int, insecure: bool) -> int:
                   f"machine {load['machine_busy_pct']:.0f} % busy; {res['verdict']}",
                   flush=True)
     mode = "--insecure" if insecure else "secure"
-    print(f"\n{case}, {duration_s:g} s, {repeat} runs, {mode}; machine busy "
+    print(f"\n{case} {' '.join(extra)}, {duration_s:g} s, {repeat} runs, {mode}; machine busy "
           f"{min(busy):.0f}-{max(busy):.0f} %")
     show("follower (median follower of each run)", per_run)
     if per_run_targets:
@@ -136,5 +140,5 @@ if __name__ == "__main__":
     parser.add_argument("--duration", type=float, default=60.0)
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--insecure", action="store_true")
-    a = parser.parse_args()
-    sys.exit(main(a.case, a.duration, a.repeat, a.insecure))
+    a, passed_on = parser.parse_known_args()
+    sys.exit(main(a.case, a.duration, a.repeat, a.insecure, passed_on))
