@@ -258,6 +258,8 @@ class ImpairedBus(ClosingContext):
         self._degraders: dict[tuple[str, int], LinkImpairer] = {}
         # Every link into this receiver left alone: drains pass samples through, counted.
         self.identity = all(s.is_identity for s in specs) and not self.faults
+        # The inner bus's clock itself: a follower reads it ~20 times a tick.
+        self.now_s = bus.now_s  # type: ignore[method-assign]
 
     @property
     def impaired(self) -> bool:

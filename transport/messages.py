@@ -21,6 +21,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 from transport.bus import Clock
+from transport.fastbuild import build
 from transport.law_fields import LawFields
 
 Vec2 = tuple[float, float]
@@ -66,7 +67,9 @@ class Stamper:
 
     def header(self, stamp_s: float | None = None) -> Header:
         """Header for the next message; `stamp_s` overrides the clock (e.g. sim time)."""
-        head = Header(self.sender_id, self._seq, self._clock() if stamp_s is None else stamp_s)
+        # Built without the frozen __init__ (transport.fastbuild): one per message sent.
+        head = build(Header, {"sender_id": self.sender_id, "seq": self._seq,
+                              "stamp_s": self._clock() if stamp_s is None else stamp_s})
         self._seq += 1
         return head
 

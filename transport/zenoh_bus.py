@@ -196,6 +196,8 @@ class ZenohBus(BusBase):
         super().__init__()
         self.cfg = cfg
         self._clock = process_clock() if clock is None else clock  # transport.clock
+        # The clock itself (time.time unless skewed): read ~20 times a follower's tick.
+        self.now_s = self._clock  # type: ignore[method-assign]
         self.clock_sync: ClockSync | None = None
         self._owned: list[_Owned] = []
         # Read by Zenoh once per process, when its first session opens; yours wins if set.

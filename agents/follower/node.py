@@ -35,12 +35,13 @@ from transport.access import sender_ids
 from transport.bus import Bus, Congestion, Subscription
 from transport.codec import encode
 from transport.decoder import Decoder
+from transport.fastbuild import build
 from transport.impairment import ImpairedBus
 from transport.key_exprs import SwarmKeys
 from transport.law_fields import NO_FIELDS, LawFields
 from transport.link_stats import AgeHistogram, LinkDecoder
 from transport.message_checks import DEFAULT_LIMITS
-from transport.messages import FollowerState, RunControl, Stamper, TargetObservation, vec2
+from transport.messages import FollowerState, RunControl, Stamper, TargetObservation
 
 log = logging.getLogger("enclose.follower")
 ALTITUDE_GAIN_PER_S = 1.0
@@ -51,10 +52,6 @@ PEER_QUEUE = 8
 # A follower first running this long after the start joins a running swarm
 # (LawRunner.join); at the start all begin together from p~.
 JOIN_AFTER_S = 1.0
-
-
-def _xy(vec: complex) -> tuple[float, float]:
-    return (vec.real, vec.imag)
 
 
 class FollowerNode:
@@ -129,6 +126,7 @@ class FollowerNode:
             self.peer_subs[j] = self.bus.subscribe(self.keys.follower_state(j), PEER_QUEUE)
             if self.est_steps:
                 self.est_subs[j] = self.bus.subscribe(self.keys.follower_estimate(j), PEER_QUEUE)
+        self.drained = [*self.subs, *self.peer_subs.values(), *self.est_subs.values()]
 
     def tick(self, now_s: float) -> None:
         """The loop body: members, receive, the law, the command, publish."""
@@ -239,16 +237,17 @@ class FollowerNode:
         self.status.counters["members"] = len(members)  # as this follower sees the swarm
 
     def ingest(self) -> None:
-        for sub in [*self.subs, *self.peer_subs.values(), *self.est_subs.values()]:
+        for sub in self.drained:
             for inbound in self.decoder.drain(sub):
-                self._apply(inbound.message)
+                self._apply(inbound.message, inbound.received.recv_stamp_s)
 
-    def _apply(self, msg: object) -> None:
+    def _apply(self, msg: object, now_s: float) -> None:
+        """`msg`, taken off its queue at `now_s`."""
         if isinstance(msg, TargetObservation) and msg.observer_index == self.index:
             self.latest.observe(self.runner.setup, msg.target_index,
                                 complex(msg.pos_m[0], msg.pos_m[1]), msg.observed_stamp_s)
         elif isinstance(msg, FollowerState) and msg.index in self.peer_subs:
-            self.latest.receive(msg, self.bus.now_s())
+            self.latest.receive(msg, now_s)
         elif isinstance(msg, RunControl):
             if msg.command == "start":
                 self.start_s = msg.start_stamp_s
@@ -303,12 +302,16 @@ class FollowerNode:
             self.status.counters["states_not_published"] += 1
             return
         stamper = self.est_stamper if estimate else self.stamper
-        pos, vel = vec2(state.pos_enu_m[:2]), vec2(state.vel_enu_m_s[:2])
+        p, v = state.pos_enu_m, state.vel_enu_m_s
+        pos, vel = (float(p[0]), float(p[1])), (float(v[0]), float(v[1]))
         if self.liar.mode is not None:
             told = self.liar.apply(now_s, Published(r, dr, pos, vel, fields))
             r, dr, pos, vel, fields = told.r, told.dr, told.pos, told.vel, told.fields
-        msg = FollowerState(stamper.header(now_s), self.index, _xy(r), _xy(dr), pos, vel,
-                            _xy(u), state.stamp_s, fields)
+        # Built without the frozen __init__ (transport.fastbuild): one a tick.
+        msg = build(FollowerState, {
+            "header": stamper.header(now_s), "index": self.index, "r_m": (r.real, r.imag),
+            "dr_m_s": (dr.real, dr.imag), "pos_m": pos, "vel_m_s": vel,
+            "u_m_s": (u.real, u.imag), "vehicle_stamp_s": state.stamp_s, "law": fields})
         try:
             payload = encode(msg)
         except CodecError as exc:  # a law field not finite (the platform's fields are)
@@ -332,12 +335,12 @@ class FollowerNode:
         links = self.bus.counters() if isinstance(self.bus, ImpairedBus) else {}
         sent = self.stamper.next_seq + self.est_stamper.next_seq
         return {**self.decoder.counters(), **self.liveness.counters(), **ages, **links,
-                **self.latest.gate.counters, "states_sent": sent,
+                **self.latest.gate.all_counters(), "states_sent": sent,
                 "law_failures": self.runner.failures, "states_lied": self.liar.lies,
                 **self.cost.counters()}
 
     def close(self) -> None:
-        for sub in [*self.subs, *self.peer_subs.values(), *self.est_subs.values()]:
+        for sub in self.drained:
             sub.close()
         self.liveness.close()
         self.out.close()

@@ -118,7 +118,10 @@ class Plausibility:
         self.own = Own()
         self.origin_s: float | None = None  # the experiment's start: detection times
         self._tracks: dict[int, _Track] = {}
-        self.counters: Counter[str] = Counter()
+        self.counters: Counter[str] = Counter()  # refusals (`_count`)
+        # The largest value each check passed, metres: a float compared per check, turned
+        # into whole mm only when the status asks (`all_counters`).
+        self._largest = dict.fromkeys(REASONS, 0.0)
         self._excess = 0.0  # of the last check failed, for the log
 
     def check(self, sender: int, peer: Peer, now_s: float) -> str | None:
@@ -252,11 +255,16 @@ class Plausibility:
         if value > limit:
             self._excess = value - limit
             return True
-        key = _MAX_KEYS[check]
-        mm = round(value * 1000.0)
-        if mm > self.counters.get(key, 0):
-            self.counters[key] = mm
+        if value > self._largest[check]:
+            self._largest[check] = value
         return False
+
+    def all_counters(self) -> dict[str, int]:
+        """The refusals (`implausible_*`) and, per check that passed a value of 1 mm or
+        more, the largest (`plausible_max_mm_<check>`)."""
+        largest = {_MAX_KEYS[c]: mm for c, v in self._largest.items()
+                   if (mm := round(v * 1000.0)) > 0}
+        return {**self.counters, **largest}
 
     def _sums(self, sender: int, peer: Peer, now_s: float) -> dict[str, complex]:
         """Per odd field: its two ends' sum on our link, both carried to now_s."""

@@ -47,13 +47,14 @@ import agents.follower.main
 from agents.membership.follower_place import setup_for
 from agents.loading.scenario_file import load_scenario
 from transport.impairment import ImpairedBus
+from transport.memory_bus import MemoryBus, MemoryHub
 from transport.key_exprs import SwarmKeys
 from transport.link_stats import AgeHistogram
 for name in ("paper", "ring16"):
     s = load_scenario(name, whole_run=False)
     for i in range(s.n):
         setup_for(s, i, set(range(s.n)) - {(i + 1) % s.n})
-    bus = ImpairedBus(None, s.network, receiver=0)
+    bus = ImpairedBus(MemoryBus(MemoryHub(), "lean"), s.network, receiver=0)
     bus.impairer(bus.link(SwarmKeys("lean").follower_state(1)))
     ages = AgeHistogram()
     ages.add(0.01)
