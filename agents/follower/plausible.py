@@ -127,9 +127,7 @@ class Plausibility:
     def check(self, sender: int, peer: Peer, now_s: float) -> str | None:
         """None if `peer` (sender's newest message) is plausible, else why not (counted)."""
         track = self._tracks.get(sender)
-        heard = {"r": peer.r, **{n: v for n in self.odd
-                                 if isinstance(v := peer.fields.get(n), Sample)}}
-        d = self._sums(sender, peer, now_s)
+        heard, d = self._heard(sender, peer, now_s)
         if track is None:
             track = _Track(peer.r, -1e18, now_s, now_s, heard, d, {})
             self._tracks[sender] = track
@@ -225,7 +223,8 @@ class Plausibility:
             miss *= 2.0 * limit / size
         total = track.residual.get(key, 0j) * math.exp(-dt / tau_s) + miss
         track.residual[key] = total
-        return self._over(check, max(abs(total), size), limit)
+        summed = abs(total)
+        return self._over(check, summed if summed > size else size, limit)
 
     def _agrees(self, sender: int, track: _Track, peer: Peer, now_s: float) -> str | None:
         """The agreement and geometry checks."""
@@ -244,10 +243,16 @@ class Plausibility:
         other neighbours' latest ones, refused or not (heard within the hold): one liar
         cannot make two honest neighbours refuse each other; two liars around one
         follower can vouch for each other."""
-        refs = [] if self.own.r is None else [self.own.r.at(now_s)]
-        refs += [t.last["r"].at(now_s) for j, t in self._tracks.items()
-                 if j != sender and now_s - t.heard_s <= self.hold_s]
-        return min((abs(at - ref) for ref in refs), default=0.0)
+        nearest: float | None = None
+        if self.own.r is not None:
+            nearest = abs(at - self.own.r.at(now_s))
+        hold_s = self.hold_s
+        for j, t in self._tracks.items():
+            if j != sender and now_s - t.heard_s <= hold_s:
+                far = abs(at - t.last["r"].at(now_s))
+                if nearest is None or far < nearest:
+                    nearest = far
+        return 0.0 if nearest is None else nearest
 
     def _over(self, check: str, value: float, limit: float) -> bool:
         """True past `limit`; the largest value passed is kept (`plausible_max_mm_<check>`:
@@ -266,14 +271,20 @@ class Plausibility:
                    if (mm := round(v * 1000.0)) > 0}
         return {**self.counters, **largest}
 
-    def _sums(self, sender: int, peer: Peer, now_s: float) -> dict[str, complex]:
-        """Per odd field: its two ends' sum on our link, both carried to now_s."""
-        out = {}
+    def _heard(self, sender: int, peer: Peer,
+               now_s: float) -> tuple[dict[str, Sample], dict[str, complex]]:
+        """What is checked of `peer`: r and each odd field it holds, and per odd field its
+        two ends' sum on our link, both carried to now_s (one pass: every message)."""
+        heard, d = {"r": peer.r}, {}
+        fields, sums = peer.fields, self.own.sums
         for name in self.odd:
-            theirs, ours = peer.fields.get(name), self.own.sums.get(name, {}).get(sender)
-            if isinstance(theirs, Sample) and ours is not None:
-                out[name] = theirs.at(now_s) + ours.at(now_s)
-        return out
+            theirs = fields.get(name)
+            if isinstance(theirs, Sample):
+                heard[name] = theirs
+                ours = sums[name].get(sender) if name in sums else None
+                if ours is not None:
+                    d[name] = theirs.at(now_s) + ours.at(now_s)
+        return heard, d
 
     def _count(self, sender: int, why: str, now_s: float) -> None:
         c = self.counters
