@@ -1,7 +1,11 @@
 """What a wake-up and a Zenoh message cost this machine (issue 15: the floor of a big ring).
 
 Prints CPU per iteration (not wall time) of
-  1. a timed sleep of 1, 5 and 20 ms and its wake-up (the followers' Ticker);
+  1. a timed sleep of 1, 5 and 20 ms and its wake-up (the followers' Ticker), and what one
+     fixed piece of Python work costs back to back and right after each pause, a sleep or a
+     busy wait (a follower's tick is such work after a 20-ms pause): three FollowerStates
+     built, encoded and through a follower's receive path (decode, the transport's checks,
+     the link tallies: transport.link_stats.LinkDecoder);
   2. a pipe ping-pong between two busy processes (an event wake-up);
   3. zenoh-python `put` of a 160-byte payload at 200 Hz, to a subscriber in the same
      session and to one in another process over TCP on 127.0.0.1 (default transport and
@@ -17,8 +21,18 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 
 import zenoh
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from transport.access import sender_ids
+from transport.bus import Received
+from transport.codec import encode
+from transport.key_exprs import SwarmKeys
+from transport.link_stats import LinkDecoder
+from transport.message_checks import DEFAULT_LIMITS
+from transport.messages import FollowerState, Header
 
 PORT = 17_999
 PAYLOAD = b"x" * 160
@@ -30,6 +44,44 @@ def sleep_cost(period_s: float, n: int) -> float:
         nxt += period_s
         time.sleep(max(0.0, nxt - time.perf_counter()))
     return (time.process_time() - c0) / n
+
+
+def receive_work() -> Callable[[], None]:
+    """Three fresh FollowerStates through a follower's receive path, per call."""
+    keys, decoder, seq = SwarmKeys("wake"), LinkDecoder(limits=DEFAULT_LIMITS,
+                                                         senders=sender_ids(4, 2)), [0]
+    law = {"link_sums_m": ((0, 0.5, -0.25), (2, 0.1, 0.2)),
+           "link_rates_m_s": ((0, 0.01, 0.0), (2, -0.02, 0.01))}
+
+    def run() -> None:
+        now_s = time.time()
+        for j in (1, 2, 3):
+            msg = FollowerState(Header(f"follower-{j}", seq[0], now_s), j, (1.0, 2.0),
+                                (0.1, 0.2), (9.0, -3.0), (0.5, 0.5), (0.4, 0.6), now_s, law)
+            if decoder.decode(Received(keys.follower_state(j), encode(msg), now_s)) is None:
+                raise AssertionError(f"dropped: {decoder.dropped}")
+        seq[0] += 1
+    return run
+
+
+def cold_cost(work: Callable[[], None], pause_s: float, spin: bool, n: int) -> float:
+    """Median thread CPU of `work` right after a sleep (or a busy wait) of `pause_s`; back
+    to back when `pause_s` is 0."""
+    work()
+    used = []
+    for _ in range(n):
+        if pause_s <= 0.0:
+            pass
+        elif spin:
+            end = time.perf_counter() + pause_s
+            while time.perf_counter() < end:
+                pass
+        else:
+            time.sleep(pause_s)
+        t0 = time.thread_time_ns()
+        work()
+        used.append(time.thread_time_ns() - t0)
+    return sorted(used)[n // 2] * 1e-9
 
 
 def pipe_cost(n: int) -> tuple[float, float]:
@@ -128,6 +180,14 @@ def main() -> None:
         n = min(args.n, int(4.0 / period))
         print(f"timed sleep {period * 1e3:4.0f} ms + wake-up: {sleep_cost(period, n) * us:6.1f} "
               "us CPU per iteration", flush=True)
+    work, n = receive_work(), min(args.n, 200)
+    warm = cold_cost(work, 0.0, False, 4 * n)
+    print(f"3 states received, back to back:         {warm * us:6.1f} us", flush=True)
+    for period, spin in ((0.001, False), (0.005, False), (0.020, False), (0.020, True)):
+        cold = cold_cost(work, period, spin, n)
+        pause = "busy wait" if spin else "sleep"
+        print(f"3 states received after a {period * 1e3:2.0f}-ms {pause:9s}: {cold * us:6.1f} us "
+              f"({cold / warm:.1f}x)", flush=True)
     parent, child = pipe_cost(20 * args.n)
     print(f"pipe ping-pong, two busy processes: {parent * us:5.1f} + {child * us:5.1f} us CPU "
           "per round trip", flush=True)
