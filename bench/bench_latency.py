@@ -54,9 +54,10 @@ def ring_scenario(n: int, duration_s: float) -> str:
     return "\n".join(lines)
 
 
-def run_once(scenario: Path | str, duration_s: float, out: Path) -> dict[str, Any]:
+def run_once(scenario: Path | str, duration_s: float, out: Path,
+             extra: list[str]) -> dict[str, Any]:
     argv = [sys.executable, "-m", "deploy.cli", "run", str(scenario), "--duration",
-            str(duration_s), "--out", str(out), "--latency-stamps"]
+            str(duration_s), "--out", str(out), "--latency-stamps", *extra]
     code = subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                           check=False).returncode
     try:
@@ -89,7 +90,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--duration", type=float, default=20.0)
     parser.add_argument("--out", type=Path, default=Path("runs/bench-latency"))
-    args = parser.parse_args()
+    # Any other argument goes to `enclose run` (an A/B: `--zenoh-runtime split`).
+    args, extra = parser.parse_known_args()
     args.out.mkdir(parents=True, exist_ok=True)
     cases: list[tuple[str, Path | str, str]] = []  # label, scenario, run folder stem
     for n in args.sizes:
@@ -100,7 +102,7 @@ def main() -> None:
     for label, scenario, stem in cases:
         runs = []
         for k in range(args.repeats):
-            res = run_once(scenario, args.duration, (args.out / f"{stem}-{k}").resolve())
+            res = run_once(scenario, args.duration, (args.out / f"{stem}-{k}").resolve(), extra)
             print(f"== {label} run {k + 1} ({args.duration:g} s): {json.dumps(res)}", flush=True)
             runs.append(res)
         ok = [r for r in runs if r.get("followers_reporting")]
