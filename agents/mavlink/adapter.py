@@ -25,6 +25,7 @@ if TYPE_CHECKING:  # the follower's process runs without numpy (issue 15)
     import numpy as np
 from agents.frames import ned_to_enu_xyz
 from agents.mavlink import lean_common
+from agents.mavlink.fast_rx import LOCAL_POSITION_NED, FastRx
 from agents.mavlink.modes import (
     MAV_MODE_FLAG_SAFETY_ARMED,
     decode_custom_mode,
@@ -37,10 +38,10 @@ from agents.mavlink.udp import ANCILLARY_BYTES, bind_udp, kernel_drops
 from agents.mavlink.vehicle_types import NO_STATE, AdapterConfig, VehicleState
 from agents.mavlink.velocity_setpoint import velocity_fields
 from agents.mavlink.wire import (
+    Framer,
     MAVLinkMessage,
     decode_datagram,
     encode,
-    encode_fields,
     new_codec,
     sign_outgoing,
     signature_ok,
@@ -54,6 +55,9 @@ MAV_SEVERITY_WARNING = 4
 STATUSTEXT_KEPT = 20
 TIMESYNC_PERIOD_S = 0.25
 SETPOINT = lean_common.MAVLink_set_position_target_local_ned_message
+# What `handle` does more with than hear the vehicle: HEARTBEAT, GLOBAL_POSITION_INT,
+# COMMAND_ACK, TIMESYNC (of the types FastRx reads; LOCAL_POSITION_NED it reads itself).
+HANDLED_IDS = frozenset({0, 33, 77, 111})
 
 
 class MavlinkAdapter:
@@ -74,6 +78,8 @@ class MavlinkAdapter:
             self.tx = new_codec(cfg.own_sysid, cfg.own_compid, lean_common)
             sign_outgoing(self.tx, cfg.signing_key, cfg.signing_link_id,
                           signing_timestamp(time.time()))
+        self.setpoints = Framer(self.tx, SETPOINT)
+        self.fast = FastRx(self.mav, self.verifier, self.counters)
         self.gate = RxGate(f"vehicle {cfg.target_sysid or '?'} link", ADAPTER_BUDGET,
                            self.counters, self.verifier)
         self.sysid = cfg.target_sysid
@@ -154,10 +160,7 @@ class MavlinkAdapter:
                 break
             if anc and (dropped := kernel_drops(anc)) is not None:
                 self.counters["mav_kernel_drops"] = dropped
-            received = kernel_arrival_s(anc, time.time(), self.clock())
-            admitted = gate.admit(data, addr, received)
-            if admitted:
-                self._datagram(admitted, addr, received)
+            self._take(data, addr, kernel_arrival_s(anc, time.time(), self.clock()))
         if now - self._last_hb_tx_s >= HEARTBEAT_PERIOD_S and self.remote is not None:
             self._last_hb_tx_s = now
             self._send(self.mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER,
@@ -166,6 +169,41 @@ class MavlinkAdapter:
             self._last_ts_tx_s = now
             self._send(self.mav.timesync_encode(0, self.vclock.request(self.clock())))
         return self._update_link(now)
+
+    def _take(self, data: bytes, addr: Addr, received: float) -> None:
+        """A datagram off the socket: FastRx takes what it can judge, the gate's screen and
+        `_datagram` the rest (agents.mavlink.fast_rx: the same verdicts either way)."""
+        gate, rest, refused = self.gate, 0, None
+        if gate.fits(len(data)):
+            accepted, rest, refused = self.fast.scan(data)
+        if refused is not None:
+            gate.refuse(refused, addr)
+            return
+        if rest == 0:
+            admitted = gate.admit(data, addr, received)
+            if admitted:
+                self._datagram(admitted, addr, received)
+            return
+        gate.take(len(data))
+        for msg_id, sysid, compid, body in accepted:
+            try:
+                if msg_id == LOCAL_POSITION_NED:
+                    if self._from_vehicle(sysid, compid, received):
+                        self._position(body, received)
+                elif msg_id in HANDLED_IDS:  # at a few Hz: as a message object
+                    for msg in decode_datagram(self.mav, body).messages:
+                        self.handle(msg, addr, received)
+                else:
+                    self._from_vehicle(sysid, compid, received)
+            except Exception:  # a hostile or odd packet must not stop the follower
+                self._handler_error(msg_id)
+        if rest < len(data):
+            self._datagram(data[rest:], addr, received)
+
+    def _handler_error(self, kind: object) -> None:
+        self.counters["handler_errors"] += 1
+        if self.counters["handler_errors"] <= 5:
+            log.exception("vehicle %s: cannot handle %s", self.sysid, kind)
 
     def _datagram(self, data: bytes, addr: Addr, received: float) -> None:
         decoded = decode_datagram(self.mav, data)
@@ -178,9 +216,7 @@ class MavlinkAdapter:
             try:
                 self.handle(msg, addr, received)
             except Exception:  # a hostile or odd packet must not stop the follower
-                self.counters["handler_errors"] += 1
-                if self.counters["handler_errors"] <= 5:
-                    log.exception("vehicle %s: cannot handle %s", self.sysid, msg.get_type())
+                self._handler_error(msg.get_type())
 
     def wait_readable(self, timeout_s: float) -> None:
         """Block until a datagram is queued or timeout_s passes (start-up helpers only)."""
@@ -217,12 +253,10 @@ class MavlinkAdapter:
             if self._heartbeat(msg, addr):
                 self.heard_s = now
             return
-        if self.sysid is None or src != self.sysid or msg.get_srcComponent() != 1:
-            self.counters["ignored_other_system"] += 1
+        if not self._from_vehicle(src, msg.get_srcComponent(), now):
             return
-        self.heard_s = now
         if kind == "LOCAL_POSITION_NED":
-            self._local_position(msg, now)
+            self._position((msg.time_boot_ms, msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz), now)
         elif kind == "TIMESYNC":
             self._timesync(msg, now)
         elif kind == "COMMAND_ACK":
@@ -268,15 +302,25 @@ class MavlinkAdapter:
         self._state = replace(self._state, armed=self._armed, mode=self._mode)
         return True
 
-    def _local_position(self, msg: MAVLinkMessage, now: float) -> None:
-        x, y, z, vx, vy, vz = msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz
+    def _from_vehicle(self, sysid: int, compid: int, now: float) -> bool:
+        """Whether a message other than a HEARTBEAT is our vehicle's (then it is heard)."""
+        if self.sysid is None or sysid != self.sysid or compid != 1:
+            self.counters["ignored_other_system"] += 1
+            return False
+        self.heard_s = now
+        return True
+
+    def _position(self, fields: tuple[int, float, float, float, float, float, float],
+                  now: float) -> None:
+        """LOCAL_POSITION_NED's fields in wire order: time_boot_ms, x, y, z, vx, vy, vz."""
+        boot_ms, x, y, z, vx, vy, vz = fields
         if not math.isfinite(x + y + z + vx + vy + vz):  # any NaN or inf makes the sum so
             self.counters["ignored_nonfinite"] += 1
             return
         # The link is judged by when we read telemetry (as before arrival stamps): only
         # the sample's own stamp needs its true arrival time.
         self._last_rx_s = max(now, self._poll_s)
-        stamp = self.vclock.map.stamp(msg.time_boot_ms * 1e-3, now)
+        stamp = self.vclock.map.stamp(boot_ms * 1e-3, now)
         self._state = VehicleState(ned_to_enu_xyz(x, y, z), ned_to_enu_xyz(vx, vy, vz), stamp,
                                    self._armed, self._mode, True)
 
@@ -304,7 +348,7 @@ class MavlinkAdapter:
         if self.sysid is None or self.remote is None:
             self.counters["refused_not_connected"] += 1
             return False
-        self._send_bytes(encode_fields(self.tx, SETPOINT, *fields))
+        self._send_bytes(self.setpoints.frame(*fields))
         self.counters["setpoints_sent"] += 1
         return True
 
@@ -325,7 +369,7 @@ class MavlinkAdapter:
             return
         self._send_bytes(encode(self.tx, msg))
 
-    def _send_bytes(self, data: bytes) -> None:
+    def _send_bytes(self, data: bytes | bytearray) -> None:
         if self.sock is None or self.remote is None:
             self.counters["tx_dropped"] += 1
             return

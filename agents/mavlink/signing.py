@@ -242,13 +242,32 @@ class SignatureVerifier:
             if not commit:
                 self._good_sig = (signed_part, sig)
         else:
-            return "wrong_key" if self._other_vehicles_key(signed_part, sig,
-                                                           link_id) else "bad_signature"
-        stamp = int.from_bytes(frame[-12:-6], "little")
+            return self._signature_reason(signed_part, sig, link_id)
+        return self._stream_reason((link_id, sysid, compid),
+                                   int.from_bytes(frame[-12:-6], "little"), commit)
+
+    def accept(self, link_id: int, sysid: int, compid: int, stamp: int) -> str | None:
+        """`check` of a signed frame whose signature the caller found good under `key`
+        (agents.mavlink.fast_rx): the stream checks, the stream moved on success, counted."""
+        reason = self._stream_reason((link_id, sysid, compid), stamp, True)
+        self.counters["accepted_signed" if reason is None else f"rejected_{reason}"] += 1
+        return reason
+
+    def refuse_signature(self, signed_part: bytes, sig: bytes, link_id: int) -> str:
+        """`check`'s reason for a signed frame whose signature failed `key`, counted."""
+        reason = self._signature_reason(signed_part, sig, link_id)
+        self.counters[f"rejected_{reason}"] += 1
+        return reason
+
+    def _signature_reason(self, signed_part: bytes, sig: bytes, link_id: int) -> str:
+        return "wrong_key" if self._other_vehicles_key(signed_part, sig,
+                                                       link_id) else "bad_signature"
+
+    def _stream_reason(self, stream: tuple[int, int, int], stamp: int,
+                       commit: bool) -> str | None:
         wall = signing_timestamp(self.clock())
         if stamp > wall + FUTURE_LIMIT:
             return "future"
-        stream = (link_id, sysid, compid)
         last = self.streams.get(stream)
         if last is not None and stamp <= last:
             return "replay"
