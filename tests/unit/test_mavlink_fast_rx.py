@@ -51,7 +51,7 @@ def build(cls: Any, payload: bytes, sysid: int, compid: int, stamp: int | None,
     frame = body + mcrf4xx(body[1:] + bytes((cls.crc_extra,)), 0xFFFF).to_bytes(2, "little")
     if not signed:
         return frame
-    frame += bytes((link,)) + stamp.to_bytes(6, "little")
+    frame += bytes((link,)) + int(stamp).to_bytes(6, "little")
     return frame + signature(key, frame)
 
 
