@@ -45,13 +45,12 @@ def build(cls: Any, payload: bytes, sysid: int, compid: int, stamp: int | None,
           key: bytes = KEY, link: int = 0, flags: int = 0) -> bytes:
     """A MAVLink 2 frame of `cls` around `payload`, signed with `key` at `stamp` (unsigned
     when None), with a good CRC."""
-    signed = stamp is not None
-    body = HEADER_V2.pack(0xFD, len(payload), flags | signed, 0, 7, sysid, compid,
+    body = HEADER_V2.pack(0xFD, len(payload), flags | (stamp is not None), 0, 7, sysid, compid,
                           cls.id & 0xFFFF, cls.id >> 16) + payload
     frame = body + mcrf4xx(body[1:] + bytes((cls.crc_extra,)), 0xFFFF).to_bytes(2, "little")
-    if not signed:
+    if stamp is None:
         return frame
-    frame += bytes((link,)) + int(stamp).to_bytes(6, "little")
+    frame += bytes((link,)) + stamp.to_bytes(6, "little")
     return frame + signature(key, frame)
 
 
