@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import logging
 import math
+import select
 import selectors
 import socket
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from errors import LinkLostError, MavlinkError
@@ -33,7 +33,7 @@ from agents.mavlink.modes import (
 )
 from agents.mavlink.rx_gate import ADAPTER_BUDGET, RxGate
 from agents.mavlink.signing import SignatureVerifier, signing_timestamp
-from agents.mavlink.timemap import VehicleClock, kernel_arrival_s
+from agents.mavlink.timemap import SO_TIMESTAMPNS, VehicleClock, kernel_arrival_s
 from agents.mavlink.udp import ANCILLARY_BYTES, bind_udp, kernel_drops
 from agents.mavlink.vehicle_types import NO_STATE, AdapterConfig, VehicleState
 from agents.mavlink.velocity_setpoint import velocity_fields
@@ -78,7 +78,10 @@ class MavlinkAdapter:
             self.tx = new_codec(cfg.own_sysid, cfg.own_compid, lean_common)
             sign_outgoing(self.tx, cfg.signing_key, cfg.signing_link_id,
                           signing_timestamp(time.time()))
+        # What is sent at rate, framed in one pass (wire.Framer); fields in wire order.
         self.setpoints = Framer(self.tx, SETPOINT)
+        self.heartbeats = Framer(self.tx, lean_common.MAVLink_heartbeat_message)
+        self.timesyncs = Framer(self.tx, lean_common.MAVLink_timesync_message)
         self.fast = FastRx(self.mav, self.verifier, self.counters)
         self.gate = RxGate(f"vehicle {cfg.target_sysid or '?'} link", ADAPTER_BUDGET,
                            self.counters, self.verifier)
@@ -102,6 +105,7 @@ class MavlinkAdapter:
         self._t0 = clock()
         self.sock: socket.socket | None = None
         self._selector: selectors.BaseSelector | None = None
+        self._probe: select.poll | None = None
         # Called while a blocking start-up helper waits: a process re-arming its vehicle
         # mid-run keeps its status heartbeat going (agents.shell.vehicle_loop).
         self.on_wait: Callable[[], None] | None = None
@@ -112,12 +116,15 @@ class MavlinkAdapter:
                              self.remote if self.cfg.connect else None)
         self._selector = selectors.DefaultSelector()
         self._selector.register(self.sock, selectors.EVENT_READ)
+        self._probe = select.poll()
+        self._probe.register(self.sock, select.POLLIN)
         return self
 
     def close(self) -> None:
         if self._selector is not None:
             self._selector.close()
             self._selector = None
+        self._probe = None
         if self.sock is not None:
             self.sock.close()
             self.sock = None
@@ -147,6 +154,7 @@ class MavlinkAdapter:
         carried = gate.new_tick()
         if carried is not None and carried[1] is not None:  # last tick had no room for it
             self._datagram(carried[0], carried[1], carried[2])
+        probe = self._probe
         while self.sock is not None and gate.open:
             try:
                 data, anc, _flags, addr = self.sock.recvmsg(65535, ANCILLARY_BYTES)
@@ -158,16 +166,22 @@ class MavlinkAdapter:
             except OSError:
                 self.counters["rx_errors"] += 1
                 break
-            if anc and (dropped := kernel_drops(anc)) is not None:
+            # A drop count comes only after drops, beside the arrival stamp.
+            if anc and (len(anc) > 1 or anc[0][1] != SO_TIMESTAMPNS) and \
+                    (dropped := kernel_drops(anc)) is not None:
                 self.counters["mav_kernel_drops"] = dropped
             self._take(data, addr, kernel_arrival_s(anc, time.time(), self.clock()))
+            # Stop when the socket is empty: a zero-timeout poll is cheaper than the
+            # exception of a read that finds nothing.
+            if probe is not None and not probe.poll(0):
+                break
         if now - self._last_hb_tx_s >= HEARTBEAT_PERIOD_S and self.remote is not None:
             self._last_hb_tx_s = now
-            self._send(self.mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER,
-                                                 MAV_AUTOPILOT_INVALID, 0, 0, 4))
+            self._send_framed(self.heartbeats, 0, MAV_TYPE_ONBOARD_CONTROLLER,
+                              MAV_AUTOPILOT_INVALID, 0, 4, 3)
         if now - self._last_ts_tx_s >= TIMESYNC_PERIOD_S and self.sysid is not None:
             self._last_ts_tx_s = now
-            self._send(self.mav.timesync_encode(0, self.vclock.request(self.clock())))
+            self._send_framed(self.timesyncs, 0, self.vclock.request(self.clock()))
         return self._update_link(now)
 
     def _take(self, data: bytes, addr: Addr, received: float) -> None:
@@ -242,7 +256,7 @@ class MavlinkAdapter:
                 log.warning("link to vehicle %s lost: no telemetry for %.2f s", self.sysid,
                             self.cfg.link_timeout_s)
         if ok != self._state.link_ok:
-            self._state = replace(self._state, link_ok=ok)
+            self._state = self._state._replace(link_ok=ok)
         return self._state
 
     def handle(self, msg: MAVLinkMessage, addr: Addr, now: float) -> None:
@@ -299,7 +313,7 @@ class MavlinkAdapter:
         self.remote = addr
         self._armed = bool(msg.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
         self._mode = decode_custom_mode(flavour, msg.custom_mode)
-        self._state = replace(self._state, armed=self._armed, mode=self._mode)
+        self._state = self._state._replace(armed=self._armed, mode=self._mode)
         return True
 
     def _from_vehicle(self, sysid: int, compid: int, now: float) -> bool:
@@ -328,7 +342,7 @@ class MavlinkAdapter:
     def _timesync(self, msg: MAVLinkMessage, now: float) -> None:
         """Answer the vehicle's requests (our clock, ns); fold replies to ours into the map."""
         if msg.tc1 == 0:
-            self._send(self.mav.timesync_encode(round(self.clock() * 1e9), msg.ts1))
+            self._send_framed(self.timesyncs, round(self.clock() * 1e9), msg.ts1)
             self.counters["timesync_answered"] += 1
         else:
             self.vclock.reply(msg.tc1, msg.ts1, now)
@@ -368,6 +382,13 @@ class MavlinkAdapter:
             self.counters["tx_dropped"] += 1
             return
         self._send_bytes(encode(self.tx, msg))
+
+    def _send_framed(self, framer: Framer, *fields: float) -> None:
+        """`fields` (wire order) framed by `framer` and sent, as `_send` sends a message."""
+        if self.sock is None or self.remote is None:
+            self.counters["tx_dropped"] += 1
+            return
+        self._send_bytes(framer.frame(*fields))
 
     def _send_bytes(self, data: bytes | bytearray) -> None:
         if self.sock is None or self.remote is None:

@@ -249,7 +249,17 @@ class SignatureVerifier:
     def accept(self, link_id: int, sysid: int, compid: int, stamp: int) -> str | None:
         """`check` of a signed frame whose signature the caller found good under `key`
         (agents.mavlink.fast_rx): the stream checks, the stream moved on success, counted."""
-        reason = self._stream_reason((link_id, sysid, compid), stamp, True)
+        stream, streams = (link_id, sysid, compid), self.streams
+        last = streams.get(stream)
+        # The common case inline (`_stream_reason`, `_remember`): a known stream moving on.
+        if last is not None and last < stamp <= signing_timestamp(self.clock()) + FUTURE_LIMIT:
+            del streams[stream]
+            streams[stream] = stamp
+            if stamp > self.latest:
+                self.latest = stamp
+            self.counters["accepted_signed"] += 1
+            return None
+        reason = self._stream_reason(stream, stamp, True)
         self.counters["accepted_signed" if reason is None else f"rejected_{reason}"] += 1
         return reason
 

@@ -153,15 +153,13 @@ _TAIL = struct.Struct("<HBQ")  # CRC, link id, timestamp (6 bytes; the signature
 class Framer:
     """Frames messages of one type as the next packets of `mav`'s stream, in one pass:
     header and payload packed by one struct into a reused buffer, CRC, signature block
-    and signature written into it.  The same bytes as `encode_fields` (which it falls
-    back to for a payload MAVLink 2 would cut: a zero last byte); for the message a
-    follower sends every tick.  A frame is the framer's buffer until its next call."""
+    and signature written into it.  The same bytes as `encode_fields`, for the messages
+    an agent sends at rate.  A frame is the framer's buffer until its next call."""
 
-    __slots__ = ("buf", "cls", "crc", "crc_at", "extra", "mav", "msg_id", "packer", "view")
+    __slots__ = ("buf", "crc", "crc_at", "extra", "mav", "msg_id", "packer", "view")
 
     def __init__(self, mav: Codec, msg_cls: type[MAVLinkMessage]) -> None:
-        self.mav, self.cls = mav, msg_cls
-        self.msg_id, self.extra = msg_cls.id, msg_cls.crc_extra
+        self.mav, self.msg_id, self.extra = mav, msg_cls.id, msg_cls.crc_extra
         self.crc = dialect_tables(mav).crc
         self.packer = struct.Struct(_HEADER_V2.format + msg_cls.unpacker.format.lstrip("<"))
         self.crc_at = self.packer.size
@@ -170,29 +168,29 @@ class Framer:
 
     def frame(self, *fields: float) -> bytes | bytearray:
         """The next packet of `fields` (in wire order, `ordered_fieldnames`)."""
-        mav, buf, crc_at, msg_id = self.mav, self.buf, self.crc_at, self.msg_id
+        mav, buf, view, end, msg_id = self.mav, self.buf, self.view, self.crc_at, self.msg_id
         signing = mav.signing
         signed = signing.sign_outgoing
-        seq = mav.seq
-        self.packer.pack_into(buf, 0, STX_V2, crc_at - 10, 1 if signed else 0, 0, seq,
+        self.packer.pack_into(buf, 0, STX_V2, end - 10, 1 if signed else 0, 0, mav.seq,
                               mav.srcSystem, mav.srcComponent, msg_id & 0xFFFF, msg_id >> 16,
                               *fields)
-        if not buf[crc_at - 1]:
-            return encode_fields(mav, self.cls, *fields)
-        mav.seq = (seq + 1) & 0xFF
+        mav.seq = (mav.seq + 1) & 0xFF
+        if not buf[end - 1]:  # MAVLink 2 cuts a payload's trailing zeros, keeping one byte
+            end = max(11, 10 + len(bytes(view[10:end]).rstrip(b"\0")))
+            buf[1] = end - 10
         # CRC-16/MCRF4XX of the frame from its length byte, then the CRC extra: the extra
         # stands in the CRC's place for one call, overwritten by the CRC.
-        buf[crc_at] = self.extra
-        crc = self.crc(self.view[1:crc_at + 1], 0xFFFF)
+        buf[end] = self.extra
+        crc = self.crc(view[1:end + 1], 0xFFFF)
         if not signed:
-            return bytes(self.view[:crc_at]) + crc.to_bytes(2, "little")
+            return bytes(view[:end]) + crc.to_bytes(2, "little")
         # The stream's timestamp kept on the wall clock (_advance_signing_clock).
         stamp = int((time.time() - EPOCH_2015_S) * TICKS_PER_S)
         if stamp < signing.timestamp:
             stamp = signing.timestamp
         signing.timestamp = stamp + 1
-        _TAIL.pack_into(buf, crc_at, crc, signing.link_id, stamp)
+        _TAIL.pack_into(buf, end, crc, signing.link_id, stamp)
         digest = keyed_sha256(signing.secret_key).copy()
-        digest.update(self.view[:crc_at + 9])
-        buf[crc_at + 9:] = digest.digest()[:6]
-        return buf
+        digest.update(view[:end + 9])
+        buf[end + 9:end + 15] = digest.digest()[:6]
+        return buf if end == self.crc_at else bytes(view[:end + 15])
