@@ -24,7 +24,7 @@ from pymavlink.dialects.v20.common import mcrf4xx
 from agents.mavlink import lean_common
 from agents.mavlink.adapter import SETPOINT, AdapterConfig, MavlinkAdapter
 from agents.mavlink.rx_gate import RxBudget
-from agents.mavlink.signing import TICKS_PER_S, signature, signing_timestamp
+from agents.mavlink.signing import TICKS_PER_S, SignatureVerifier, signature, signing_timestamp
 from agents.mavlink.wire import Framer, encode_fields, new_codec, sign_outgoing
 
 pytestmark = pytest.mark.timeout(180)
@@ -218,3 +218,28 @@ def test_framer_packs_the_bytes_encode_fields_packs(
     for cls, fields in sent:
         assert bytes(framers[cls].frame(*fields)) == encode_fields(theirs, cls, *fields)
     assert ours.seq == theirs.seq and ours.signing.timestamp == theirs.signing.timestamp
+
+
+@SETTINGS
+@given(st.lists(st.tuples(st.integers(0, 2), st.integers(1, 3), st.integers(0, 1),
+                          st.integers(-70 * TICKS_PER_S, 7 * TICKS_PER_S), st.booleans()),
+                min_size=1, max_size=30),
+       st.integers(1, 3))
+def test_accept_and_refuse_give_check_s_verdicts_and_streams(
+        frames_sent: list[tuple[int, int, int, int, bool]], max_streams: int) -> None:
+    """The verifier's halves FastRx calls, against `check` of the same frames: verdicts,
+    counters, the stream table in its order, evictions (a table of 1 to 3 streams)."""
+    cls = lean_common.MAVLink_attitude_message
+    ours, theirs = (SignatureVerifier(KEY, clock=lambda: NOW_S, allowed_unsigned=frozenset(),
+                                      max_streams=max_streams) for _ in range(2))
+    for link, sysid, compid, offset, good in frames_sent:
+        data = build(cls, bytes(cls.unpacker.size), sysid, compid, NOW + offset,
+                     KEY if good else OTHER_KEY, link)
+        if good:
+            verdict = ours.accept(link, sysid, compid, NOW + offset)
+        else:
+            verdict = ours.refuse_signature(data[:-6], data[-6:], link)
+        assert verdict == theirs.check(data, cls.id, sysid, compid)
+        assert (list(ours.streams.items()), ours.latest, ours.evicted_floor, ours.counters) \
+            == (list(theirs.streams.items()), theirs.latest, theirs.evicted_floor,
+                theirs.counters)
