@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import logging
 import math
-import select
 import selectors
 import socket
 import time
@@ -78,7 +77,6 @@ class MavlinkAdapter(VehicleMessages):
         self._t0 = clock()
         self.sock: socket.socket | None = None
         self._selector: selectors.BaseSelector | None = None
-        self._probe: select.poll | None = None
         # Called while a blocking start-up helper waits: a process re-arming its vehicle
         # mid-run keeps its status heartbeat going (agents.shell.vehicle_loop).
         self.on_wait: Callable[[], None] | None = None
@@ -89,15 +87,12 @@ class MavlinkAdapter(VehicleMessages):
                              self.remote if self.cfg.connect else None)
         self._selector = selectors.DefaultSelector()
         self._selector.register(self.sock, selectors.EVENT_READ)
-        self._probe = select.poll()
-        self._probe.register(self.sock, select.POLLIN)
         return self
 
     def close(self) -> None:
         if self._selector is not None:
             self._selector.close()
             self._selector = None
-        self._probe = None
         if self.sock is not None:
             self.sock.close()
             self.sock = None
@@ -118,7 +113,6 @@ class MavlinkAdapter(VehicleMessages):
         carried = gate.new_tick()
         if carried is not None and carried[1] is not None:  # last tick had no room for it
             self._datagram(carried[0], carried[1], carried[2])
-        probe = self._probe
         while self.sock is not None and gate.open:
             try:
                 data, anc, _flags, addr = self.sock.recvmsg(65535, ANCILLARY_BYTES)
@@ -135,10 +129,6 @@ class MavlinkAdapter(VehicleMessages):
                     (dropped := kernel_drops(anc)) is not None:
                 self.counters["mav_kernel_drops"] = dropped
             self._take(data, addr, kernel_arrival_s(anc, time.time(), self.clock()))
-            # Stop when the socket is empty: a zero-timeout poll is cheaper than the
-            # exception of a read that finds nothing.
-            if probe is not None and not probe.poll(0):
-                break
         if now - self._last_hb_tx_s >= HEARTBEAT_PERIOD_S and self.remote is not None:
             self._last_hb_tx_s = now
             self._send_framed(self.heartbeats, 0, MAV_TYPE_ONBOARD_CONTROLLER,
@@ -246,7 +236,7 @@ class MavlinkAdapter(VehicleMessages):
             return
         self._send_bytes(framer.frame(*fields))
 
-    def _send_bytes(self, data: bytes | bytearray) -> None:
+    def _send_bytes(self, data: bytes) -> None:
         if self.sock is None or self.remote is None:
             self.counters["tx_dropped"] += 1
             return
