@@ -3,16 +3,19 @@
 Measured with process_time (CPU of this process only, less disturbed by other load):
 - parse: one signed datagram of LOCAL_POSITION_NED / SET_POSITION_TARGET_LOCAL_NED through
   `decode_datagram` and through pymavlink's own parser (the path before issue 15);
-- receive: the same plus the signature check (`signature_ok`), as the adapter does it;
+- receive: the same plus the signature check (`signature_ok`), as the adapter did it, and
+  the adapter's one pass (`FastRx.scan`, issue 50: header, CRC, signature, stream check);
 - setpoint send: `MavlinkAdapter.send_velocity_enu` (signed, sent over loopback UDP);
 - follower tick: `poll()` (what one simulated vehicle sent in a tick) + one setpoint;
+- follower tick, cold: the same with the caches a 50-Hz loop sees (issue 50): the vehicle
+  simulated in another process, 20 ms asleep between ticks; CPU of the loop's thread;
 - telemetry: one vehicle's `VehicleEndpoint.telemetry` per tick (signed, the streams a
   follower leaves at their defaults and with ATTITUDE/GLOBAL_POSITION_INT at 4 Hz);
 - simulator: `Simulator.step_once` with N signed vehicles flying offboard, each sent one
   setpoint per tick over UDP, telemetry drained outside the timed part: the median tick's
   CPU per vehicle (receive, autopilot, model, telemetry; not the Zenoh sensor publisher).
 
-    python bench/bench_mavlink_path.py [--vehicles 16] [--ticks 500]
+    python bench/bench_mavlink_path.py [--vehicles 16] [--ticks 500] [--cold-s 10]
 Runs against whichever `agents`/`sim_backend` are first on sys.path (PYTHONPATH=<other
 checkout> measures another version with the same script).
 """
@@ -21,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import multiprocessing
 import os
 import socket
 import statistics
@@ -28,6 +32,7 @@ import sys
 import time
 from collections import Counter
 from collections.abc import Callable
+from multiprocessing.connection import Connection
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -37,6 +42,11 @@ from agents.mavlink.signing import SignatureVerifier, signing_timestamp
 from agents.mavlink.wire import decode_datagram, encode, new_codec, sign_outgoing, signature_ok
 from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
+
+try:  # absent before issue 50: measuring an older checkout leaves its row out
+    from agents.mavlink.fast_rx import FastRx
+except ImportError:
+    FastRx = None  # type: ignore[assignment,misc]
 
 KEY = bytes(range(1, 33))
 HOST = "127.0.0.1"
@@ -82,14 +92,27 @@ def checked_receive(rx: mavlink2.MAVLink, data: bytes) -> Callable[[], None]:
     return receive
 
 
+def one_pass(rx: mavlink2.MAVLink, data: bytes) -> Callable[[], None]:
+    """FastRx.scan as the adapter reads (the same frame: its stream forgotten each time)."""
+    verifier = SignatureVerifier(KEY, allowed_unsigned=frozenset())
+    fast = FastRx(rx, verifier, Counter())
+
+    def receive() -> None:
+        verifier.streams.clear()
+        fast.scan(data)
+    return receive
+
+
 def bench_parse(calls: int) -> None:
     rx = new_codec(2, 1)
     for name, data in signed_frames().items():
         ours = per_call_us(functools.partial(decode_datagram, rx, data), calls)
         theirs = per_call_us(functools.partial(pymavlink_parse, rx, data), calls)
         checked = per_call_us(checked_receive(rx, data), calls)
+        fast = "" if FastRx is None else \
+            f", in one pass {per_call_us(one_pass(rx, data), calls):6.2f} us"
         print(f"parse {name:<30} ours {ours:6.2f} us  pymavlink {theirs:6.2f} us  "
-              f"(x{theirs / ours:.1f});  with signature check {checked:6.2f} us")
+              f"(x{theirs / ours:.1f});  with signature check {checked:6.2f} us{fast}")
 
 
 def bench_send(calls: int) -> None:
@@ -246,12 +269,61 @@ def bench_follower_tick(ticks: int) -> None:
               f"{statistics.median(cpu) * 1e6:6.1f} us median (link ok: {ok})")
 
 
+def simulate(port: int, seconds: float, ready: Connection) -> None:
+    """One signed vehicle stepped at 50 Hz, its telemetry to `port` (ATT, GPI at 4 Hz)."""
+    sim = new_sim(1)
+    ep = sim.endpoints[0]
+    ep.default_dest = (HOST, port)
+    ep.intervals[30] = ep.intervals[33] = 0.25
+    ready.send(sim.listen_ports()[0])
+    t = time.monotonic()
+    end = t + seconds
+    while t < end:
+        sim.step_once()
+        t += 0.02
+        time.sleep(max(0.0, t - time.monotonic()))
+    sim.close()
+
+
+def bench_follower_cold(seconds: float) -> None:
+    """poll() and one setpoint per 20-ms tick, the vehicle in another process: the caches
+    a follower's loop sees.  Thread CPU per tick, median and mean (rare ticks count)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind((HOST, 0))
+        port = probe.getsockname()[1]
+    ours, theirs = multiprocessing.Pipe()
+    sim = multiprocessing.Process(target=simulate, args=(port, seconds + 2.0, theirs))
+    sim.start()
+    cfg = AdapterConfig(local_port=port, remote_port=ours.recv(), target_sysid=1,
+                        signing_key=KEY)
+    cpu_in, cpu_out = [], []
+    with MavlinkAdapter(cfg) as ad:
+        t = time.monotonic()
+        for k in range(int(seconds * 50)):
+            t += 0.02
+            time.sleep(max(0.0, t - time.monotonic()))
+            a = time.thread_time_ns()
+            ad.poll()
+            b = time.thread_time_ns()
+            ad.send_velocity_enu((0.5, -0.25, 0.0))
+            if k >= 100:  # after start-up
+                cpu_in.append((b - a) * 1e-3)
+                cpu_out.append((time.thread_time_ns() - b) * 1e-3)
+        ok = ad.state.link_ok
+    sim.join()
+    print(f"follower MAVLink work per tick, cold (a 50-Hz loop, ATT+GPI at 4 Hz, signed): "
+          f"poll {statistics.median(cpu_in):5.1f} us median {statistics.mean(cpu_in):5.1f} "
+          f"mean, setpoint {statistics.median(cpu_out):5.1f} / {statistics.mean(cpu_out):5.1f}"
+          f" us (link ok: {ok})")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--vehicles", type=int, default=16)
     parser.add_argument("--ticks", type=int, default=500)
     parser.add_argument("--calls", type=int, default=20000)
+    parser.add_argument("--cold-s", type=float, default=10.0)
     args = parser.parse_args()
     load = os.getloadavg()[0]
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load average {load:.1f}")
@@ -259,6 +331,8 @@ def main() -> int:
     bench_send(args.calls // 4)
     bench_telemetry(args.calls // 4)
     bench_follower_tick(args.ticks)
+    if args.cold_s > 0:
+        bench_follower_cold(args.cold_s)
     bench_simulator(args.vehicles, args.ticks, False)
     bench_simulator(args.vehicles, args.ticks, True)
     return 0

@@ -14,55 +14,45 @@ import math
 import selectors
 import socket
 import time
-from collections import Counter
 from collections.abc import Callable
-from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from errors import LinkLostError, MavlinkError
 
 if TYPE_CHECKING:  # the follower's process runs without numpy (issue 15)
     import numpy as np
-from agents.frames import ned_to_enu_xyz
 from agents.mavlink import lean_common
-from agents.mavlink.modes import (
-    MAV_MODE_FLAG_SAFETY_ARMED,
-    decode_custom_mode,
-    flavour_of_autopilot,
-)
+from agents.mavlink.fast_rx import FastRx
 from agents.mavlink.rx_gate import ADAPTER_BUDGET, RxGate
 from agents.mavlink.signing import SignatureVerifier, signing_timestamp
-from agents.mavlink.timemap import VehicleClock, kernel_arrival_s
+from agents.mavlink.timemap import SO_TIMESTAMPNS, kernel_arrival_s
 from agents.mavlink.udp import ANCILLARY_BYTES, bind_udp, kernel_drops
-from agents.mavlink.vehicle_types import NO_STATE, AdapterConfig, VehicleState
+from agents.mavlink.vehicle_messages import Addr, VehicleMessages
+from agents.mavlink.vehicle_types import AdapterConfig, VehicleState
 from agents.mavlink.velocity_setpoint import velocity_fields
 from agents.mavlink.wire import (
+    Framer,
     MAVLinkMessage,
     decode_datagram,
     encode,
-    encode_fields,
     new_codec,
     sign_outgoing,
     signature_ok,
 )
 
+__all__ = ["AdapterConfig", "MavlinkAdapter", "VehicleState"]  # as imported from here
 log = logging.getLogger(__name__)
-Addr = tuple[str, int]
 MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID = 18, 8
 HEARTBEAT_PERIOD_S = 1.0
-MAV_SEVERITY_WARNING = 4
-STATUSTEXT_KEPT = 20
 TIMESYNC_PERIOD_S = 0.25
 SETPOINT = lean_common.MAVLink_set_position_target_local_ned_message
 
 
-class MavlinkAdapter:
+class MavlinkAdapter(VehicleMessages):
     """Talks to one autopilot; never blocks except in `wait_readable`."""
 
     def __init__(self, cfg: AdapterConfig, clock: Callable[[], float] = time.monotonic) -> None:
-        self.cfg = cfg
-        self.clock = clock
-        self.counters: Counter[str] = Counter()
+        super().__init__(cfg, clock)
         # The lean dialect: the types we use and a real autopilot streams at rate, not
         # common's hundreds (~4.8 MB a process); the rest count as unknown_types.
         self.mav = new_codec(cfg.own_sysid, cfg.own_compid, lean_common)
@@ -74,25 +64,16 @@ class MavlinkAdapter:
             self.tx = new_codec(cfg.own_sysid, cfg.own_compid, lean_common)
             sign_outgoing(self.tx, cfg.signing_key, cfg.signing_link_id,
                           signing_timestamp(time.time()))
+        # What is sent at rate, framed in one pass (wire.Framer); fields in wire order.
+        self.setpoints = Framer(self.tx, SETPOINT)
+        self.heartbeats = Framer(self.tx, lean_common.MAVLink_heartbeat_message)
+        self.timesyncs = Framer(self.tx, lean_common.MAVLink_timesync_message)
+        self.fast = FastRx(self.mav, self.verifier, self.counters)
         self.gate = RxGate(f"vehicle {cfg.target_sysid or '?'} link", ADAPTER_BUDGET,
                            self.counters, self.verifier)
-        self.sysid = cfg.target_sysid
-        self.flavour: str | None = None
-        self.remote: Addr | None = None if cfg.remote_port is None else (cfg.remote_host,
-                                                                         cfg.remote_port)
-        self.home_amsl_m: float | None = None
-        self.acks: dict[int, int] = {}
-        self.statustexts: list[str] = []
-        self.statustext_count = 0
-        self._state = NO_STATE
-        self._armed, self._mode = False, "UNKNOWN"
-        self._last_rx_s = -math.inf
-        self.heard_s = -math.inf  # our clock when the vehicle last sent anything
         self._last_hb_tx_s = -math.inf
         self._link_reported_ok = False
-        self.vclock = VehicleClock(f"vehicle {cfg.target_sysid or '?'}")
         self._last_ts_tx_s = -math.inf
-        self._poll_s = -math.inf
         self._t0 = clock()
         self.sock: socket.socket | None = None
         self._selector: selectors.BaseSelector | None = None
@@ -122,16 +103,7 @@ class MavlinkAdapter:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    # ---- receive ------------------------------------------------------------------------
-    @property
-    def state(self) -> VehicleState:
-        return self._state
-
-    @property
-    def telemetry_seen(self) -> bool:
-        """A position ever arrived: from then on `state.link_ok` says if it is heard."""
-        return self._last_rx_s > -math.inf
-
+    # ---- receive (what is heard is applied by VehicleMessages) ---------------------------
     def poll(self) -> VehicleState:
         """Read what the tick's budget allows (agents.mavlink.rx_gate: the rest waits in the
         socket), keep our heartbeat going, update the link flag; never blocks."""
@@ -152,20 +124,38 @@ class MavlinkAdapter:
             except OSError:
                 self.counters["rx_errors"] += 1
                 break
-            if anc and (dropped := kernel_drops(anc)) is not None:
+            # A drop count comes only after drops, beside the arrival stamp.
+            if anc and (len(anc) > 1 or anc[0][1] != SO_TIMESTAMPNS) and \
+                    (dropped := kernel_drops(anc)) is not None:
                 self.counters["mav_kernel_drops"] = dropped
-            received = kernel_arrival_s(anc, time.time(), self.clock())
+            self._take(data, addr, kernel_arrival_s(anc, time.time(), self.clock()))
+        if now - self._last_hb_tx_s >= HEARTBEAT_PERIOD_S and self.remote is not None:
+            self._last_hb_tx_s = now
+            self._send_framed(self.heartbeats, 0, MAV_TYPE_ONBOARD_CONTROLLER,
+                              MAV_AUTOPILOT_INVALID, 0, 4, 3)
+        if now - self._last_ts_tx_s >= TIMESYNC_PERIOD_S and self.sysid is not None:
+            self._last_ts_tx_s = now
+            self._send_framed(self.timesyncs, 0, self.vclock.request(self.clock()))
+        return self._update_link(now)
+
+    def _take(self, data: bytes, addr: Addr, received: float) -> None:
+        """A datagram off the socket: FastRx takes what it can judge, the gate's screen and
+        `_datagram` the rest (agents.mavlink.fast_rx: the same verdicts either way)."""
+        gate, rest, refused = self.gate, 0, None
+        if gate.fits(len(data)):
+            accepted, rest, refused = self.fast.scan(data)
+        if refused is not None:
+            gate.refuse(refused, addr)
+            return
+        if rest == 0:
             admitted = gate.admit(data, addr, received)
             if admitted:
                 self._datagram(admitted, addr, received)
-        if now - self._last_hb_tx_s >= HEARTBEAT_PERIOD_S and self.remote is not None:
-            self._last_hb_tx_s = now
-            self._send(self.mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER,
-                                                 MAV_AUTOPILOT_INVALID, 0, 0, 4))
-        if now - self._last_ts_tx_s >= TIMESYNC_PERIOD_S and self.sysid is not None:
-            self._last_ts_tx_s = now
-            self._send(self.mav.timesync_encode(0, self.vclock.request(self.clock())))
-        return self._update_link(now)
+            return
+        gate.take(len(data))
+        self.apply(accepted, addr, received)
+        if rest < len(data):
+            self._datagram(data[rest:], addr, received)
 
     def _datagram(self, data: bytes, addr: Addr, received: float) -> None:
         decoded = decode_datagram(self.mav, data)
@@ -178,9 +168,7 @@ class MavlinkAdapter:
             try:
                 self.handle(msg, addr, received)
             except Exception:  # a hostile or odd packet must not stop the follower
-                self.counters["handler_errors"] += 1
-                if self.counters["handler_errors"] <= 5:
-                    log.exception("vehicle %s: cannot handle %s", self.sysid, msg.get_type())
+                self._handler_error(msg.get_type())
 
     def wait_readable(self, timeout_s: float) -> None:
         """Block until a datagram is queued or timeout_s passes (start-up helpers only)."""
@@ -206,92 +194,8 @@ class MavlinkAdapter:
                 log.warning("link to vehicle %s lost: no telemetry for %.2f s", self.sysid,
                             self.cfg.link_timeout_s)
         if ok != self._state.link_ok:
-            self._state = replace(self._state, link_ok=ok)
+            self._state = self._state._replace(link_ok=ok)
         return self._state
-
-    def handle(self, msg: MAVLinkMessage, addr: Addr, now: float) -> None:
-        """Apply one received message (public so unit tests can feed messages directly)."""
-        src = msg.get_srcSystem()
-        kind = msg.get_type()
-        if kind == "HEARTBEAT":
-            if self._heartbeat(msg, addr):
-                self.heard_s = now
-            return
-        if self.sysid is None or src != self.sysid or msg.get_srcComponent() != 1:
-            self.counters["ignored_other_system"] += 1
-            return
-        self.heard_s = now
-        if kind == "LOCAL_POSITION_NED":
-            self._local_position(msg, now)
-        elif kind == "TIMESYNC":
-            self._timesync(msg, now)
-        elif kind == "COMMAND_ACK":
-            self.acks[msg.command] = msg.result
-        elif kind == "STATUSTEXT":
-            self._statustext(msg)
-        elif kind == "GLOBAL_POSITION_INT":
-            self.home_amsl_m = (msg.alt - msg.relative_alt) * 1e-3
-        elif kind == "HOME_POSITION":
-            self.home_amsl_m = msg.altitude * 1e-3
-
-    def _statustext(self, msg: MAVLinkMessage) -> None:
-        """Keep the vehicle's recent STATUSTEXTs: the reasons behind refusals and failsafes."""
-        text = str(msg.text).rstrip("\x00")
-        self.statustexts.append(text)
-        del self.statustexts[:-STATUSTEXT_KEPT]
-        self.statustext_count += 1
-        if msg.severity <= MAV_SEVERITY_WARNING:
-            log.warning("vehicle %s says: %s", self.sysid, text)
-
-    def statustexts_since(self, count: int) -> list[str]:
-        """The STATUSTEXTs received after the `statustext_count` value `count` (newest last)."""
-        return self.statustexts[len(self.statustexts) - min(self.statustext_count - count,
-                                                            len(self.statustexts)):]
-
-    def _heartbeat(self, msg: MAVLinkMessage, addr: Addr) -> bool:
-        """Apply our vehicle's HEARTBEAT; False if it is somebody else's."""
-        flavour = flavour_of_autopilot(msg.autopilot)
-        src = msg.get_srcSystem()
-        if flavour is None or msg.get_srcComponent() != 1:
-            return False  # ground stations, companions, gimbals: not our vehicle
-        if self.sysid is None:
-            self.sysid = src
-        if src != self.sysid:
-            self.counters["ignored_other_system"] += 1
-            return False
-        if self.flavour is None:
-            log.info("vehicle %d is %s at %s:%d", src, flavour, *addr)
-        self.flavour = flavour
-        self.remote = addr
-        self._armed = bool(msg.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
-        self._mode = decode_custom_mode(flavour, msg.custom_mode)
-        self._state = replace(self._state, armed=self._armed, mode=self._mode)
-        return True
-
-    def _local_position(self, msg: MAVLinkMessage, now: float) -> None:
-        x, y, z, vx, vy, vz = msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz
-        if not math.isfinite(x + y + z + vx + vy + vz):  # any NaN or inf makes the sum so
-            self.counters["ignored_nonfinite"] += 1
-            return
-        # The link is judged by when we read telemetry (as before arrival stamps): only
-        # the sample's own stamp needs its true arrival time.
-        self._last_rx_s = max(now, self._poll_s)
-        stamp = self.vclock.map.stamp(msg.time_boot_ms * 1e-3, now)
-        self._state = VehicleState(ned_to_enu_xyz(x, y, z), ned_to_enu_xyz(vx, vy, vz), stamp,
-                                   self._armed, self._mode, True)
-
-    # ---- clock --------------------------------------------------------------------------
-    def _timesync(self, msg: MAVLinkMessage, now: float) -> None:
-        """Answer the vehicle's requests (our clock, ns); fold replies to ours into the map."""
-        if msg.tc1 == 0:
-            self._send(self.mav.timesync_encode(round(self.clock() * 1e9), msg.ts1))
-            self.counters["timesync_answered"] += 1
-        else:
-            self.vclock.reply(msg.tc1, msg.ts1, now)
-
-    def clock_counters(self) -> dict[str, int]:
-        """How the vehicle's clock is mapped: TIMESYNC locked (1/0), re-locks, reboots."""
-        return self.vclock.counters()
 
     # ---- send ---------------------------------------------------------------------------
     def send_velocity_enu(self, vel_m_s: tuple[float, float, float] | np.ndarray,
@@ -304,7 +208,7 @@ class MavlinkAdapter:
         if self.sysid is None or self.remote is None:
             self.counters["refused_not_connected"] += 1
             return False
-        self._send_bytes(encode_fields(self.tx, SETPOINT, *fields))
+        self._send_bytes(self.setpoints.frame(*fields))
         self.counters["setpoints_sent"] += 1
         return True
 
@@ -324,6 +228,13 @@ class MavlinkAdapter:
             self.counters["tx_dropped"] += 1
             return
         self._send_bytes(encode(self.tx, msg))
+
+    def _send_framed(self, framer: Framer, *fields: float) -> None:
+        """`fields` (wire order) framed by `framer` and sent, as `_send` sends a message."""
+        if self.sock is None or self.remote is None:
+            self.counters["tx_dropped"] += 1
+            return
+        self._send_bytes(framer.frame(*fields))
 
     def _send_bytes(self, data: bytes) -> None:
         if self.sock is None or self.remote is None:

@@ -110,17 +110,16 @@ class RxGate:
         """What of `data` to parse now: None when its first frame is refused (counted under
         its reason) or when the tick has no room left for it (kept for the next tick, with
         `stamp`); else `data`, cut at the parse budget if it alone exceeds it (counted)."""
-        self.datagrams += 1
         if self.verifier is not None:
             reason = self.verifier.screen(data)
             if reason is not None:
-                self.verifier.count_rejection(reason, self.counters)
-                self.refusals.note(reason, sender)
+                self.refuse(reason, sender)
                 return None
             head = unsigned_head(data)
             if head is not None and head < len(data):
                 self.counters["unsigned_tails"] += 1
                 data = data[:head]
+        self.datagrams += 1
         room = self.budget.parse_bytes - self.parsed_bytes
         if len(data) > room and self.parsed_bytes > 0:
             self.carried = (data, sender, stamp)
@@ -133,6 +132,24 @@ class RxGate:
             data = data[:max(0, room)]
         self.parsed_bytes += len(data)
         return data
+
+
+    def refuse(self, reason: str, sender: Addr | None) -> None:
+        """A datagram whose first frame the verifier refused (counted there as
+        rejected_<reason>): counted here, logged, dropped unparsed."""
+        self.datagrams += 1
+        assert self.verifier is not None
+        self.verifier.count_rejection(reason, self.counters)
+        self.refusals.note(reason, sender)
+
+    def fits(self, size: int) -> bool:
+        """Whether a datagram of `size` bytes is parsed whole this tick (`take` it then)."""
+        return size <= self.budget.parse_bytes - self.parsed_bytes
+
+    def take(self, size: int) -> None:
+        """Charge a datagram that `fits`, read past the screen by agents.mavlink.fast_rx."""
+        self.datagrams += 1
+        self.parsed_bytes += size
 
 
 def unsigned_head(data: bytes) -> int | None:

@@ -1,4 +1,4 @@
-"""MAVLink 2 message signing: the key file, and a verifier that checks before it trusts.
+"""MAVLink 2 message signing: a verifier that checks before it trusts.
 
 Signature block (devguide message_signing): link id (1 byte), timestamp (6 bytes,
 10 µs units since 2015-01-01 UTC), signature = first 6 bytes of
@@ -16,32 +16,37 @@ sender's real frames for a day.  A new stream (a restarted sender, on a new link
 with timestamps that continue on the wall clock) is accepted.  Messages PX4 always accepts
 unsigned (HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION) pass.
 
-A key per vehicle: vehicle `sysid`'s key is derived from a run secret,
-
-    passphrase = hex(HMAC-SHA256(run secret, "enclose-mavlink-vehicle-<sysid>"))
-    key        = SHA-256(passphrase)
-
-so that whoever holds the secret (the simulator, an operator's ground station) holds every
-vehicle's key, each agent only its own, and the key is also what MAVProxy's `signing key
-<passphrase>` makes of the passphrase (it hashes passphrases with SHA-256).  A vehicle
-that knows the other vehicles' keys tells a frame signed with one of them (`wrong_key`,
-and whose) from one signed with no key it knows (`bad_signature`).
+A key per vehicle, derived from a run secret (agents.mavlink.signing_keys, whose names
+are re-exported here).  A vehicle that knows the other vehicles' keys tells a frame signed
+with one of them (`wrong_key`, and whose) from one signed with no key it knows
+(`bad_signature`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import hmac
-import os
 import time
 from collections import Counter
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
+from agents.mavlink.signing_keys import (
+    KEY_LEN,
+    agent_of_vehicle,
+    key_from_passphrase,
+    load_key,
+    vehicle_key,
+    vehicle_passphrase,
+    write_key,
+    write_raw_key,
+)
 from errors import ConfigError
 
-KEY_LEN = 32
+__all__ = ["KEY_LEN", "SignatureVerifier", "agent_of_vehicle", "key_from_passphrase",
+           "keyed_sha256", "load_key", "signature", "signing_timestamp", "vehicle_key",
+           "vehicle_passphrase", "write_key", "write_raw_key"]
+
 SIGNATURE_LEN = 13
 IFLAG_SIGNED = 0x01
 STX_V2, STX_V1 = 0xFD, 0xFE
@@ -55,7 +60,6 @@ FUTURE_LIMIT = 5 * TICKS_PER_S
 # could otherwise grow the table by one entry per frame.  The least recently accepted
 # stream is forgotten beyond this (SignatureVerifier: why that lets no replay through).
 MAX_STREAMS = 256
-VEHICLE_KEY_LABEL = "enclose-mavlink-vehicle-{sysid}"
 # PX4 accepts these unsigned on a signing link (message_signing docs).
 ALLOWED_UNSIGNED = frozenset({0, 109, 246, 247})  # HEARTBEAT, RADIO_STATUS, ADSB, COLLISION
 
@@ -63,58 +67,6 @@ ALLOWED_UNSIGNED = frozenset({0, 109, 246, 247})  # HEARTBEAT, RADIO_STATUS, ADS
 def signing_timestamp(unix_s: float) -> int:
     """A signing timestamp (10 µs ticks since 2015-01-01 UTC) from Unix seconds."""
     return max(0, int((unix_s - EPOCH_2015_S) * TICKS_PER_S))
-
-
-def write_key(path: Path) -> bytes:
-    """A fresh random 32-byte key, written raw to `path` with 0600 rights from the start."""
-    key = os.urandom(KEY_LEN)
-    write_raw_key(path, key)
-    return key
-
-
-def key_from_passphrase(passphrase: str) -> bytes:
-    """MAVProxy's `signing setup <passphrase>` key: sha256 of the passphrase."""
-    return hashlib.sha256(passphrase.encode()).digest()
-
-
-def vehicle_passphrase(run_secret: bytes, sysid: int) -> str:
-    """Vehicle `sysid`'s signing passphrase (64 hex digits): what a ground station is given."""
-    if not 1 <= sysid <= 255:
-        raise ConfigError("sysid", f"a MAVLink system id is 1..255, got {sysid}")
-    label = VEHICLE_KEY_LABEL.format(sysid=sysid).encode()
-    return hmac.new(run_secret, label, hashlib.sha256).hexdigest()
-
-
-def vehicle_key(run_secret: bytes, sysid: int) -> bytes:
-    """Vehicle `sysid`'s 32-byte signing key, derived from the run secret (module docstring)."""
-    return key_from_passphrase(vehicle_passphrase(run_secret, sysid))
-
-
-def agent_of_vehicle(sysid: int, n: int) -> str:
-    """The agent that flies vehicle `sysid` of a swarm of n followers, and alone holds its
-    key: follower i flies vehicle i (sysid i+1), target j vehicle n+j (sysid n+j+1)."""
-    return f"follower-{sysid - 1}" if sysid <= n else f"target-{sysid - 1 - n}"
-
-
-def write_raw_key(path: Path, key: bytes) -> None:
-    """`key` written raw to `path`, 0600 from the start."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "wb") as out:
-        out.write(key)
-    os.chmod(path, 0o600)
-
-
-def load_key(path: str | Path) -> bytes:
-    """The 32 raw bytes of a key file; an all-zero key would disable signing: refused."""
-    try:
-        key = Path(path).read_bytes()
-    except OSError as exc:
-        raise ConfigError("signing_key", f"{path}: {exc.strerror}") from exc
-    if len(key) != KEY_LEN:
-        raise ConfigError("signing_key", f"{path} holds {len(key)} bytes, a key is {KEY_LEN}")
-    if not any(key):
-        raise ConfigError("signing_key", f"{path} is all zeros (that disables signing)")
-    return key
 
 
 # A sha256 that has taken each key, copied per frame: the key is hashed once per key, not
@@ -242,13 +194,42 @@ class SignatureVerifier:
             if not commit:
                 self._good_sig = (signed_part, sig)
         else:
-            return "wrong_key" if self._other_vehicles_key(signed_part, sig,
-                                                           link_id) else "bad_signature"
-        stamp = int.from_bytes(frame[-12:-6], "little")
+            return self._signature_reason(signed_part, sig, link_id)
+        return self._stream_reason((link_id, sysid, compid),
+                                   int.from_bytes(frame[-12:-6], "little"), commit)
+
+    def accept(self, link_id: int, sysid: int, compid: int, stamp: int) -> str | None:
+        """`check` of a signed frame whose signature the caller found good under `key`
+        (agents.mavlink.fast_rx): the stream checks, the stream moved on success, counted."""
+        stream, streams = (link_id, sysid, compid), self.streams
+        last = streams.get(stream)
+        # The common case inline (`_stream_reason`, `_remember`): a known stream moving on.
+        if last is not None and last < stamp <= signing_timestamp(self.clock()) + FUTURE_LIMIT:
+            del streams[stream]
+            streams[stream] = stamp
+            if stamp > self.latest:
+                self.latest = stamp
+            self.counters["accepted_signed"] += 1
+            return None
+        reason = self._stream_reason(stream, stamp, True)
+        self.counters["accepted_signed" if reason is None else f"rejected_{reason}"] += 1
+        return reason
+
+    def refuse_signature(self, signed_part: bytes, sig: bytes, link_id: int) -> str:
+        """`check`'s reason for a signed frame whose signature failed `key`, counted."""
+        reason = self._signature_reason(signed_part, sig, link_id)
+        self.counters[f"rejected_{reason}"] += 1
+        return reason
+
+    def _signature_reason(self, signed_part: bytes, sig: bytes, link_id: int) -> str:
+        return "wrong_key" if self._other_vehicles_key(signed_part, sig,
+                                                       link_id) else "bad_signature"
+
+    def _stream_reason(self, stream: tuple[int, int, int], stamp: int,
+                       commit: bool) -> str | None:
         wall = signing_timestamp(self.clock())
         if stamp > wall + FUTURE_LIMIT:
             return "future"
-        stream = (link_id, sysid, compid)
         last = self.streams.get(stream)
         if last is not None and stamp <= last:
             return "replay"

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 
-@dataclass(frozen=True)
-class VehicleState:
-    """Latest known state; position/velocity in ENU, stamp on the agent's clock."""
+class VehicleState(NamedTuple):
+    """Latest known state; position/velocity in ENU, stamp on the agent's clock.
+
+    A NamedTuple, not a frozen dataclass: the adapter builds one per telemetry sample, and
+    a tuple is built ~3.5x faster (issue 50)."""
 
     pos_enu_m: tuple[float, float, float]
     vel_enu_m_s: tuple[float, float, float]

@@ -140,7 +140,7 @@ def test_statustext_kept_and_a_failing_handler_is_contained() -> None:
         assert ad.sock is not None
         sender = new_codec(1, 1)
         # A message the handler chokes on (patched to raise) is counted, not raised.
-        ad._local_position = lambda msg, now: 1 / 0  # type: ignore[method-assign]
+        ad._position = lambda fields, now: 1 / 0  # type: ignore[method-assign]
         ad.sock.sendto(local_pos(10)(sender).pack(sender), ad.sock.getsockname())
         for _ in range(100):
             ad.poll()

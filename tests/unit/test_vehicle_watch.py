@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 from agents.mavlink.adapter import VehicleState
 from agents.shell.vehicle_loop import RECOVER_AFTER_S, VehicleWatch
 
@@ -17,11 +15,11 @@ def test_flying_is_never_lost() -> None:
 
 def test_failsafe_hold_is_left_to_the_offboard_keeper() -> None:
     w = VehicleWatch(0.0)
-    assert not any(w.lost(replace(FLYING, mode="HOLD"), "px4", 0.1 * k) for k in range(10))
+    assert not any(w.lost(FLYING._replace(mode="HOLD"), "px4", 0.1 * k) for k in range(10))
 
 
 def test_other_modes_and_reboot_are_lost_after_the_grace() -> None:
-    for state in (replace(FLYING, mode="LAND"), replace(FLYING, armed=False)):
+    for state in (FLYING._replace(mode="LAND"), FLYING._replace(armed=False)):
         w = VehicleWatch()
         assert not w.lost(state, "px4", 10.0)
         assert not w.lost(state, "px4", 10.0 + 0.9 * RECOVER_AFTER_S)
@@ -32,11 +30,11 @@ def test_other_modes_and_reboot_are_lost_after_the_grace() -> None:
 
 def test_silence_is_waited_for_and_the_vehicle_judged_when_heard_again() -> None:
     w = VehicleWatch()
-    silent = replace(FLYING, link_ok=False)
+    silent = FLYING._replace(link_ok=False)
     # However long: a start-up could not run without the vehicle, and would stop the loop.
     assert not any(w.lost(silent, "px4", 10.0 + 0.5 * k) for k in range(60))
     # A simulator that restarted: heard again, disarmed, after the grace from then.
-    rebooted = replace(FLYING, armed=False, mode="MANUAL")
+    rebooted = FLYING._replace(armed=False, mode="MANUAL")
     assert not w.lost(rebooted, "px4", 40.0)
     assert w.lost(rebooted, "px4", 40.0 + RECOVER_AFTER_S)
     # Silence while a wrong mode was being timed restarts the grace.
@@ -48,4 +46,4 @@ def test_silence_is_waited_for_and_the_vehicle_judged_when_heard_again() -> None
 
 
 def test_ardupilot_guided_is_flying() -> None:
-    assert not VehicleWatch(0.0).lost(replace(FLYING, mode="GUIDED"), "ardupilot", 1.0)
+    assert not VehicleWatch(0.0).lost(FLYING._replace(mode="GUIDED"), "ardupilot", 1.0)
