@@ -46,7 +46,7 @@ LEVELS = (("none", "agent", 0, 0), ("agent 100/s x 60 KB", "agent", 100, 60_000)
 def victim(args: argparse.Namespace) -> int:
     """The agent under flood: fly vehicle 1, then `--seconds` of 50 Hz ticks, measured."""
     from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
-    from agents.mavlink.signing import load_key
+    from agents.mavlink.signing_keys import load_key
     from agents.mavlink.startup import StartupTimeouts, start_offboard
     from agents.shell.process import Ticker
 
@@ -122,7 +122,7 @@ def sim_figures(log: str) -> dict[str, int]:
 
 def keys(tmp: Path, legacy: bool) -> tuple[list[str], Path]:
     """The simulator's signing arguments and the victim's key file."""
-    from agents.mavlink.signing import vehicle_key, write_key, write_raw_key
+    from agents.mavlink.signing_keys import vehicle_key, write_key, write_raw_key
     secret = write_key(tmp / "secret.bin")
     if legacy:  # before keys per vehicle: one key, everywhere
         return ["--signing-key", str(tmp / "secret.bin")], tmp / "secret.bin"

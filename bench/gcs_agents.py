@@ -8,7 +8,8 @@ import time
 from pymavlink.dialects.v20 import common as mavlink2
 
 from agents.mavlink.modes import do_set_mode_params
-from agents.mavlink.signing import signing_timestamp, vehicle_key
+from agents.mavlink.signing import signing_timestamp
+from agents.mavlink.signing_keys import vehicle_key
 from agents.mavlink.wire import encode, encode_fields, new_codec, sign_outgoing
 
 HOST = "127.0.0.1"

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agents.mavlink.modes import FLAVOURS
-from agents.mavlink.signing import write_key
+from agents.mavlink.signing_keys import write_key
 from deploy.launch.port_slots import port_slot
 from deploy.launch.ports import ports_held
 from errors import ConfigError, SimulatorError

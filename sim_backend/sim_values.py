@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.frames import enu_to_ned
-from agents.mavlink.signing import vehicle_key
+from agents.mavlink.signing_keys import vehicle_key
 from agents.scenario.model import Scenario
 from errors import ConfigError
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.frames import ned_to_enu
-from agents.mavlink.signing import agent_of_vehicle, load_key
+from agents.mavlink.signing_keys import agent_of_vehicle, load_key
 from agents.membership.liveness import MembershipWatch
 from agents.membership.member_hold import MemberHold
 from agents.membership.ring import membership

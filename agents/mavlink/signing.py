@@ -16,10 +16,9 @@ sender's real frames for a day.  A new stream (a restarted sender, on a new link
 with timestamps that continue on the wall clock) is accepted.  Messages PX4 always accepts
 unsigned (HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION) pass.
 
-A key per vehicle, derived from a run secret (agents.mavlink.signing_keys, whose names
-are re-exported here).  A vehicle that knows the other vehicles' keys tells a frame signed
-with one of them (`wrong_key`, and whose) from one signed with no key it knows
-(`bad_signature`).
+A key per vehicle, derived from a run secret, comes from agents.mavlink.signing_keys.  A
+vehicle that knows the other vehicles' keys tells a frame signed with one of them
+(`wrong_key`, and whose) from one signed with no key it knows (`bad_signature`).
 """
 
 from __future__ import annotations
@@ -31,21 +30,8 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
-from agents.mavlink.signing_keys import (
-    KEY_LEN,
-    agent_of_vehicle,
-    key_from_passphrase,
-    load_key,
-    vehicle_key,
-    vehicle_passphrase,
-    write_key,
-    write_raw_key,
-)
+from agents.mavlink.signing_keys import KEY_LEN
 from errors import ConfigError
-
-__all__ = ["KEY_LEN", "SignatureVerifier", "agent_of_vehicle", "key_from_passphrase",
-           "keyed_sha256", "load_key", "signature", "signing_timestamp", "vehicle_key",
-           "vehicle_passphrase", "write_key", "write_raw_key"]
 
 SIGNATURE_LEN = 13
 IFLAG_SIGNED = 0x01

@@ -21,7 +21,7 @@ from types import ModuleType
 
 from agents.mavlink.signing import (
     EPOCH_2015_S,
-        TICKS_PER_S,
+    TICKS_PER_S,
     SignatureVerifier,
     keyed_sha256,
     signing_timestamp,

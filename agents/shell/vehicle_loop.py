@@ -11,7 +11,7 @@ from typing import Protocol
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter, VehicleState
 from agents.mavlink.modes import HOLD_MODE, OFFBOARD_MODE
 from agents.mavlink.offboard import OffboardKeeper
-from agents.mavlink.signing import load_key
+from agents.mavlink.signing_keys import load_key
 from agents.mavlink.startup import StartupTimeouts, start_offboard
 from agents.membership.liveness import StallGuard
 from agents.scenario.model import Scenario

@@ -17,7 +17,7 @@ from typing import Any
 
 from agents.loading.scenario_file import load_scenario
 from agents.mavlink.modes import FLAVOURS
-from agents.mavlink.signing import load_key
+from agents.mavlink.signing_keys import load_key
 from agents.scenario.model import HomeConfig, VehicleConfig
 from errors import EncloseError
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned, spawn_points_ned

@@ -12,7 +12,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from agents.mavlink.signing import load_key, vehicle_key, vehicle_passphrase, write_raw_key
+from agents.mavlink.signing_keys import load_key, vehicle_key, vehicle_passphrase, write_raw_key
 from deploy.launch.run_secrets import MAVLINK_SECRET_FILE
 from errors import ConfigError
 

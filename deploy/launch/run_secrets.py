@@ -21,7 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from agents.mavlink.signing import agent_of_vehicle, vehicle_key, write_key, write_raw_key
+from agents.mavlink.signing_keys import agent_of_vehicle, vehicle_key, write_key, write_raw_key
 from deploy.procs.forked import call_forked
 from transport.credentials import Identity, identity_file, make_credentials
 from transport.key_exprs import SwarmKeys

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
-from agents.mavlink.signing import vehicle_key, write_key
+from agents.mavlink.signing_keys import vehicle_key, write_key
 from agents.mavlink.startup import StartupTimeouts, start_offboard
 from tests.integration.sim_process import start_sim
 

@@ -30,7 +30,8 @@ from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
-from agents.mavlink.signing import load_key, signing_timestamp
+from agents.mavlink.signing import signing_timestamp
+from agents.mavlink.signing_keys import load_key
 from agents.mavlink.wire import Codec, decode_datagram, encode, new_codec, sign_outgoing
 from tests.integration.rogue import wait_running
 

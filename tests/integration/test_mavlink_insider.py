@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
-from agents.mavlink.signing import vehicle_key, write_key, write_raw_key
+from agents.mavlink.signing_keys import vehicle_key, write_key, write_raw_key
 from agents.mavlink.startup import StartupTimeouts, start_offboard
 from tests.integration.sim_process import start_sim
 

@@ -143,7 +143,7 @@ def test_mavproxy_flies_a_signing_vehicle_with_the_passphrase_enclose_gives(
         tmp_path: Path) -> None:
     """docs/sim.md's recipe: `enclose vehicle-key SECRET 2` prints vehicle 2's passphrase,
     MAVProxy's `signing key <passphrase>` makes the same key; vehicle 2 then obeys it."""
-    from agents.mavlink.signing import write_key
+    from agents.mavlink.signing_keys import write_key
     from deploy.cli import main as enclose
 
     write_key(tmp_path / "secret.bin")

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.rx_gate import ADAPTER_BUDGET, VEHICLE_BUDGET, RxBudget, RxGate
-from agents.mavlink.signing import SignatureVerifier, signing_timestamp, vehicle_key
+from agents.mavlink.signing import SignatureVerifier, signing_timestamp
+from agents.mavlink.signing_keys import vehicle_key
 from agents.mavlink.wire import encode, new_codec, sign_outgoing
 from agents.scenario.model import HomeConfig, VehicleConfig
 from errors import ConfigError, SimulatorError

@@ -11,14 +11,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.mavlink.signing import (
-    TICKS_PER_S,
-    SignatureVerifier,
-    key_from_passphrase,
-    load_key,
-    signing_timestamp,
-    write_key,
-)
+from agents.mavlink.signing import TICKS_PER_S, SignatureVerifier, signing_timestamp
+from agents.mavlink.signing_keys import key_from_passphrase, load_key, write_key
 from agents.mavlink.wire import new_codec, sign_outgoing
 from agents.scenario.model import HomeConfig, VehicleConfig
 from errors import ConfigError

@@ -115,7 +115,7 @@ def test_no_stream_ever_goes_back_whatever_is_evicted(ops: list[tuple[int, int]]
 
 @pytest.mark.realtime
 def test_a_vehicle_counts_its_evictions_with_its_signing_counters() -> None:
-    from agents.mavlink.signing import vehicle_key
+    from agents.mavlink.signing_keys import vehicle_key
     from agents.scenario.model import HomeConfig, VehicleConfig
     from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
     from tests.unit.test_mavlink_vehicle_keys import SECRET, disarm, signer

@@ -13,14 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.mavlink.signing import (
-    FUTURE_LIMIT,
-    TICKS_PER_S,
-    SignatureVerifier,
-    signing_timestamp,
-    vehicle_key,
-    vehicle_passphrase,
-)
+from agents.mavlink.signing import FUTURE_LIMIT, TICKS_PER_S, SignatureVerifier, signing_timestamp
+from agents.mavlink.signing_keys import vehicle_key, vehicle_passphrase
 from agents.mavlink.wire import encode, new_codec, sign_outgoing
 from agents.scenario.model import HomeConfig, VehicleConfig
 from deploy.launch.run_secrets import (

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from agents.mavlink.signing import agent_of_vehicle
+from agents.mavlink.signing_keys import agent_of_vehicle
 from deploy.report.refusals import launch_refusals, refusal_text
 from deploy.report.verdict import print_verdict, read_verdict
 from sim_backend.swarm_sim import wrong_key_senders
