@@ -116,30 +116,46 @@ class Decoder:
             del self._last_seq[stream]
 
     def decode(self, rec: Received) -> Inbound | None:
-        try:
-            msg = decode(rec.payload)
-        except CodecError as exc:
-            self._drop(exc.reason, rec.key, None)
-            return None
-        if self.expect is not None and not isinstance(msg, self.expect):
-            self._drop("unexpected_type", rec.key, msg)
-            return None
-        reason = key_reason(msg, rec.key) or self._sender_reason(msg, rec.key)
+        return self.decode_at(rec, None)
+
+    def decode_at(self, rec: Received, clocks: ClockBook | None) -> Inbound | None:
+        """`decode`, the stamps mapped with `clocks` (None: ours now)."""
+        msg, reason = self.screen(rec, clocks)
         if reason is not None:
             self._drop(reason, rec.key, msg)
             return None
-        msg = self.clocks.to_local(msg)
+        assert msg is not None  # accepted
+        self.accepted += 1
+        stale = self._track(msg.header.sender_id, rec.key, msg.header.seq)
+        return build(Inbound, {"message": msg, "received": rec, "stale": stale})
+
+    def screen(self, rec: Received, clocks: ClockBook | None = None
+               ) -> tuple[Message | None, str | None]:
+        """Every check of `decode`, nothing counted: (the message on our clock, None), or
+        (what it claims to be, if it decoded, and the reason it is refused).  `clocks`:
+        the stamps' mapping to use instead of ours now (one taken when it arrived)."""
+        try:
+            msg = decode(rec.payload)
+        except CodecError as exc:
+            return None, exc.reason
+        if self.expect is not None and not isinstance(msg, self.expect):
+            return msg, "unexpected_type"
+        reason = key_reason(msg, rec.key) or self._sender_reason(msg, rec.key)
+        if reason is not None:
+            return msg, reason
+        msg = (self.clocks if clocks is None else clocks).to_local(msg)
         if self.limits is not None:
             reason = check(msg, rec.key, rec.recv_stamp_s, self.limits)
             if reason is None and self.law_fields is not None and type(msg) is FollowerState \
                     and msg.law:
                 reason = law_reason(msg.law, self.law_fields)
             if reason is not None:
-                self._drop(f"rejected_{reason}", rec.key, msg)
-                return None
-        self.accepted += 1
-        stale = self._track(msg.header.sender_id, rec.key, msg.header.seq)
-        return build(Inbound, {"message": msg, "received": rec, "stale": stale})
+                return msg, f"rejected_{reason}"
+        return msg, None
+
+    def refuse(self, reason: str, key: str) -> None:
+        """Count a refusal decided before decoding (the key alone, the size)."""
+        self._drop(reason, key, None)
 
     def _sender_reason(self, msg: Message, key: str) -> str | None:
         """With `senders`: the sender, and the process the key is about, must be known."""

@@ -1,8 +1,12 @@
-"""A streaming MCAP recording of the bus: one JSON channel per key, JSON schemas per type.
+"""A streaming MCAP recording of the bus: one channel per key.
 
-Foxglove and PlotJuggler read `json` messages described by `jsonschema` schemas.  The schemas
-are generated from the message dataclasses, so a field added to a message shows up here
-without an edit.  log_time is the recorder's receive time, publish_time the sender's stamp.
+The recorder writes each bus message as it arrived (`write_wire`): its msgpack payload, the
+codec's wire array (transport.codec), on a `msgpack` channel whose schema (encoding
+`jsonschema`, named `enclose.<Type>`) describes that array, generated from the message
+dataclass.  log_time is the recorder's receive time; publish_time is the sender's stamp
+where the message was decoded on arrival, else the receive time too (a reader takes the
+sender's stamp from the payload's header).  Recordings before that (`write`, still read:
+deploy.recording.resume) have `json` channels, the dataclass as an object.
 Messages go into compressed chunks of `chunk_size` bytes written as soon as they fill, and
 the file object is flushed each `flush()`: a crash loses at most the chunk being built.
 """
@@ -27,6 +31,7 @@ from deploy.recording.mcap_fast import MessageAppender, spill_chunk_indices
 from transport.messages import Message
 
 MESSAGE_ENCODING = "json"
+WIRE_ENCODING = "msgpack"  # the MCAP registry's name for MessagePack channels
 SCHEMA_ENCODING = "jsonschema"
 DEFAULT_CHUNK_BYTES = 64 * 1024
 _NS = 1_000_000_000
@@ -84,6 +89,16 @@ def dataclass_schema(cls: type) -> dict[str, Any]:
         "properties": {f.name: _type_schema(hints[f.name]) for f in fields},
         "required": [f.name for f in fields],
     }
+
+
+def wire_schema(cls: type) -> dict[str, Any]:
+    """JSON schema of a message's wire array: version, type tag, header, then the fields."""
+    body = dataclass_schema(cls)
+    fields = [v for k, v in body["properties"].items() if k != "header"]
+    head = [{"type": "integer"}, {"type": "integer"}, {"type": "string"},
+            {"type": "integer"}, {"type": "number"}]
+    return {"type": "array", "title": f"{cls.__name__} (transport.codec wire array)",
+            "prefixItems": head + fields, "minItems": len(head)}
 
 
 _FIELD_NAMES: dict[type, tuple[str, ...]] = {}
@@ -183,6 +198,7 @@ class McapLog:
         if self._indices is None:
             spool.close()
         self._schemas: dict[type, int] = {}
+        self._wire_schemas: dict[type, int] = {}
         self._channels: dict[str, int] = {}
         self._raw_schemas: dict[RawSchema, int] = {}
         self.closed = False
@@ -207,6 +223,28 @@ class McapLog:
         add(channel_id=channel, log_time=int(recv_stamp_s * _NS), data=message_json(msg),
             publish_time=max(0, int(msg.header.stamp_s * _NS)),
             sequence=msg.header.seq & 0xFFFFFFFF)
+        self.messages[key] += 1
+
+    def wire_channel(self, key: str, cls: type) -> int:
+        """The `msgpack` channel of `key` (registered at its first use)."""
+        channel = self._channels.get(key)
+        if channel is None:
+            schema = self._wire_schemas.get(cls)
+            if schema is None:
+                data = json.dumps(wire_schema(cls)).encode()
+                schema = self._writer.register_schema(schema_name(cls), SCHEMA_ENCODING, data)
+                self._wire_schemas[cls] = schema
+            channel = self._writer.register_channel(key, WIRE_ENCODING, schema)
+            self._channels[key] = channel
+        return channel
+
+    def write_wire(self, key: str, channel: int, payload: bytes, log_time_ns: int,
+                   publish_time_ns: int | None = None, sequence: int = 0) -> None:
+        """A bus message's payload as it arrived, on `key`'s `wire_channel`."""
+        add = self._writer.add_message if self._fast is None else self._fast.add
+        add(channel_id=channel, log_time=log_time_ns, data=payload,
+            publish_time=log_time_ns if publish_time_ns is None else publish_time_ns,
+            sequence=sequence)
         self.messages[key] += 1
 
     def write_raw(self, frame: RawFrame) -> None:

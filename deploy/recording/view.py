@@ -108,7 +108,8 @@ def _json(topic: str, body: dict[str, Any], log_time_ns: int) -> ViewFrame:
 class LiveView:
     """Latest truth, states and statuses; frames when there is something new to show."""
 
-    def __init__(self, info: RunInfo, scene_hz: float = DEFAULT_SCENE_HZ) -> None:
+    def __init__(self, info: RunInfo, scene_hz: float = DEFAULT_SCENE_HZ,
+                 recorded_states: list[int] | None = None) -> None:
         self.info = info
         self.period_s = 1.0 / scene_hz
         self.states: dict[int, FollowerState] = {}
@@ -120,7 +121,10 @@ class LiveView:
         self._last_scene_s = -float("inf")
         self._members: frozenset[int] | None = None
         self._pending_log: list[ViewFrame] = []
-        self._recorded_states = [0] * info.n
+        # States received per follower: counted here from what is added, or the recorder's
+        # own count when it adds only the newest (deploy.recording.intake).
+        self._counts_added = recorded_states is None
+        self._recorded_states = [0] * info.n if recorded_states is None else recorded_states
         self._too_close = False  # two vehicles under the safety distance at the last scene
         self._network_said: set[tuple[int, str]] = set()  # network fault windows logged
 
@@ -130,7 +134,8 @@ class LiveView:
                 self._truth = (msg, recv_stamp_s)
         elif isinstance(msg, FollowerState) and 0 <= msg.index < self.info.n:
             self.states[msg.index] = msg
-            self._recorded_states[msg.index] += 1
+            if self._counts_added:
+                self._recorded_states[msg.index] += 1
         elif isinstance(msg, ProcessStatus):
             self._add_status(msg, recv_stamp_s)
         elif isinstance(msg, RunControl) and msg.command == "start":
