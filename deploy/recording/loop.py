@@ -199,6 +199,8 @@ class Recorder:
             rec = Received(item.key, item.payload, item.recv_stamp_s)
             self._decode_now(self.intake.take([rec]))
             self.carried["messages"] += 1
+            if self.carried["messages"] % 4096 == 0:  # in bounded batches here too
+                self.decode_deferred()
         log.info("carried on from %s: %s", part.name, dict(self.carried))
 
     def tick(self) -> None:

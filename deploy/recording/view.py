@@ -24,11 +24,11 @@ from typing import Any
 import numpy as np
 from foxglove import messages as fm
 
-from agents.analysis.metrics import error_series, separation_series
+from agents.analysis.metrics import error_series
 from agents.analysis.timeseries import RunSeries
 from deploy.recording.live_links import LinkTracker
 from deploy.recording.mcap_log import RawFrame, RawSchema
-from deploy.recording.scene import LinkView, scene_update, timestamp, too_close
+from deploy.recording.scene import LinkView, pair_distances, scene_update, timestamp, too_close
 from deploy.report.refusals import refusals
 from deploy.report.rundir import RunInfo
 from transport.messages import FollowerState, Message, ProcessStatus, RunControl, TruthSnapshot
@@ -89,6 +89,8 @@ def errors_now(truth: TruthSnapshot, states: Mapping[int, FollowerState],
                        np.asarray(truth.target_pos_m, dtype=np.float64)[None])
     e = error_series(series, info.successor, np.asarray(info.angles_rad), info.rho_d_m)
     rho, delta, est_err = e.e_rho_m[0], e.e_delta[0], e.estimator_error_m[0]
+    _, _, apart = pair_distances(pos)
+    apart = apart[~np.isnan(apart)]  # as separation_series: NaN positions ignored
     return {"e_rho_m": _finite(rho), "e_delta": _finite(delta),
             "estimator_error_m": _finite(est_err),
             "max_abs_e_rho_m": _finite(np.abs(rho).max())[0],
@@ -96,7 +98,7 @@ def errors_now(truth: TruthSnapshot, states: Mapping[int, FollowerState],
             "max_estimator_error_m": _finite(est_err.max())[0],
             "bound_rho_m": info.eps_rho_m, "bound_delta": info.eps_delta,
             "bound_estimator_m": info.eps_rho_m,
-            "min_separation_m": _finite(separation_series(pos[None]))[0],
+            "min_separation_m": _finite(apart.min() if apart.size else np.nan)[0],
             "safety_distance_m": info.safety_distance_m}
 
 
