@@ -105,6 +105,7 @@ class Decoder:
         self.rejected_from: Counter[str] = Counter()  # per known sender
         self.log = RateLimitedLog(log)
         self.accepted = 0
+        self.last_stale = False  # of the last message accepted
         self.gaps: Counter[str] = Counter()  # per sender id, over its streams
         self.stale: Counter[str] = Counter()
         self._last_seq: dict[tuple[str, str], int] = {}
@@ -116,36 +117,41 @@ class Decoder:
             del self._last_seq[stream]
 
     def decode(self, rec: Received) -> Inbound | None:
-        return self.decode_at(rec, None)
+        msg = self.accept(rec.key, rec.payload, rec.recv_stamp_s)
+        if msg is None:
+            return None
+        return build(Inbound, {"message": msg, "received": rec, "stale": self.last_stale})
 
-    def decode_at(self, rec: Received, clocks: ClockBook | None) -> Inbound | None:
-        """`decode`, the stamps mapped with `clocks` (None: ours now)."""
-        msg, reason = self.screen(rec, clocks)
+    def accept(self, key: str, payload: bytes, recv_stamp_s: float,
+               clocks: ClockBook | None = None) -> Message | None:
+        """`decode` without the `Inbound` (staleness in `last_stale`), the stamps mapped
+        with `clocks` (None: ours now)."""
+        msg, reason = self.screen(key, payload, recv_stamp_s, clocks)
         if reason is not None:
-            self._drop(reason, rec.key, msg)
+            self._drop(reason, key, msg)
             return None
         assert msg is not None  # accepted
         self.accepted += 1
-        stale = self._track(msg.header.sender_id, rec.key, msg.header.seq)
-        return build(Inbound, {"message": msg, "received": rec, "stale": stale})
+        self.last_stale = self._track(msg.header.sender_id, key, msg.header.seq)
+        return msg
 
-    def screen(self, rec: Received, clocks: ClockBook | None = None
-               ) -> tuple[Message | None, str | None]:
+    def screen(self, key: str, payload: bytes, recv_stamp_s: float,
+               clocks: ClockBook | None = None) -> tuple[Message | None, str | None]:
         """Every check of `decode`, nothing counted: (the message on our clock, None), or
         (what it claims to be, if it decoded, and the reason it is refused).  `clocks`:
         the stamps' mapping to use instead of ours now (one taken when it arrived)."""
         try:
-            msg = decode(rec.payload)
+            msg = decode(payload)
         except CodecError as exc:
             return None, exc.reason
         if self.expect is not None and not isinstance(msg, self.expect):
             return msg, "unexpected_type"
-        reason = key_reason(msg, rec.key) or self._sender_reason(msg, rec.key)
+        reason = key_reason(msg, key) or self._sender_reason(msg, key)
         if reason is not None:
             return msg, reason
         msg = (self.clocks if clocks is None else clocks).to_local(msg)
         if self.limits is not None:
-            reason = check(msg, rec.key, rec.recv_stamp_s, self.limits)
+            reason = check(msg, key, recv_stamp_s, self.limits)
             if reason is None and self.law_fields is not None and type(msg) is FollowerState \
                     and msg.law:
                 reason = law_reason(msg.law, self.law_fields)

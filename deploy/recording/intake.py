@@ -29,8 +29,7 @@ from dataclasses import dataclass
 from deploy.recording.mcap_log import McapLog
 from transport.bus import Received
 from transport.codec import MAX_PAYLOAD_BYTES
-from transport.decoder import Decoder, Inbound
-from transport.fastbuild import build
+from transport.decoder import Decoder
 from transport.message_checks import key_rule
 from transport.messages import FollowerState, Message, TargetObservation
 from transport.peer_clock import ClockBook
@@ -139,29 +138,26 @@ class Intake:
         return bool(self._pending) and (len(self._pending) >= self.decode_bytes
                                         or now_s - self._oldest_s >= self.decode_age_s)
 
-    def decoded(self) -> Iterator[Inbound]:
+    def decoded(self) -> Iterator[Message]:
         """Every deferred sample waiting, decoded and counted, oldest first (per key)."""
         data, self._pending = self._pending, bytearray()
+        accept, arrival, slots = self.decoder.accept, self._arrival, self._by_id
         at = 0
         while at < len(data):
             recv_s, offset, sid, size = _HEAD.unpack_from(data, at)
             at += _HEAD.size
-            rec = build(Received, {"key": self._by_id[sid].key,
-                                   "payload": bytes(data[at:at + size]),
-                                   "recv_stamp_s": recv_s, "hlc_stamp_s": None,
-                                   "hlc_source": None, "arrival_s": None})
+            arrival.offset = None if offset != offset else offset
+            msg = accept(slots[sid].key, bytes(data[at:at + size]), recv_s, arrival)
             at += size
-            self._arrival.offset = None if offset != offset else offset
-            inbound = self.decoder.decode_at(rec, self._arrival)
             self.deferred_decoded += 1
-            if inbound is not None:
-                yield inbound
+            if msg is not None:
+                yield msg
 
     def peek(self) -> Iterator[tuple[Message, float]]:
         """The newest deferred sample of each key since the last peek, where it passes
         every check (not counted: it is, when its batch is decoded)."""
         newest, self._newest = self._newest, {}
         for rec in newest.values():
-            msg, reason = self.decoder.screen(rec)
+            msg, reason = self.decoder.screen(rec.key, rec.payload, rec.recv_stamp_s)
             if reason is None and msg is not None:
                 yield msg, rec.recv_stamp_s

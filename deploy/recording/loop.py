@@ -39,10 +39,10 @@ from errors import CodecError, TransportError
 from transport.access import sender_ids
 from transport.bus import Bus, Congestion, Received
 from transport.codec import encode
-from transport.decoder import Decoder, Inbound
+from transport.decoder import Decoder
 from transport.key_exprs import SwarmKeys
 from transport.message_checks import RECORDER_LIMITS
-from transport.messages import FollowerState, ProcessStatus, Stamper
+from transport.messages import FollowerState, Message, ProcessStatus, Stamper
 
 log = logging.getLogger(__name__)
 
@@ -165,7 +165,7 @@ class Recorder:
             msg = inbound.message
             self.mcap.write_wire(rec.key, slot.channel, rec.payload, int(rec.recv_stamp_s * _NS),
                                  max(0, int(msg.header.stamp_s * _NS)), msg.header.seq & 0xFFFFFFFF)
-            self._use(inbound)
+            self._use(msg)
             self.feed.add(msg, rec.recv_stamp_s)
             shown = True
         return shown
@@ -173,12 +173,11 @@ class Recorder:
     def decode_deferred(self) -> None:
         """The deferred states and observations waiting, decoded into the assembler."""
         t0 = time.process_time()
-        for inbound in self.intake.decoded():
-            self._use(inbound)
+        for msg in self.intake.decoded():
+            self._use(msg)
         self.decode_cpu_s += time.process_time() - t0
 
-    def _use(self, inbound: Inbound) -> None:
-        msg = inbound.message
+    def _use(self, msg: Message) -> None:
         if msg.header.sender_id != self._stamper.sender_id:  # our own status is always fresh
             self.newest_stamp_s = max(self.newest_stamp_s, msg.header.stamp_s)
         self.asm.add(msg)

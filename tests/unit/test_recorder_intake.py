@@ -84,7 +84,7 @@ def test_a_state_is_checked_and_counted_when_its_batch_is_decoded(tmp_path: Path
                  rec(KEYS.follower_state(1), forged),
                  rec(KEYS.follower_state(0), state(0, 2, START_S + 0.02))])
     assert not decoder.dropped and decoder.accepted == 0 and intake.arrivals[:2] == [2, 1]
-    decoded = [i.message for i in intake.decoded()]
+    decoded = list(intake.decoded())
     mcap.close()
     assert [m.header.seq for m in decoded] == [0, 2]
     assert decoder.dropped == {"rejected_sender": 1}
@@ -100,9 +100,9 @@ def test_a_state_is_mapped_with_the_clock_offset_of_its_arrival(tmp_path: Path) 
     intake.take([rec(KEYS.follower_state(0), state(0, 0, START_S + 0.25),
                      recv_s=START_S + 0.01)])
     clocks.now = 0.0  # the estimate moved before the batch was decoded
-    (inbound,) = intake.decoded()
+    (msg,) = intake.decoded()
     mcap.close()
-    assert inbound.message.header.stamp_s == pytest.approx(START_S)
+    assert msg.header.stamp_s == pytest.approx(START_S)
 
 
 def test_the_view_gets_the_newest_of_each_key_checked_not_counted(tmp_path: Path) -> None:
