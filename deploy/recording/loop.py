@@ -108,7 +108,7 @@ class Recorder:
         # Without `record_sensor`, not the target observations either: noiseless, they are
         # the truth's target positions again, and in ring64 they were half of what the
         # recorder decoded (1 280 a second), where it fell seconds behind.
-        self._subs = [bus.subscribe(k, capacity) for k, capacity in
+        self._subs = [bus.subscribe(k, capacity, hlc=False) for k, capacity in
                       queue_capacities(self.keys, scenario, record_sensor).items()]
         # After the subscription: what arrives while we read back waits in its queue.
         self.carried: Counter[str] = Counter()
