@@ -24,13 +24,13 @@ from deploy.json_files import write_json_atomic
 from deploy.procs.forked import trim_heap
 from deploy.recording.assembler import RunAssembler
 from deploy.recording.intake import Intake, Slot
-from deploy.recording.links import FINAL_STATES
+from deploy.recording.links import followers_pending
 from deploy.recording.live_server import LiveServer
-from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
+from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog
 from deploy.recording.progress import PROGRESS_FILE
 from deploy.recording.queues import DRAIN_PIECE, drain_pieces, queue_capacities
 from deploy.recording.recorder_report import MCAP_FILE, counters, progress, status_counters
-from deploy.recording.resume import newest_part, read_back
+from deploy.recording.resume import carry_on
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
 from deploy.recording.view_feed import ViewFeed
 from deploy.report.link_history import LinkHistory
@@ -187,20 +187,12 @@ class Recorder:
 
     def _carry_on(self) -> None:
         """A restarted recorder: take over what the dead one recorded (deploy.recording.resume)."""
-        part = newest_part(self.run_dir)
-        if part is None:
-            return
-        for item in read_back(part, self.carried):
-            if isinstance(item, RawFrame):  # the dead one's live view, as it was
-                self.mcap.write_raw(item)
-                self.carried["view_frames"] += 1
-                continue
-            rec = Received(item.key, item.payload, item.recv_stamp_s)
-            self._decode_now(self.intake.take([rec]))
-            self.carried["messages"] += 1
-            if self.carried["messages"] % 4096 == 0:  # in bounded batches here too
-                self.decode_deferred()
-        log.info("carried on from %s: %s", part.name, dict(self.carried))
+        carry_on(self.run_dir, self.carried, self.mcap.write_raw, self._take_carried)
+
+    def _take_carried(self, rec: Received) -> None:
+        self._decode_now(self.intake.take([rec]))
+        if self.carried["messages"] % 4096 == 0:  # in bounded batches here too
+            self.decode_deferred()
 
     def tick(self) -> None:
         """Once a period: flush the MCAP, publish status, write progress.json."""
@@ -251,21 +243,14 @@ class Recorder:
         follower status was ever heard (no followers on this bus).  True if all came.
         """
         deadline = time.monotonic() + self.final_status_wait_s
-        while not self._final_statuses_in():
+        while self.follower_status and (
+                pending := followers_pending(self.follower_status, self.scenario.n)):
             if time.monotonic() > deadline:
-                log.warning("no final status from followers %s: links use their last",
-                            self._followers_pending())
+                log.warning("no final status from followers %s: links use their last", pending)
                 return False
             time.sleep(max(poll_s, 0.001))
             self.step()
         return True
-
-    def _followers_pending(self) -> list[int]:
-        return [i for i in range(self.scenario.n)
-                if getattr(self.follower_status.get(i), "state", "") not in FINAL_STATES]
-
-    def _final_statuses_in(self) -> bool:
-        return not self.follower_status or not self._followers_pending()
 
     # ---- the end -------------------------------------------------------------------------
     def finish(self) -> bool:
@@ -298,14 +283,6 @@ class Recorder:
 
     def progress(self) -> dict[str, Any]:
         return progress(self)
-
-    @property
-    def live_url(self) -> str | None:
-        return self.feed.url
-
-    @property
-    def live_frames_sent(self) -> int:
-        return self.feed.frames_sent
 
     def _publish_status(self) -> None:
         msg = ProcessStatus(self._stamper.header(), ROLE, self.index, self.state,

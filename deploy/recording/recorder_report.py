@@ -37,7 +37,7 @@ def counters(rec: Recorder) -> dict[str, Any]:
             "mcap_file": MCAP_FILE,
             # Read back from a dead predecessor's MCAP (deploy.recording.resume).
             "carried_on": dict(rec.carried),
-            "live": {"url": rec.live_url, "frames_sent": rec.live_frames_sent,
+            "live": {"url": rec.feed.url, "frames_sent": rec.feed.frames_sent,
                      "frames_per_topic": dict(sorted(rec.mcap.frames.items())),
                      "view_errors": rec.feed.errors},
         },
@@ -60,7 +60,7 @@ def progress(rec: Recorder) -> dict[str, Any]:
         "links": rec.link_history.summary(),
         "recorder_behind_s": behind_s(now, rec.newest_stamp_s),
         "wall_stamp_s": now,
-        "live_url": rec.live_url,
+        "live_url": rec.feed.url,
     }
 
 

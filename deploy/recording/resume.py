@@ -22,7 +22,7 @@ import json
 import logging
 import re
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,6 +38,7 @@ from deploy.recording.mcap_log import (
     schema_name,
 )
 from errors import CodecError
+from transport.bus import Received
 from transport.codec import CODEC_VERSION, SCHEMAS, decode
 from transport.messages import Message as BusMessage
 
@@ -76,6 +77,23 @@ def wire_from_json(cls: type, data: bytes) -> bytes:
     wire = [CODEC_VERSION, tag, header["sender_id"], header["seq"], header["stamp_s"],
             *(body[f.name] for f in fields)]
     return bytes(msgpack.packb(wire, use_bin_type=True))
+
+
+def carry_on(run_dir: Path, carried: Counter[str], write_raw: Callable[[RawFrame], None],
+             take: Callable[[Received], None]) -> None:
+    """The newest part's live-view frames to `write_raw`, its bus messages to `take` as if
+    they came off the bus again; counted in `carried` with what could not be read."""
+    part = newest_part(run_dir)
+    if part is None:
+        return
+    for item in read_back(part, carried):
+        if isinstance(item, RawFrame):  # the dead one's live view, as it was
+            write_raw(item)
+            carried["view_frames"] += 1
+        else:
+            carried["messages"] += 1
+            take(Received(item.key, item.payload, item.recv_stamp_s))
+    log.info("carried on from %s: %s", part.name, dict(carried))
 
 
 def message_from_json(cls: type, data: bytes) -> BusMessage:
