@@ -1,14 +1,15 @@
-"""The recorder's intake: every sample on a known key recorded as it arrived, raw.
+"""The recorder's intake: every sample on a known key recorded as it arrived.
 
-Decoding each message to record it was most of the recorder's CPU (issue 50), and nine in
-ten of ring64's messages are follower states, which only the run's end needs whole.  So:
-- Each sample goes into the MCAP as its msgpack payload (mcap_log.write_wire), with its
-  receive stamp.
-- Follower states and target observations ("deferred" keys) are not decoded to be
-  recorded.  They wait packed here and are decoded, with every check of the `Decoder`
-  and counted by it, a bounded batch at a time (`DECODE_BYTES`, a few seconds of ring64)
-  and at the end of the run; the assembler gets them then.  A refused one is in the MCAP
-  all the same: readers decode and check (deploy.recording.resume).
+Decoding each message into its dataclass and checking it to record it was most of the
+recorder's CPU (issue 50), and nine in ten of ring64's messages are follower states, which
+only the run's end needs whole.  So:
+- Follower states and target observations ("deferred" keys) go into the MCAP as the JSON
+  their wire array makes (mcap_log.wire_json: no dataclass, no checks), with their receive
+  stamp; a payload that is no wire array of its key's type is not recorded.
+- They wait packed here and are decoded, with every check of the `Decoder` and counted by
+  it, a bounded batch at a time (`DECODE_BYTES`, a few seconds of ring64) and at the end of
+  the run; the assembler gets them then.  One refused then is in the MCAP all the same:
+  readers decode and check (deploy.recording.resume).
 - The newest deferred sample of each key is kept for the live view and progress, and
   decoded, checked but not counted, at the view's rate (`peek`).
 - The rest (truth, control, statuses: ~120 a second in ring64) the loop decodes at once
@@ -26,7 +27,7 @@ import struct
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 
-from deploy.recording.mcap_log import McapLog
+from deploy.recording.mcap_log import McapLog, wire_json
 from transport.bus import Received
 from transport.codec import MAX_PAYLOAD_BYTES
 from transport.decoder import Decoder
@@ -98,7 +99,7 @@ class Intake:
             self.decoder.refuse("wrong_key", key)
             return None
         follower = rule.index if rule.kind is FollowerState else None
-        slot = Slot(len(self._by_id), key, rule.kind, self.mcap.wire_channel(key, rule.kind),
+        slot = Slot(len(self._by_id), key, rule.kind, self.mcap.channel(key, rule.kind),
                     rule.kind in DEFERRED, rule.owner, follower)
         self._slots[key] = slot
         self._by_id.append(slot)
@@ -122,7 +123,11 @@ class Intake:
             recv_s = rec.recv_stamp_s
             if not self._pending:
                 self._oldest_s = recv_s
-            self.mcap.write_wire(rec.key, slot.channel, payload, int(recv_s * _NS))
+            recorded = wire_json(slot.cls, payload)
+            if recorded is not None:
+                data, stamp_ns, seq = recorded
+                self.mcap.write_json(rec.key, slot.channel, data, int(recv_s * _NS), stamp_ns,
+                                     seq)
             offset = clocks.offset_s(slot.owner) if clocks.peers else None
             self._pending += _HEAD.pack(recv_s, math.nan if offset is None else offset,
                                         slot.id, len(payload))

@@ -59,7 +59,6 @@ FINAL_STATUS_WAIT_S = 2.0  # after the stop, for the followers' "done" counters 
 # (the MCAP's log time) is taken when it is drained, at most this much later.
 POLL_S = 0.02
 PEEK_S = 0.1  # the newest states decoded for the live view and progress (its scene rate)
-_NS = 1_000_000_000
 
 
 class Recorder:
@@ -158,13 +157,12 @@ class Recorder:
     def _decode_now(self, items: list[tuple[Slot, Received]]) -> bool:
         """Decode, record if accepted and use; True if any was."""
         shown = False
-        for slot, rec in items:
+        for _, rec in items:
             inbound = self.decoder.decode(rec)
             if inbound is None:
                 continue
             msg = inbound.message
-            self.mcap.write_wire(rec.key, slot.channel, rec.payload, int(rec.recv_stamp_s * _NS),
-                                 max(0, int(msg.header.stamp_s * _NS)), msg.header.seq & 0xFFFFFFFF)
+            self.mcap.write(rec.key, msg, rec.recv_stamp_s)
             self._use(msg)
             self.feed.add(msg, rec.recv_stamp_s)
             shown = True

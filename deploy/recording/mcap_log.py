@@ -1,12 +1,12 @@
-"""A streaming MCAP recording of the bus: one channel per key.
+"""A streaming MCAP recording of the bus: one JSON channel per key, JSON schemas per type.
 
-The recorder writes each bus message as it arrived (`write_wire`): its msgpack payload, the
-codec's wire array (transport.codec), on a `msgpack` channel whose schema (encoding
-`jsonschema`, named `enclose.<Type>`) describes that array, generated from the message
-dataclass.  log_time is the recorder's receive time; publish_time is the sender's stamp
-where the message was decoded on arrival, else the receive time too (a reader takes the
-sender's stamp from the payload's header).  Recordings before that (`write`, still read:
-deploy.recording.resume) have `json` channels, the dataclass as an object.
+Foxglove and PlotJuggler read `json` messages described by `jsonschema` schemas.  The schemas
+are generated from the message dataclasses, so a field added to a message shows up here
+without an edit.  A message is the dataclass as an object: `write` makes it from a decoded
+message, `wire_json` from a payload as it arrived, without decoding it into the dataclass
+(the recorder checks follower states and observations later, in batches:
+deploy.recording.intake).  log_time is the recorder's receive time, publish_time the
+sender's stamp.
 Messages go into compressed chunks of `chunk_size` bytes written as soon as they fill, and
 the file object is flushed each `flush()`: a crash loses at most the chunk being built.
 """
@@ -28,10 +28,10 @@ import msgspec
 from mcap.writer import CompressionType, Writer
 
 from deploy.recording.mcap_fast import MessageAppender, spill_chunk_indices
+from transport.codec import CODEC_VERSION, SCHEMAS
 from transport.messages import Message
 
 MESSAGE_ENCODING = "json"
-WIRE_ENCODING = "msgpack"  # the MCAP registry's name for MessagePack channels
 SCHEMA_ENCODING = "jsonschema"
 DEFAULT_CHUNK_BYTES = 64 * 1024
 _NS = 1_000_000_000
@@ -91,16 +91,6 @@ def dataclass_schema(cls: type) -> dict[str, Any]:
     }
 
 
-def wire_schema(cls: type) -> dict[str, Any]:
-    """JSON schema of a message's wire array: version, type tag, header, then the fields."""
-    body = dataclass_schema(cls)
-    fields = [v for k, v in body["properties"].items() if k != "header"]
-    head = [{"type": "integer"}, {"type": "integer"}, {"type": "string"},
-            {"type": "integer"}, {"type": "number"}]
-    return {"type": "array", "title": f"{cls.__name__} (transport.codec wire array)",
-            "prefixItems": head + fields, "minItems": len(head)}
-
-
 _FIELD_NAMES: dict[type, tuple[str, ...]] = {}
 
 
@@ -114,6 +104,42 @@ def _mapping_as_dict(obj: object) -> dict[str, Any]:
 # The same bytes as json.dumps(separators=(",", ":")) at a sixth of its cost: at n = 16 the
 # recorder writes ~1 700 messages a second, and json was a fifth of its CPU.
 _JSON = msgspec.json.Encoder(enc_hook=_mapping_as_dict)
+
+
+_UNPACK = msgspec.msgpack.Decoder()
+_WIRE_NAMES: dict[tuple[type, int], tuple[int, tuple[str, ...]]] = {}
+
+
+def _wire_names(cls: type, version: int) -> tuple[int, tuple[str, ...]]:
+    """(type tag, the names of its fields a payload of codec `version` carries)."""
+    names = _WIRE_NAMES.get((cls, version))
+    if names is None:
+        tag, fields = SCHEMAS[cls]
+        names = _WIRE_NAMES[(cls, version)] = (
+            tag, tuple(f.name for f in fields if f.since <= version))
+    return names
+
+
+def wire_json(cls: type, payload: bytes) -> tuple[bytes, int, int] | None:
+    """(the JSON `message_json` gives the message in `payload`, its sender's stamp in ns, its
+    sequence number), made from the codec's wire array without the dataclass; None if
+    `payload` is no wire array of `cls` of this codec version (the decoder refuses it)."""
+    try:
+        wire = _UNPACK.decode(payload)
+        version, tag, sid, seq, stamp_s = wire[:5]
+        if type(version) is not int or version != CODEC_VERSION or type(seq) is not int:
+            return None
+        want, names = _wire_names(cls, version)
+        if tag != want or len(wire) != 5 + len(names):
+            return None
+        body = {"header": {"sender_id": sid, "seq": seq, "stamp_s": stamp_s},
+                **dict(zip(names, wire[5:], strict=True))}
+        data = _JSON.encode(body)
+        stamp_ns = int(stamp_s * _NS)
+    except (msgspec.DecodeError, msgspec.EncodeError, TypeError, ValueError, KeyError,
+            OverflowError):
+        return None
+    return data, max(0, stamp_ns), seq & 0xFFFFFFFF
 
 
 def message_json(msg: Message) -> bytes:
@@ -198,14 +224,14 @@ class McapLog:
         if self._indices is None:
             spool.close()
         self._schemas: dict[type, int] = {}
-        self._wire_schemas: dict[type, int] = {}
         self._channels: dict[str, int] = {}
         self._raw_schemas: dict[RawSchema, int] = {}
         self.closed = False
         if metadata:
             self._writer.add_metadata("enclose", dict(metadata))
 
-    def _channel(self, key: str, cls: type) -> int:
+    def channel(self, key: str, cls: type) -> int:
+        """The `json` channel of `key` (registered at its first use)."""
         channel = self._channels.get(key)
         if channel is None:
             schema = self._schemas.get(cls)
@@ -218,31 +244,18 @@ class McapLog:
         return channel
 
     def write(self, key: str, msg: Message, recv_stamp_s: float) -> None:
-        channel = self._channel(key, type(msg))
+        channel = self.channel(key, type(msg))
         add = self._writer.add_message if self._fast is None else self._fast.add
         add(channel_id=channel, log_time=int(recv_stamp_s * _NS), data=message_json(msg),
             publish_time=max(0, int(msg.header.stamp_s * _NS)),
             sequence=msg.header.seq & 0xFFFFFFFF)
         self.messages[key] += 1
 
-    def wire_channel(self, key: str, cls: type) -> int:
-        """The `msgpack` channel of `key` (registered at its first use)."""
-        channel = self._channels.get(key)
-        if channel is None:
-            schema = self._wire_schemas.get(cls)
-            if schema is None:
-                data = json.dumps(wire_schema(cls)).encode()
-                schema = self._writer.register_schema(schema_name(cls), SCHEMA_ENCODING, data)
-                self._wire_schemas[cls] = schema
-            channel = self._writer.register_channel(key, WIRE_ENCODING, schema)
-            self._channels[key] = channel
-        return channel
-
-    def write_wire(self, key: str, channel: int, payload: bytes, log_time_ns: int,
+    def write_json(self, key: str, channel: int, data: bytes, log_time_ns: int,
                    publish_time_ns: int | None = None, sequence: int = 0) -> None:
-        """A bus message's payload as it arrived, on `key`'s `wire_channel`."""
+        """A message's JSON (`wire_json`) on `key`'s `channel`."""
         add = self._writer.add_message if self._fast is None else self._fast.add
-        add(channel_id=channel, log_time=log_time_ns, data=payload,
+        add(channel_id=channel, log_time=log_time_ns, data=data,
             publish_time=log_time_ns if publish_time_ns is None else publish_time_ns,
             sequence=sequence)
         self.messages[key] += 1

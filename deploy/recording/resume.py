@@ -7,11 +7,10 @@ its own recording and its assembler, so that `recording.mcap`, `series.csv` and 
 cover the whole run but for the seconds the recorder was down.  Since every recorder copies
 its predecessor, the newest part holds all earlier ones.
 
-`read_back` gives each bus message as its wire payload, as it arrived: the new recorder
-records and checks it as if it came off the bus again.  It reads both recordings: the
-`msgpack` channels of the raw recorder (deploy.recording.intake) and the `json` channels
-of recordings made before it (each turned back into its wire array).  A raw recording holds
-every sample on a known key, also those refused when decoded: `read_messages` decodes
+`read_back` gives each bus message as its wire payload (its `json` channel's message turned
+back into its wire array): the new recorder records and checks it as if it came off the bus
+again.  A recording holds every follower state and observation that was a wire array of its
+type, also those refused when decoded (deploy.recording.intake): `read_messages` decodes
 (codec checks only, the malformed skipped and counted); the recorder's own checks (senders,
 plausibility, law fields) are its `Decoder`'s.
 """
@@ -32,7 +31,6 @@ from mcap.stream_reader import StreamReader
 
 from deploy.recording.mcap_log import (
     MESSAGE_ENCODING,
-    WIRE_ENCODING,
     RawFrame,
     RawSchema,
     schema_name,
@@ -155,11 +153,9 @@ def _recorded(record: Message, channels: dict[int, tuple[str, type | RawSchema |
     if isinstance(cls, RawSchema):
         return RawFrame(topic, cls, bytes(record.data), record.log_time)
     encoding = encodings.get(record.channel_id)
-    if cls is None or encoding not in (WIRE_ENCODING, MESSAGE_ENCODING):
+    if cls is None or encoding != MESSAGE_ENCODING:
         skipped["unknown_channel"] += 1
         return None
-    if encoding == WIRE_ENCODING:
-        return Recorded(topic, bytes(record.data), record.log_time * 1e-9)
     try:
         payload = wire_from_json(cls, record.data)
     except (KeyError, ValueError, TypeError):

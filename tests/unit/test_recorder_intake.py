@@ -1,22 +1,27 @@
-"""The recorder's raw intake: samples recorded as they arrived, states decoded later.
+"""The recorder's intake: samples recorded as they arrived, states decoded later.
 
 Refusals decided on the key alone are counted at once; a state is checked and counted when
 its batch is decoded, with the clock offset of when it arrived; the live view gets the
-newest of each key, checked but not counted; and the MCAP's msgpack channels, and the
-JSON channels of recordings made before them, read back as wire payloads.
+newest of each key, checked but not counted; a state is recorded as the JSON its wire array
+makes, the same JSON as its decoded message's, and reads back as its wire payload; a payload
+that is no wire array is not recorded, whatever it holds.
 """
 
 from __future__ import annotations
 
+import json
 from collections import Counter
 from pathlib import Path
 
+import msgpack
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap.reader import make_reader
 
 from agents.loading.scenario_file import load_scenario
 from deploy.recording.intake import Intake
-from deploy.recording.mcap_log import WIRE_ENCODING, McapLog
+from deploy.recording.mcap_log import MESSAGE_ENCODING, McapLog, message_json, wire_json
 from deploy.recording.resume import Recorded, read_back, read_messages
 from tests.recorder_synth import SynthRun
 from transport.access import sender_ids
@@ -132,7 +137,7 @@ def test_a_batch_is_due_when_its_oldest_has_waited_or_it_is_large(tmp_path: Path
     mcap.close()
 
 
-def test_the_mcap_holds_payloads_as_they_came_and_old_json_recordings_still_read(
+def test_the_mcap_holds_states_as_json_from_their_wire_arrays_and_reads_back(
         tmp_path: Path) -> None:
     paper = load_scenario("paper")
     run = SynthRun(paper, KEYS, START_S, duration_s=0.2)
@@ -142,10 +147,9 @@ def test_the_mcap_holds_payloads_as_they_came_and_old_json_recordings_still_read
         if isinstance(msg, FollowerState):
             intake.take([rec(key, msg)])
         else:
-            channel = mcap.wire_channel(key, type(msg))
-            mcap.write_wire(key, channel, encode(msg), int(START_S * 1e9))
+            mcap.write(key, msg, START_S)
     mcap.close()
-    old = McapLog(tmp_path / "old.mcap")  # the JSON channels of the recorder before
+    old = McapLog(tmp_path / "old.mcap")  # every message decoded first, as before
     for key, msg in samples:
         old.write(key, msg, START_S)
     old.close()
@@ -153,13 +157,37 @@ def test_the_mcap_holds_payloads_as_they_came_and_old_json_recordings_still_read
         reader = make_reader(f)
         summary = reader.get_summary()
         assert summary is not None
-        assert {c.message_encoding for c in summary.channels.values()} == {WIRE_ENCODING}
+        assert {c.message_encoding for c in summary.channels.values()} == {MESSAGE_ENCODING}
         assert {s.name for s in summary.schemas.values()} >= {"enclose.FollowerState"}
-        first = next(iter(reader.iter_messages()))[2]
-    assert decode(first.data) == samples[0][1]
+        recorded = [(c.topic, m.data) for _, c, m in reader.iter_messages()]
+    states = [(k, m) for k, m in samples if isinstance(m, FollowerState)]
+    assert [json.loads(d) for k, d in recorded if "/follower/" in k] == \
+        [json.loads(message_json(m)) for _, m in states]
     for path in (tmp_path / "r.mcap", tmp_path / "old.mcap"):
         skipped: Counter[str] = Counter()
         items = [i for i in read_back(path, skipped) if isinstance(i, Recorded)]
         assert [(i.key, decode(i.payload)) for i in items] == samples, path
         assert [(k, m) for k, m, _ in read_messages(path, skipped)] == samples
         assert not skipped
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.one_of(st.binary(max_size=64),
+                 st.lists(st.one_of(st.integers(-(2**63), 2**64 - 1), st.floats(),
+                                    st.text(max_size=4), st.binary(max_size=4), st.none()),
+                          max_size=16).map(msgpack.packb)))
+def test_a_payload_that_is_no_wire_array_is_not_recorded_and_never_raises(
+        payload: bytes) -> None:
+    made = wire_json(FollowerState, payload)
+    if made is not None:  # by chance a wire array of a state: the JSON of some object
+        assert isinstance(json.loads(made[0]), dict)
+
+
+def test_a_state_recorded_from_its_wire_array_is_its_messages_json() -> None:
+    msg = state(2, 7, START_S, x=1.5)
+    made = wire_json(FollowerState, encode(msg))
+    assert made is not None
+    data, stamp_ns, seq = made
+    assert json.loads(data) == json.loads(message_json(msg))
+    assert (stamp_ns, seq) == (int(START_S * 1e9), 7)
+    assert wire_json(FollowerState, encode(msg)[:-1]) is None  # cut short

@@ -61,7 +61,8 @@ def test_garbage_is_counted_and_the_run_is_recorded(paper: Scenario, tmp_path: P
                 sbus.publish(keys.follower_state(1), msgpack.packb([7, 1, "f", 0, 1.0]))
         sbus.publish(keys.control(), encode(run.control(control, "stop")))
         assert recorder.run(lambda: False, poll_s=0.0) == "control_stop"
-        # The bad state is recorded as it came; it is refused, and counted, when decoded.
+        # The bad state is no state's wire array: not recorded; refused, and counted, when
+        # its batch is decoded.
         assert dict(recorder.decoder.dropped) == {"msgpack": 1}
         assert recorder.finish()
         states = [decode(r.payload) for r in status.drain()]
@@ -74,7 +75,7 @@ def test_garbage_is_counted_and_the_run_is_recorded(paper: Scenario, tmp_path: P
     assert metrics["recorder"]["stop_reason"] == "control_stop"
     recorded = topics(tmp_path / MCAP_FILE)
     assert recorded[keys.truth()] == 71 and recorded[keys.follower_state(3)] == 71
-    assert recorded[keys.follower_state(1)] == 72  # with the refused one
+    assert recorded[keys.follower_state(1)] == 71  # not the refused one
     assert metrics["recorder"]["deferred"]["decoded"] == 4 * 71 + 1
     assert recorded[keys.control()] == 2
     progress = json.loads((tmp_path / "progress.json").read_text())
