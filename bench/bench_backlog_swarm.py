@@ -160,7 +160,7 @@ def _summary(out: Path, samples: list[tuple[float, float]],
     tail = [mb for t, mb in samples if t >= end - 10]
     return {"before_mb": before, "peak_mb": max(mb for t, mb in samples if t >= at),
             "end_mb": sum(tail) / len(tail),
-            "backlog": metrics["recorder"].get("backlog"),
+            "deferred": metrics["recorder"].get("deferred"),
             "errors": {k: metrics.get(k) for k in ("estimator_error_m", "radius_error_m",
                                                    "angle_error")}}
 
@@ -170,7 +170,7 @@ def main(args: argparse.Namespace) -> None:
         s = one_run(args, args.out / f"run{k}")
         print(f"run {k}: before {s['before_mb']:.1f} MB, peak {s['peak_mb']:.1f} MB "
               f"(+{s['peak_mb'] - s['before_mb']:.1f}), end {s['end_mb']:.1f} MB "
-              f"(+{s['end_mb'] - s['before_mb']:.1f}); backlog {s['backlog']}; "
+              f"(+{s['end_mb'] - s['before_mb']:.1f}); deferred {s['deferred']}; "
               f"errors {s['errors']}", flush=True)
 
 

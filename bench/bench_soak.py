@@ -20,7 +20,7 @@ own).  At the end:
   starts after `--settle-min`): late-tick rate at most its double plus 0.1 % of ticks,
   each error at most 1.25 times its value or inside the paper's bound;
 - how long the recorder took to write the end-of-run outputs, and from its stop to its
-  done (its log says); how far behind it fell (its backlog's peak) and what it dropped.
+  done (its log says); what it decoded late, in batches, and what it dropped.
 The raw samples go to OUT/soak.json; `--report-only` reports a finished run from it again.
 
 Run: python bench/bench_soak.py [--case paper] [--minutes 10] [--window-min 2]
@@ -135,8 +135,8 @@ def report(out: Path, args: argparse.Namespace, samples: list[dict[str, Any]]) -
         "settle_min": args.settle_min, "memory": memory, "roles": role_table(memory),
         "load_1min": load_range(samples, settle_s),
         "outputs_s": outputs_s(out), "stop_to_done_s": stop_to_done_s(out),
-        # How far behind the recorder fell (its backlog's peak) and what it lost to it.
-        "recorder_backlog": metrics.get("recorder", {}).get("backlog"),
+        # The states and observations it decoded late, in batches (deploy.recording.intake).
+        "recorder_deferred": metrics.get("recorder", {}).get("deferred"),
         "metrics": {k: metrics.get(k) for k in ("estimator_error_m", "radius_error_m",
                                                 "angle_error", "settle_time_s", "samples")},
     }
@@ -229,7 +229,7 @@ def show(summary: dict[str, Any]) -> None:
     print(f"end-of-run outputs written in {summary['outputs_s']} s "
           f"({summary['stop_to_done_s']} s from the recorder's stop to done); "
           f"metrics {summary['metrics']}")
-    print(f"recorder backlog: {summary.get('recorder_backlog')}")
+    print(f"recorder deferred decoding: {summary.get('recorder_deferred')}")
 
 
 def _span(v: list[float]) -> str:

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from deploy.recording.resume import read_back
+from deploy.recording.resume import read_messages
 from deploy.report.rundir import SERIES_FILE, read_info, series_columns
 from transport.messages import FollowerState, TruthSnapshot
 
@@ -62,8 +62,7 @@ def feed_forward_bias(run_dir: Path, followers: list[int], window_s: float) -> N
     start = json.loads((run_dir / "metrics.json").read_text())["start_stamp_s"]
     truth: list[tuple[float, float, float]] = []
     dr: dict[int, list[tuple[float, float, float]]] = {i: [] for i in followers}
-    for rec in read_back(run_dir / "recording.mcap", Counter()):
-        msg = getattr(rec, "message", None)
+    for _key, msg, _recv_s in read_messages(run_dir / "recording.mcap", Counter()):
         if isinstance(msg, TruthSnapshot) and msg.header.stamp_s > start:
             v = np.mean(np.asarray(msg.target_vel_m_s), axis=0)
             truth.append((msg.header.stamp_s - start, float(v[0]), float(v[1])))

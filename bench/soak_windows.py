@@ -10,7 +10,6 @@ over any span of whole minutes: the table's windows, and the spans the issue com
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import re
 from collections.abc import Iterator
@@ -25,22 +24,21 @@ Span = tuple[float, float]  # [start, end) in minutes of experiment time
 def late_per_minute(out: Path, start_stamp_s: float) -> dict[str, dict[int, list[int]]]:
     """Per role ("follower", "sim"): minute -> [late, ticks] summed over its processes,
     from the differences of each process's counters between minutes."""
-    from mcap.reader import make_reader
+    from collections import Counter
+
+    from deploy.recording.resume import read_messages
+    from transport.messages import ProcessStatus
 
     last: dict[str, dict[int, tuple[int, int]]] = {}  # process -> minute -> counters
-    with open(out / "recording.mcap", "rb") as f:
-        for _schema, channel, message in make_reader(f).iter_messages():
-            if "/status/" not in channel.topic:
-                continue
-            body = json.loads(message.data)
-            if body.get("role") not in ("follower", "sim"):
-                continue
-            c = body.get("counters", {})
-            if "ticks" not in c or "overruns" not in c:
-                continue
-            m = math.floor((body["header"]["stamp_s"] - start_stamp_s) / 60.0)
-            key = f"{body['role']}-{body['index']}"
-            last.setdefault(key, {})[m] = (int(c["overruns"]), int(c["ticks"]))
+    for _key, msg, _recv_s in read_messages(out / "recording.mcap", Counter()):
+        if not isinstance(msg, ProcessStatus) or msg.role not in ("follower", "sim"):
+            continue
+        c = msg.counters
+        if "ticks" not in c or "overruns" not in c:
+            continue
+        m = math.floor((msg.header.stamp_s - start_stamp_s) / 60.0)
+        key = f"{msg.role}-{msg.index}"
+        last.setdefault(key, {})[m] = (int(c["overruns"]), int(c["ticks"]))
     minutes: dict[str, dict[int, list[int]]] = {}
     for key, per in last.items():
         before = (0, 0)

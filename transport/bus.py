@@ -134,9 +134,11 @@ class Bus(Protocol):
         ...
 
     def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY,
-                  stamp_arrival: bool = False) -> Subscription:
+                  stamp_arrival: bool = False, hlc: bool = True) -> Subscription:
         """The newest `capacity` samples on `key_expr`; with `stamp_arrival`, each is
-        stamped as it reaches this process (`Received.arrival_s`) where the bus can."""
+        stamped as it reaches this process (`Received.arrival_s`) where the bus can;
+        without `hlc`, no sample carries its publisher's HLC stamp (a cost per sample that
+        a reader of none, the recorder, need not pay)."""
         ...
 
     def declare_token(self, key: str) -> Token: ...

@@ -105,6 +105,7 @@ class Decoder:
         self.rejected_from: Counter[str] = Counter()  # per known sender
         self.log = RateLimitedLog(log)
         self.accepted = 0
+        self.last_stale = False  # of the last message accepted
         self.gaps: Counter[str] = Counter()  # per sender id, over its streams
         self.stale: Counter[str] = Counter()
         self._last_seq: dict[tuple[str, str], int] = {}
@@ -116,32 +117,54 @@ class Decoder:
             del self._last_seq[stream]
 
     def decode(self, rec: Received) -> Inbound | None:
-        try:
-            msg = decode(rec.payload)
-        except CodecError as exc:
-            self._drop(exc.reason, rec.key, None)
+        msg = self.accept(rec.key, rec.payload, rec.recv_stamp_s)
+        if msg is None:
             return None
-        if self.expect is not None and not isinstance(msg, self.expect):
-            self._drop("unexpected_type", rec.key, msg)
-            return None
-        reason = key_reason(msg, rec.key) or self._sender_reason(msg, rec.key)
+        return build(Inbound, {"message": msg, "received": rec, "stale": self.last_stale})
+
+    def accept(self, key: str, payload: bytes, recv_stamp_s: float,
+               clocks: ClockBook | None = None) -> Message | None:
+        """`decode` without the `Inbound` (staleness in `last_stale`), the stamps mapped
+        with `clocks` (None: ours now)."""
+        msg, reason = self.screen(key, payload, recv_stamp_s, clocks)
         if reason is not None:
-            self._drop(reason, rec.key, msg)
+            self._drop(reason, key, msg)
             return None
-        clocks = self.clocks
-        if clocks.peers:  # one host: no clock to map from, and no call per message
+        assert msg is not None  # accepted
+        self.accepted += 1
+        self.last_stale = self._track(msg.header.sender_id, key, msg.header.seq)
+        return msg
+
+    def screen(self, key: str, payload: bytes, recv_stamp_s: float,
+               clocks: ClockBook | None = None) -> tuple[Message | None, str | None]:
+        """Every check of `decode`, nothing counted: (the message on our clock, None), or
+        (what it claims to be, if it decoded, and the reason it is refused).  `clocks`:
+        the stamps' mapping to use instead of ours now (one taken when it arrived)."""
+        try:
+            msg = decode(payload)
+        except CodecError as exc:
+            return None, exc.reason
+        if self.expect is not None and not isinstance(msg, self.expect):
+            return msg, "unexpected_type"
+        reason = key_reason(msg, key) or self._sender_reason(msg, key)
+        if reason is not None:
+            return msg, reason
+        if clocks is not None:
             msg = clocks.to_local(msg)
+        elif self.clocks.peers:  # one host: no clock to map from, and no call per message
+            msg = self.clocks.to_local(msg)
         if self.limits is not None:
-            reason = check(msg, rec.key, rec.recv_stamp_s, self.limits)
+            reason = check(msg, key, recv_stamp_s, self.limits)
             if reason is None and self.law_fields is not None and type(msg) is FollowerState \
                     and msg.law:
                 reason = law_reason(msg.law, self.law_fields)
             if reason is not None:
-                self._drop(f"rejected_{reason}", rec.key, msg)
-                return None
-        self.accepted += 1
-        stale = self._track(msg.header.sender_id, rec.key, msg.header.seq)
-        return build(Inbound, {"message": msg, "received": rec, "stale": stale})
+                return msg, f"rejected_{reason}"
+        return msg, None
+
+    def refuse(self, reason: str, key: str) -> None:
+        """Count a refusal decided before decoding (the key alone, the size)."""
+        self._drop(reason, key, None)
 
     def _sender_reason(self, msg: Message, key: str) -> str | None:
         """With `senders`: the sender, and the process the key is about, must be known."""

@@ -328,11 +328,11 @@ class ImpairedBus(ClosingContext):
         self.inner.publish(key, payload)
 
     def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY,
-                  stamp_arrival: bool = False) -> ImpairedSubscription:
+                  stamp_arrival: bool = False, hlc: bool = True) -> ImpairedSubscription:
         # What the impairment holds back is in flight, not queued at the receiver: a small
         # receive queue (agents.follower.node.PEER_QUEUE) must not cap the emulated delay.
         held = max(capacity, DEFAULT_CAPACITY)
-        inner = self.inner.subscribe(key_expr, capacity, stamp_arrival)
+        inner = self.inner.subscribe(key_expr, capacity, stamp_arrival, hlc)
         return ImpairedSubscription(self, inner, held)
 
     def declare_token(self, key: str) -> Token:

@@ -171,7 +171,7 @@ class MemoryBus(BusBase):
         return MemoryPublisher(self, key, congestion)
 
     def subscribe(self, key_expr: str, capacity: int = DEFAULT_CAPACITY,
-                  stamp_arrival: bool = False) -> MemorySubscription:
+                  stamp_arrival: bool = False, hlc: bool = True) -> MemorySubscription:
         # Delivery is immediate here: a sample arrives when drained (arrival_s None).
         self._check_open()
         sub = MemorySubscription(self, key_expr, capacity)

@@ -8,10 +8,15 @@ the end goes to disk as it arrives, and the end reads it back chunk by chunk.
   in memory for live progress.
 - `chunks.Assembly`: the run on the truth grid, one chunk of samples at a time, with the
   counters that qualify it (state age at use, first-state fills).
+- `intake.Intake`: every sample on a known key recorded as it arrived; follower states and
+  observations recorded from their wire arrays and decoded later, a bounded batch at a
+  time, the newest at the view's rate.
 - `mcap_log.McapLog`: streaming, chunked MCAP file, one JSON channel per key, JSON schemas
   generated from the message dataclasses (opens in Foxglove and PlotJuggler); its chunk
   indexes wait on disk for the summary (`mcap_fast`).
-- `progress`: the live `progress.json` for the launcher (atomic writes).
+- `resume`: a recording read back.
+- `progress`, `recorder_report`: the live `progress.json` for the launcher (atomic writes),
+  metrics.json's recorder share and the recorder's status counters.
 - `outputs`: the end of a run: `metrics.json`, `run.json`, `series.csv`, `series.parquet`
   and figures through `deploy.report.run_report.write_run_outputs` -- the code
   `enclose simulate` uses.

@@ -57,8 +57,11 @@ class RunAssembler:
     """
 
     def __init__(self, n: int, m: int, spill_dir: Path | None = None,
-                 block_rows: int = BLOCK_ROWS) -> None:
+                 block_rows: int = BLOCK_ROWS, recent_from_adds: bool = True) -> None:
         self.n, self.m = n, m
+        # False: states come late, in batches (deploy.recording.intake), and the live
+        # progress gets the newest ones through `note_recent` instead.
+        self.recent_from_adds = recent_from_adds
         self.spill_dir = spill_dir
         self.drops: Counter[str] = Counter()  # messages unusable for the series, per reason
         self.start: RunControl | None = None
@@ -128,10 +131,17 @@ class RunAssembler:
         (rx, ry), (dx, dy), (ux, uy) = msg.r_m, msg.dr_m_s, msg.u_m_s
         self.states.append((stamp, msg.index, rx, ry, dx, dy, ux, uy))
         row = (stamp, rx, ry, dx, dy, ux, uy)
-        self._recent_states[msg.index].append(row)
+        if self.recent_from_adds:
+            self._recent_states[msg.index].append(row)
         tally.states += 1
         if tally.first is None or stamp < tally.first[0]:
             tally.first = np.asarray(row, dtype=np.float64)
+
+    def note_recent(self, msg: FollowerState) -> None:
+        """A state for the live progress only (`recent_series`), not the run's series."""
+        if 0 <= msg.index < self.n and len(msg.r_m) == len(msg.dr_m_s) == len(msg.u_m_s) == 2:
+            (rx, ry), (dx, dy), (ux, uy) = msg.r_m, msg.dr_m_s, msg.u_m_s
+            self._recent_states[msg.index].append((msg.header.stamp_s, rx, ry, dx, dy, ux, uy))
 
     # ---- queries -------------------------------------------------------------------------
     @property
@@ -155,7 +165,7 @@ class RunAssembler:
     def recent_series(self, window_s: float) -> RunSeries | None:
         """The last `window_s` of truth (by arrival) with states aligned: for live progress."""
         start = self.start_stamp_s()
-        if start is None or not self.truth.rows or not any(self.state_counts()):
+        if start is None or not self.truth.rows or not any(self._recent_states):
             return None
         truth = np.asarray(self._recent_truth)
         stamps = truth[:, 0]
@@ -166,7 +176,7 @@ class RunAssembler:
         est = np.full((len(stamps), self.n, 2), np.nan)
         cmd = np.full((len(stamps), self.n, 2), np.nan)
         for i, ring in enumerate(self._recent_states):
-            if not self.tallies[i].states:
+            if not ring:
                 continue
             tail = np.asarray(list(ring)[-(4 * len(stamps) + 8) :])
             tail = tail[np.argsort(tail[:, 0], kind="stable")]

@@ -89,3 +89,8 @@ def link_report(
             entry = link_entry(link, c, statuses, recorded_states)
             out[f"{link}->f{i}"] = {**entry, "final": status.state in FINAL_STATES}
     return out
+
+
+def followers_pending(statuses: Mapping[int, ProcessStatus], n: int) -> list[int]:
+    """The followers (of `n`) whose latest status is not a final one (or who sent none)."""
+    return [i for i in range(n) if getattr(statuses.get(i), "state", "") not in FINAL_STATES]

@@ -1,8 +1,10 @@
-"""The recorder's single loop: drain the bus, decode, log to MCAP, feed the assembler.
+"""The recorder's single loop: drain the bus, record it raw, decode, feed the assembler.
 
 Side effects live here only: the MCAP file, progress.json, the recorder's ProcessStatus and
-liveliness token, and at the end the run's outputs.  Bad payloads are counted by the
-`Decoder` and never reach the MCAP or the series.
+liveliness token, and at the end the run's outputs.  Every sample on a known key is recorded
+as it arrived; follower states and observations are decoded later, in batches
+(deploy.recording.intake).  Bad payloads are counted by the `Decoder` and never reach the
+series; the MCAP holds refused states and observations as they came (readers check them).
 """
 
 from __future__ import annotations
@@ -21,33 +23,32 @@ from agents.scenario.model import Scenario
 from deploy.json_files import write_json_atomic
 from deploy.procs.forked import trim_heap
 from deploy.recording.assembler import RunAssembler
-from deploy.recording.backlog import Backlog
-from deploy.recording.links import FINAL_STATES, link_report, unreadable_links
+from deploy.recording.intake import Intake, Slot
+from deploy.recording.links import followers_pending
 from deploy.recording.live_defaults import PROGRESS_FILE
 from deploy.recording.live_server import LiveServer
-from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog, RawFrame
-from deploy.recording.progress import behind_s, live_errors
-from deploy.recording.queues import STEP_BATCH, drain_into, queue_capacities
-from deploy.recording.resume import newest_part, read_back
+from deploy.recording.mcap_log import DEFAULT_CHUNK_BYTES, McapLog
+from deploy.recording.queues import DRAIN_PIECE, drain_pieces, queue_capacities
+from deploy.recording.recorder_report import MCAP_FILE, counters, progress, status_counters
+from deploy.recording.resume import carry_on
 from deploy.recording.view import DEFAULT_SCENE_HZ, LiveView
 from deploy.recording.view_feed import ViewFeed
 from deploy.report.link_history import LinkHistory
 from deploy.report.rundir import RunInfo
 from errors import CodecError, TransportError
 from transport.access import sender_ids
-from transport.bus import Bus, Congestion
+from transport.bus import Bus, Congestion, Received
 from transport.codec import encode
 from transport.decoder import Decoder
 from transport.key_exprs import SwarmKeys
 from transport.message_checks import RECORDER_LIMITS
-from transport.messages import Message, ProcessStatus, Stamper
+from transport.messages import FollowerState, Message, ProcessStatus, Stamper
 
 log = logging.getLogger(__name__)
 
 ROLE = "recorder"
-MCAP_FILE = "recording.mcap"
-# After a backlog is worked off, its memory (decoded samples, Zenoh's buffers) is free but
-# still resident: hand it back, at most this often.
+# After a busy stretch its memory (decoded samples, Zenoh's buffers) is free but still
+# resident: hand it back, at most this often.
 TRIM_EVERY_S = 10.0
 OVERDUE_GRACE_S = 30.0  # stop on our own this long after the planned end if no "stop" came
 FINAL_STATUS_WAIT_S = 2.0  # after the stop, for the followers' "done" counters (links)
@@ -57,6 +58,7 @@ FINAL_STATUS_WAIT_S = 2.0  # after the stop, for the followers' "done" counters 
 # 10 Hz scene on time; what arrives meanwhile waits in its ring, and its receive stamp
 # (the MCAP's log time) is taken when it is drained, at most this much later.
 POLL_S = 0.02
+PEEK_S = 0.1  # the newest states decoded for the live view and progress (its scene rate)
 
 
 class Recorder:
@@ -85,14 +87,19 @@ class Recorder:
         # as its followers drop it (transport.law_fields).
         self.decoder = Decoder(limits=RECORDER_LIMITS, senders=sender_ids(scenario.n, scenario.m),
                                law_fields=make_law(scenario).declared())
-        self.asm = RunAssembler(scenario.n, scenario.m, spill_dir=run_dir)  # rows on disk
+        self.decode_cpu_s = 0.0  # in the deferred batches
+        senders = sender_ids(scenario.n, scenario.m)
+        self.intake = Intake(self.mcap, self.decoder, senders, scenario.n)
+        self.asm = RunAssembler(scenario.n, scenario.m, spill_dir=run_dir,  # rows on disk
+                                recent_from_adds=False)
         self.state = "starting"
         self.stop_reason = ""
-        self._info = RunInfo.from_scenario(scenario, "networked", scenario.run.duration_s)
+        self.info = RunInfo.from_scenario(scenario, "networked", scenario.run.duration_s)
         # The live view's frames go into the MCAP always (replay looks as live did) and to
         # the WebSocket server when there is one; scene_hz None turns the view off.
-        self.feed = ViewFeed(self.mcap, None if scene_hz is None
-                             else LiveView(self._info, scene_hz), live)
+        self.feed = ViewFeed(self.mcap, None if scene_hz is None else LiveView(
+            self.info, scene_hz, self.intake.arrivals), live)
+        self._next_peek_s = -math.inf
         self._stamper = Stamper(f"{ROLE}-{index}", bus.now_s)
         self._status = bus.declare_publisher(self.keys.status(ROLE, index), Congestion.DROP)
         # Everything but the followers' estimator-rate states (issue 15): up to 400 per
@@ -100,9 +107,8 @@ class Recorder:
         # Without `record_sensor`, not the target observations either: noiseless, they are
         # the truth's target positions again, and in ring64 they were half of what the
         # recorder decoded (1 280 a second), where it fell seconds behind.
-        self._subs = [bus.subscribe(k, capacity) for k, capacity in
+        self._subs = [bus.subscribe(k, capacity, hlc=False) for k, capacity in
                       queue_capacities(self.keys, scenario, record_sensor).items()]
-        self.backlog = Backlog(sub.key_expr for sub in self._subs)
         # After the subscription: what arrives while we read back waits in its queue.
         self.carried: Counter[str] = Counter()
         self._carry_on()
@@ -113,37 +119,65 @@ class Recorder:
         # of the run's metrics and the marks on its figures.
         self.liveness = MembershipWatch(bus, self.keys, scenario.n)
         self.membership: list[tuple[float, frozenset[int]]] = []
-        self._started_wall_s = bus.now_s()
+        self.started_wall_s = bus.now_s()
         self._next_tick_s = 0.0
         self._set_state("linked")
 
     # ---- one iteration -------------------------------------------------------------------
-    def step(self, drain: bool = True) -> int:
-        """Empty the rings into the backlog (unless not `drain`) and handle up to STEP_BATCH
-        of each key from it; the number handled (decoded or refused)."""
+    def step(self) -> int:
+        """Empty the rings: record every sample, decode what is decoded now (deferred
+        states once a batch waits); the number of samples taken."""
         # Membership first: its events must not wait behind a backlog of samples.
-        members = self.liveness.members(self.bus.now_s())
+        now = self.bus.now_s()
+        members = self.liveness.members(now)
         if members and (not self.membership or members != self.membership[-1][1]):
-            self.membership.append((self.bus.now_s(), members))
-        if drain:
-            drain_into(self.backlog, self._subs)
-        taken = self.backlog.batch(STEP_BATCH)
-        inbound = self.decoder.decode_all(taken)
-        for item in inbound:
-            self._record(item.received.key, item.message, item.received.recv_stamp_s)
-            self.feed.add(item.message, item.received.recv_stamp_s)
-        if inbound:
+            self.membership.append((now, members))
+        taken, shown = 0, False
+        for sub in self._subs:
+            for piece in drain_pieces(sub):
+                taken += len(piece)
+                shown |= self._decode_now(self.intake.take(piece))
+        if self.intake.due(now):
+            self.decode_deferred()
+        if now >= self._next_peek_s:
+            self._next_peek_s = now + PEEK_S
+            for msg, recv_s in self.intake.peek():
+                self.feed.add(msg, recv_s)
+                if isinstance(msg, FollowerState):
+                    self.asm.note_recent(msg)
+                shown = True
+        if shown:
             self.feed.show_new()
         if self.asm.start is not None and self.state == "linked":
-            self._info = RunInfo.from_scenario(self.scenario, "networked",
+            self.info = RunInfo.from_scenario(self.scenario, "networked",
                                                self.asm.start.duration_s)
             self._set_state("running")
-        return len(taken)
+        return taken
 
-    def _record(self, key: str, msg: Message, recv_stamp_s: float) -> None:
+    def _decode_now(self, items: list[tuple[Slot, Received]]) -> bool:
+        """Decode, record if accepted and use; True if any was."""
+        shown = False
+        for _, rec in items:
+            inbound = self.decoder.decode(rec)
+            if inbound is None:
+                continue
+            msg = inbound.message
+            self.mcap.write(rec.key, msg, rec.recv_stamp_s)
+            self._use(msg)
+            self.feed.add(msg, rec.recv_stamp_s)
+            shown = True
+        return shown
+
+    def decode_deferred(self) -> None:
+        """The deferred states and observations waiting, decoded into the assembler."""
+        t0 = time.process_time()
+        for msg in self.intake.decoded():
+            self._use(msg)
+        self.decode_cpu_s += time.process_time() - t0
+
+    def _use(self, msg: Message) -> None:
         if msg.header.sender_id != self._stamper.sender_id:  # our own status is always fresh
             self.newest_stamp_s = max(self.newest_stamp_s, msg.header.stamp_s)
-        self.mcap.write(key, msg, recv_stamp_s)
         self.asm.add(msg)
         if isinstance(msg, ProcessStatus) and msg.role == "follower":
             self.follower_status[msg.index] = msg
@@ -151,17 +185,12 @@ class Recorder:
 
     def _carry_on(self) -> None:
         """A restarted recorder: take over what the dead one recorded (deploy.recording.resume)."""
-        part = newest_part(self.run_dir)
-        if part is None:
-            return
-        for item in read_back(part, self.carried):
-            if isinstance(item, RawFrame):  # the dead one's live view, as it was
-                self.mcap.write_raw(item)
-                self.carried["view_frames"] += 1
-                continue
-            self._record(item.key, item.message, item.recv_stamp_s)
-            self.carried["messages"] += 1
-        log.info("carried on from %s: %s", part.name, dict(self.carried))
+        carry_on(self.run_dir, self.carried, self.mcap.write_raw, self._take_carried)
+
+    def _take_carried(self, rec: Received) -> None:
+        self._decode_now(self.intake.take([rec]))
+        if self.carried["messages"] % 4096 == 0:  # in bounded batches here too
+            self.decode_deferred()
 
     def tick(self) -> None:
         """Once a period: flush the MCAP, publish status, write progress.json."""
@@ -184,8 +213,7 @@ class Recorder:
         """Loop until RunControl "stop", a signal (`stop_requested`) or overdue; the reason."""
         was_behind, trimmed_at = False, -math.inf
         while True:
-            self.step()
-            behind = len(self.backlog) > 0  # then straight on, without the poll's nap
+            behind = self.step() >= DRAIN_PIECE  # then straight on, without the poll's nap
             if was_behind and not behind and time.monotonic() - trimmed_at >= TRIM_EVERY_S:
                 trim_heap()
                 trimmed_at = time.monotonic()
@@ -201,9 +229,7 @@ class Recorder:
                 break
             if not behind:
                 time.sleep(poll_s)
-        self.step()  # whatever arrived with the stop word, and then what was behind it
-        while self.backlog:  # (without taking more: a flood must not hold the stop up)
-            self.step(drain=False)
+        self.step()  # whatever arrived with the stop word (a full ring's worth at most)
         log.info("recording stops: %s", self.stop_reason)
         self.await_final_statuses(poll_s)
         return self.stop_reason
@@ -215,21 +241,14 @@ class Recorder:
         follower status was ever heard (no followers on this bus).  True if all came.
         """
         deadline = time.monotonic() + self.final_status_wait_s
-        while not self._final_statuses_in():
+        while self.follower_status and (
+                pending := followers_pending(self.follower_status, self.scenario.n)):
             if time.monotonic() > deadline:
-                log.warning("no final status from followers %s: links use their last",
-                            self._followers_pending())
+                log.warning("no final status from followers %s: links use their last", pending)
                 return False
             time.sleep(max(poll_s, 0.001))
             self.step()
         return True
-
-    def _followers_pending(self) -> list[int]:
-        return [i for i in range(self.scenario.n)
-                if getattr(self.follower_status.get(i), "state", "") not in FINAL_STATES]
-
-    def _final_statuses_in(self) -> bool:
-        return not self.follower_status or not self._followers_pending()
 
     # ---- the end -------------------------------------------------------------------------
     def finish(self) -> bool:
@@ -238,6 +257,7 @@ class Recorder:
         self.feed.stop()
         self.mcap.close()
         try:
+            self.decode_deferred()  # the last batch
             # Imported here: it needs pyarrow and its figures matplotlib (~1 s of imports),
             # which would otherwise delay the recorder's start, and so every run's.
             from deploy.recording.outputs import write_final_outputs
@@ -257,66 +277,14 @@ class Recorder:
     # ---- reporting -----------------------------------------------------------------------
     def counters(self) -> dict[str, Any]:
         """The recorder's share of metrics.json."""
-        dropped = dict(self.decoder.dropped) | {
-            f"assembler_{k}": v for k, v in self.asm.drops.items()
-        }
-        if skipped := unreadable_links(self.follower_status):
-            dropped["link_counters_unreadable"] = skipped
-        return {
-            "recorder": {
-                "messages_per_topic": dict(sorted(self.mcap.messages.items())),
-                "messages_total": sum(self.mcap.messages.values()),
-                "dropped": dropped,
-                # Samples lost to a backlog beyond its bound, and the backlog's largest size.
-                "backlog": {"dropped": self.backlog.dropped,
-                            "peak_mb": round(self.backlog.peak_bytes / 2**20, 2)},
-                "decoder": self.decoder.counters(),
-                "stop_reason": self.stop_reason,
-                "wall_s": self.bus.now_s() - self._started_wall_s,
-                "mcap_file": MCAP_FILE,
-                # Read back from a dead predecessor's MCAP (deploy.recording.resume).
-                "carried_on": dict(self.carried),
-                "live": {"url": self.live_url, "frames_sent": self.live_frames_sent,
-                         "frames_per_topic": dict(sorted(self.mcap.frames.items())),
-                         "view_errors": self.feed.errors},
-            },
-            "links": link_report(self.follower_status, self.asm.state_counts()),
-        }
+        return counters(self)
 
     def progress(self) -> dict[str, Any]:
-        now = self.bus.now_s()
-        return {
-            "state": self.state,
-            "t_s": self.asm.latest_experiment_time_s(),
-            "duration_s": None if self.asm.start is None else self.asm.start.duration_s,
-            **live_errors(self.asm, self._info),
-            "truth_samples": self.asm.truth_count,
-            "follower_states": self.asm.state_counts(),
-            "messages_total": sum(self.mcap.messages.values()),
-            "dropped_total": self.decoder.dropped_total,
-            "links": self.link_history.summary(),
-            "recorder_behind_s": behind_s(now, self.newest_stamp_s),
-            "wall_stamp_s": now,
-            "live_url": self.live_url,
-        }
-
-    @property
-    def live_url(self) -> str | None:
-        return self.feed.url
-
-    @property
-    def live_frames_sent(self) -> int:
-        return self.feed.frames_sent
-
-    def _status_counters(self) -> dict[str, int]:
-        out = {**self.decoder.counters(), **self.liveness.counters()}
-        out["truth"] = self.asm.truth_count
-        out["mcap_messages"] = sum(self.mcap.messages.values())
-        return out
+        return progress(self)
 
     def _publish_status(self) -> None:
         msg = ProcessStatus(self._stamper.header(), ROLE, self.index, self.state,
-                            self._status_counters(), self.stop_reason)
+                            status_counters(self), self.stop_reason)
         try:
             self._status.put(encode(msg))
         except (TransportError, CodecError):  # best effort: never ends the recording

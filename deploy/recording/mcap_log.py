@@ -2,7 +2,11 @@
 
 Foxglove and PlotJuggler read `json` messages described by `jsonschema` schemas.  The schemas
 are generated from the message dataclasses, so a field added to a message shows up here
-without an edit.  log_time is the recorder's receive time, publish_time the sender's stamp.
+without an edit.  A message is the dataclass as an object: `write` makes it from a decoded
+message, `wire_json` from a payload as it arrived, without decoding it into the dataclass
+(the recorder checks follower states and observations later, in batches:
+deploy.recording.intake).  log_time is the recorder's receive time, publish_time the
+sender's stamp.
 Messages go into compressed chunks of `chunk_size` bytes written as soon as they fill, and
 the file object is flushed each `flush()`: a crash loses at most the chunk being built.
 """
@@ -24,6 +28,7 @@ import msgspec
 from mcap.writer import CompressionType, Writer
 
 from deploy.recording.mcap_fast import MessageAppender, spill_chunk_indices
+from transport.codec import CODEC_VERSION, SCHEMAS
 from transport.messages import Message
 
 MESSAGE_ENCODING = "json"
@@ -99,6 +104,42 @@ def _mapping_as_dict(obj: object) -> dict[str, Any]:
 # The same bytes as json.dumps(separators=(",", ":")) at a sixth of its cost: at n = 16 the
 # recorder writes ~1 700 messages a second, and json was a fifth of its CPU.
 _JSON = msgspec.json.Encoder(enc_hook=_mapping_as_dict)
+
+
+_UNPACK = msgspec.msgpack.Decoder()
+_WIRE_NAMES: dict[tuple[type, int], tuple[int, tuple[str, ...]]] = {}
+
+
+def _wire_names(cls: type, version: int) -> tuple[int, tuple[str, ...]]:
+    """(type tag, the names of its fields a payload of codec `version` carries)."""
+    names = _WIRE_NAMES.get((cls, version))
+    if names is None:
+        tag, fields = SCHEMAS[cls]
+        names = _WIRE_NAMES[(cls, version)] = (
+            tag, tuple(f.name for f in fields if f.since <= version))
+    return names
+
+
+def wire_json(cls: type, payload: bytes) -> tuple[bytes, int, int] | None:
+    """(the JSON `message_json` gives the message in `payload`, its sender's stamp in ns, its
+    sequence number), made from the codec's wire array without the dataclass; None if
+    `payload` is no wire array of `cls` of this codec version (the decoder refuses it)."""
+    try:
+        wire = _UNPACK.decode(payload)
+        version, tag, sid, seq, stamp_s = wire[:5]
+        if type(version) is not int or version != CODEC_VERSION or type(seq) is not int:
+            return None
+        want, names = _wire_names(cls, version)
+        if tag != want or len(wire) != 5 + len(names):
+            return None
+        body = {"header": {"sender_id": sid, "seq": seq, "stamp_s": stamp_s},
+                **dict(zip(names, wire[5:], strict=True))}
+        data = _JSON.encode(body)
+        stamp_ns = int(stamp_s * _NS)
+    except (msgspec.DecodeError, msgspec.EncodeError, TypeError, ValueError, KeyError,
+            OverflowError):
+        return None
+    return data, max(0, stamp_ns), seq & 0xFFFFFFFF
 
 
 def message_json(msg: Message) -> bytes:
@@ -189,7 +230,8 @@ class McapLog:
         if metadata:
             self._writer.add_metadata("enclose", dict(metadata))
 
-    def _channel(self, key: str, cls: type) -> int:
+    def channel(self, key: str, cls: type) -> int:
+        """The `json` channel of `key` (registered at its first use)."""
         channel = self._channels.get(key)
         if channel is None:
             schema = self._schemas.get(cls)
@@ -202,11 +244,20 @@ class McapLog:
         return channel
 
     def write(self, key: str, msg: Message, recv_stamp_s: float) -> None:
-        channel = self._channel(key, type(msg))
+        channel = self.channel(key, type(msg))
         add = self._writer.add_message if self._fast is None else self._fast.add
         add(channel_id=channel, log_time=int(recv_stamp_s * _NS), data=message_json(msg),
             publish_time=max(0, int(msg.header.stamp_s * _NS)),
             sequence=msg.header.seq & 0xFFFFFFFF)
+        self.messages[key] += 1
+
+    def write_json(self, key: str, channel: int, data: bytes, log_time_ns: int,
+                   publish_time_ns: int | None = None, sequence: int = 0) -> None:
+        """A message's JSON (`wire_json`) on `key`'s `channel`."""
+        add = self._writer.add_message if self._fast is None else self._fast.add
+        add(channel_id=channel, log_time=log_time_ns, data=data,
+            publish_time=log_time_ns if publish_time_ns is None else publish_time_ns,
+            sequence=sequence)
         self.messages[key] += 1
 
     def write_raw(self, frame: RawFrame) -> None:

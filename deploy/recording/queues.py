@@ -1,24 +1,21 @@
 """The recorder's queues: one Zenoh ring per recorded key, sized to its traffic, emptied
-into the packed backlog (deploy.recording.backlog) in pieces."""
+in pieces on every step (deploy.recording.intake records them at once)."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterator
 
 from agents.scenario.model import Scenario
-from deploy.recording.backlog import Backlog
-from transport.bus import Subscription
+from transport.bus import Received, Subscription
 from transport.key_exprs import SwarmKeys
 
 # Each queue as long as its key's traffic fills in this time (at most QUEUE_MAX): all the
 # backlog a stall or an insider's flood may need, and its ring's pages mapped early on.
 QUEUE_HOLD_S = 120.0
 QUEUE_MIN, QUEUE_MAX = 256, 16384
-# Samples handled of each key per step: a backlog is worked off in steps of this many, not
-# decoded whole at once (20 s of ring64 would be ~50 000 objects alive together, a
-# high-water mark the heap keeps).  Every step empties the rings into a compact Backlog.
-STEP_BATCH = 256
+# A ring is emptied a piece at a time (few unpacked samples alive at once), at most a
+# full ring's worth a step however fast a flood refills it meanwhile.
 DRAIN_PIECE = 1024
 DRAIN_PIECES_MAX = QUEUE_MAX // DRAIN_PIECE + 1
 
@@ -43,12 +40,10 @@ def _ring_size(items: float) -> int:
     return min(QUEUE_MAX, max(QUEUE_MIN, math.ceil(items)))
 
 
-def drain_into(backlog: Backlog, subs: Iterable[Subscription]) -> None:
-    """Every ring emptied into `backlog`, in pieces: few unpacked samples alive at once;
-    at most a full ring's worth each, however fast a flood refills it meanwhile."""
-    for sub in subs:
-        for _ in range(DRAIN_PIECES_MAX):
-            piece = sub.drain(DRAIN_PIECE)
-            backlog.take_in(sub.key_expr, piece)
-            if len(piece) < DRAIN_PIECE:
-                break
+def drain_pieces(sub: Subscription) -> Iterator[list[Received]]:
+    """`sub`'s ring emptied in pieces of DRAIN_PIECE, at most a full ring's worth."""
+    for _ in range(DRAIN_PIECES_MAX):
+        piece = sub.drain(DRAIN_PIECE)
+        yield piece
+        if len(piece) < DRAIN_PIECE:
+            break

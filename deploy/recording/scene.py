@@ -20,7 +20,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from foxglove import messages as fm
+from numpy.typing import NDArray
 
 from transport.messages import FollowerState, TruthSnapshot
 
@@ -101,11 +103,27 @@ def circle_points(cx: float, cy: float, radius_m: float, z: float) -> list[fm.Po
             for k in range(CIRCLE_SEGMENTS + 1)]
 
 
+def pair_distances(pos_m: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+    """i, j and the distance of every pair i < j of the (n, 2) positions, i then j in order:
+    the numbers of agents.analysis.metrics.separation_series, at a seventh of its cost for
+    one instant (the view's 10 Hz at n = 64: ~1 ms a scene in Python loops)."""
+    i, j = np.triu_indices(len(pos_m), 1)
+    diff = pos_m[j] - pos_m[i]
+    return i, j, np.sqrt(np.add.reduce(diff * diff, axis=1))
+
+
+def horizontal_m(truth: TruthSnapshot) -> NDArray[np.float64]:
+    """The vehicles' (n, 2) horizontal positions."""
+    return np.asarray(truth.follower_pos_m, dtype=np.float64).reshape(-1, 3)[:, :2]
+
+
 def too_close(truth: TruthSnapshot, distance_m: float) -> list[tuple[float, int, int]]:
     """(distance, i, j) of each pair of vehicles closer than `distance_m` (horizontal)."""
-    pos = truth.follower_pos_m
-    return [(d, i, j) for i in range(len(pos)) for j in range(i + 1, len(pos))
-            if (d := math.hypot(pos[i][0] - pos[j][0], pos[i][1] - pos[j][1])) < distance_m]
+    i, j, d = pair_distances(horizontal_m(truth))
+    close = d < distance_m
+    return [(float(x), int(a), int(b))
+            for x, a, b in zip(d[close], i[close], j[close], strict=True)]
 
 
 def _vehicles(truth: TruthSnapshot, stamp: fm.Timestamp,

@@ -24,11 +24,11 @@ from typing import Any
 import numpy as np
 from foxglove import messages as fm
 
-from agents.analysis.metrics import error_series, separation_series
+from agents.analysis.metrics import error_series
 from agents.analysis.timeseries import RunSeries
 from deploy.recording.live_links import LinkTracker
 from deploy.recording.mcap_log import RawFrame, RawSchema
-from deploy.recording.scene import LinkView, scene_update, timestamp, too_close
+from deploy.recording.scene import LinkView, pair_distances, scene_update, timestamp, too_close
 from deploy.report.refusals import refusals
 from deploy.report.rundir import RunInfo
 from transport.messages import FollowerState, Message, ProcessStatus, RunControl, TruthSnapshot
@@ -89,6 +89,8 @@ def errors_now(truth: TruthSnapshot, states: Mapping[int, FollowerState],
                        np.asarray(truth.target_pos_m, dtype=np.float64)[None])
     e = error_series(series, info.successor, np.asarray(info.angles_rad), info.rho_d_m)
     rho, delta, est_err = e.e_rho_m[0], e.e_delta[0], e.estimator_error_m[0]
+    _, _, apart = pair_distances(pos)
+    apart = apart[~np.isnan(apart)]  # as separation_series: NaN positions ignored
     return {"e_rho_m": _finite(rho), "e_delta": _finite(delta),
             "estimator_error_m": _finite(est_err),
             "max_abs_e_rho_m": _finite(np.abs(rho).max())[0],
@@ -96,7 +98,7 @@ def errors_now(truth: TruthSnapshot, states: Mapping[int, FollowerState],
             "max_estimator_error_m": _finite(est_err.max())[0],
             "bound_rho_m": info.eps_rho_m, "bound_delta": info.eps_delta,
             "bound_estimator_m": info.eps_rho_m,
-            "min_separation_m": _finite(separation_series(pos[None]))[0],
+            "min_separation_m": _finite(apart.min() if apart.size else np.nan)[0],
             "safety_distance_m": info.safety_distance_m}
 
 
@@ -108,7 +110,8 @@ def _json(topic: str, body: dict[str, Any], log_time_ns: int) -> ViewFrame:
 class LiveView:
     """Latest truth, states and statuses; frames when there is something new to show."""
 
-    def __init__(self, info: RunInfo, scene_hz: float = DEFAULT_SCENE_HZ) -> None:
+    def __init__(self, info: RunInfo, scene_hz: float = DEFAULT_SCENE_HZ,
+                 recorded_states: list[int] | None = None) -> None:
         self.info = info
         self.period_s = 1.0 / scene_hz
         self.states: dict[int, FollowerState] = {}
@@ -120,7 +123,10 @@ class LiveView:
         self._last_scene_s = -float("inf")
         self._members: frozenset[int] | None = None
         self._pending_log: list[ViewFrame] = []
-        self._recorded_states = [0] * info.n
+        # States received per follower: counted here from what is added, or the recorder's
+        # own count when it adds only the newest (deploy.recording.intake).
+        self._counts_added = recorded_states is None
+        self._recorded_states = [0] * info.n if recorded_states is None else recorded_states
         self._too_close = False  # two vehicles under the safety distance at the last scene
         self._network_said: set[tuple[int, str]] = set()  # network fault windows logged
 
@@ -130,7 +136,8 @@ class LiveView:
                 self._truth = (msg, recv_stamp_s)
         elif isinstance(msg, FollowerState) and 0 <= msg.index < self.info.n:
             self.states[msg.index] = msg
-            self._recorded_states[msg.index] += 1
+            if self._counts_added:
+                self._recorded_states[msg.index] += 1
         elif isinstance(msg, ProcessStatus):
             self._add_status(msg, recv_stamp_s)
         elif isinstance(msg, RunControl) and msg.command == "start":

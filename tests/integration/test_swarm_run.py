@@ -80,14 +80,14 @@ class LiveWatcher(threading.Thread):
 
 def recorded_truth(mcap: Path) -> dict[float, list[list[float]]]:
     """Follower positions of every recorded TruthSnapshot, by sender stamp."""
-    out = {}
-    with mcap.open("rb") as f:
-        for _schema, _channel, message in make_reader(f).iter_messages(
-                topics=None, log_time_order=False):
-            if _channel.topic.endswith("/truth"):
-                body = json.loads(message.data)
-                out[body["header"]["stamp_s"]] = body["follower_pos_m"]
-    return out
+    from collections import Counter
+
+    from deploy.recording.resume import read_messages
+    from transport.messages import TruthSnapshot
+
+    return {msg.header.stamp_s: [list(p) for p in msg.follower_pos_m]
+            for key, msg, _ in read_messages(mcap, Counter())
+            if key.endswith("/truth") and isinstance(msg, TruthSnapshot)}
 
 
 def recorded_frames(mcap: Path, topic: str) -> tuple[str, set[bytes]]:
@@ -118,7 +118,7 @@ def check_live_view(watcher: LiveWatcher, out: Path) -> None:
         assert len(vehicles) == 4
         stamp = vehicles["follower-0"].timestamp
         stamp_s = stamp.seconds + stamp.nanos * 1e-9  # google.protobuf.Timestamp
-        k = bisect.bisect_left(stamps, stamp_s - 2e-6)  # ns in protobuf, float s in JSON
+        k = bisect.bisect_left(stamps, stamp_s - 2e-6)  # ns in protobuf, float s in msgpack
         if k == len(stamps) or abs(stamps[k] - stamp_s) > 2e-6:
             continue
         true_pos = truth[stamps[k]]

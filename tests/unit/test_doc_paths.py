@@ -113,7 +113,7 @@ def exists(token: str, doc: Path, files: set[str], dirs: set[str]) -> bool:
         return True
     if name in files or name in dirs or rooted:
         return name in files or name in dirs  # rooted at a top-level entry: exact
-    # A partial path (`recording/backlog.py`, `interface.py` in a folder's row): the end
+    # A partial path (`recording/intake.py`, `interface.py` in a folder's row): the end
     # of some file's path.
     return any(p.endswith("/" + name) for p in files | dirs)
 
@@ -151,7 +151,7 @@ def test_a_dead_path_is_found_and_placeholders_pass() -> None:
     assert not exists("-m agents.follower_node", doc, files, dirs)
     assert not exists("nowhere/at_all.py", doc, files, dirs)
     assert not exists("tests/swarm_harness", doc, files, dirs)
-    for ok in ("agents/law/paper.py", "deploy/", "paper.py", "recording/backlog.py",
+    for ok in ("agents/law/paper.py", "deploy/", "paper.py", "recording/intake.py",
                "-m agents.follower.main", "runs/run-paper-<time>/", "/proc/<pid>/smaps",
                "OUT_DIR/operator/", "metrics.json", "enclose/<swarm>/control",
                "../agents/law/interface.py", "m/s", "3/7", "-m pytest", "DEPLOYMENT.toml"):

@@ -17,7 +17,6 @@ from deploy.recording.queues import (
     DRAIN_PIECES_MAX,
     QUEUE_HOLD_S,
     QUEUE_MAX,
-    STEP_BATCH,
     queue_capacities,
 )
 from deploy.report.run_report import regenerate_figures
@@ -62,6 +61,9 @@ def test_garbage_is_counted_and_the_run_is_recorded(paper: Scenario, tmp_path: P
                 sbus.publish(keys.follower_state(1), msgpack.packb([7, 1, "f", 0, 1.0]))
         sbus.publish(keys.control(), encode(run.control(control, "stop")))
         assert recorder.run(lambda: False, poll_s=0.0) == "control_stop"
+        # The bad state is no state's wire array: not recorded; refused, and counted, when
+        # its batch is decoded.
+        assert dict(recorder.decoder.dropped) == {"msgpack": 1}
         assert recorder.finish()
         states = [decode(r.payload) for r in status.drain()]
     assert [s.state for s in states if isinstance(s, ProcessStatus)][-3:] == [
@@ -73,6 +75,8 @@ def test_garbage_is_counted_and_the_run_is_recorded(paper: Scenario, tmp_path: P
     assert metrics["recorder"]["stop_reason"] == "control_stop"
     recorded = topics(tmp_path / MCAP_FILE)
     assert recorded[keys.truth()] == 71 and recorded[keys.follower_state(3)] == 71
+    assert recorded[keys.follower_state(1)] == 71  # not the refused one
+    assert metrics["recorder"]["deferred"]["decoded"] == 4 * 71 + 1
     assert recorded[keys.control()] == 2
     progress = json.loads((tmp_path / "progress.json").read_text())
     assert progress["state"] == "done" and progress["max_abs_e_rho_m"] < 1e-9
@@ -232,8 +236,8 @@ def test_a_recorder_behind_the_bus_says_by_how_much_and_calls_no_link_silent(
 
 
 def publish_backlog(bus: MemoryBus, keys: SwarmKeys) -> int:
-    """More statuses than two steps take, queued at once; how many."""
-    count = 2 * STEP_BATCH + 7
+    """More statuses than a drain's piece, queued at once; how many."""
+    count = DRAIN_PIECE + 7
     for k in range(count):
         status = ProcessStatus(Header("target-0", k, START_S), "target", 0, "running", {})
         bus.publish(keys.status("target", 0), encode(status))
@@ -241,23 +245,17 @@ def publish_backlog(bus: MemoryBus, keys: SwarmKeys) -> int:
 
 
 @pytest.mark.timeout(30)
-def test_a_backlog_is_worked_off_a_batch_a_step(tmp_path: Path) -> None:
+def test_a_step_takes_every_ring_whole_and_records_it(tmp_path: Path) -> None:
     ring64 = load_scenario("ring64")  # its statuses' queue holds the whole backlog
     hub, keys, clock = MemoryHub(), SwarmKeys("batch"), [START_S]
     with MemoryBus(hub, "recorder", clock=lambda: clock[0]) as rbus, \
             MemoryBus(hub, "swarm", clock=lambda: clock[0]) as sbus:
         recorder = Recorder(rbus, "batch", ring64, tmp_path, scene_hz=None)
         backlog = publish_backlog(sbus, keys)
-        steps = [recorder.step()]
-        queued = len(recorder.backlog)  # the first step took every queue in whole
-        steps += [recorder.step() for _ in range(3)]
-        counted = recorder.counters()["recorder"]["backlog"]
+        steps = [recorder.step() for _ in range(2)]
         recorder.mcap.close()
-    assert queued >= backlog - STEP_BATCH
-    assert steps[:2] == [STEP_BATCH, STEP_BATCH] and steps[3] == 0
-    assert sum(steps) - backlog in (0, 1)  # and perhaps the recorder's own first status
+    assert steps[0] - backlog in (0, 1) and steps[1] == 0  # (and the recorder's own status)
     assert topics(tmp_path / MCAP_FILE)[keys.status("target", 0)] == backlog
-    assert counted["dropped"] == 0 and counted["peak_mb"] > 0
 
 
 @pytest.mark.realtime
@@ -335,10 +333,9 @@ def test_a_flood_cannot_hold_a_step_or_the_stop(tmp_path: Path) -> None:
         recorder = Recorder(rbus, "flood", load_scenario("paper"), tmp_path, scene_hz=None)
         flood = _Flood(recorder._subs[0].key_expr)
         recorder._subs = [flood]
-        recorder.step()  # a step takes at most a full ring's worth
-        assert flood.drained == len(recorder.backlog) + STEP_BATCH \
-            == DRAIN_PIECES_MAX * DRAIN_PIECE
-        recorder.step(drain=False)  # working a backlog off takes nothing more
+        assert recorder.step() == DRAIN_PIECES_MAX * DRAIN_PIECE  # a full ring's worth at most
         assert flood.drained == DRAIN_PIECES_MAX * DRAIN_PIECE
-        assert recorder.decoder.dropped_total == 2 * STEP_BATCH  # garbage, counted
+        # Its key is no process's: refused before decoding, counted, never recorded.
+        assert recorder.decoder.dropped == {"unknown_key": DRAIN_PIECES_MAX * DRAIN_PIECE}
         recorder.mcap.close()
+    assert not topics(tmp_path / MCAP_FILE)

@@ -72,6 +72,7 @@ class FakeBus:
 def drain_with(ring: PreemptedRing, clock: FakeClock) -> list[float]:
     sub = object.__new__(ZenohSubscription)
     sub.key_expr, sub._arrived, sub._ring = KEY, None, ring  # type: ignore[assignment]
+    sub._hlc = True
     sub._bus = FakeBus(clock)  # type: ignore[assignment]
     sub._key = KEY  # an exact key: its samples are named by it
     return [rec.recv_stamp_s for rec in sub.drain()]
@@ -94,6 +95,7 @@ def test_max_items_still_bounds_a_drain() -> None:
     sub = object.__new__(ZenohSubscription)
     ring = PreemptedRing(clock, count=10, pause_s=0.0)
     sub.key_expr, sub._arrived, sub._ring = KEY, None, ring  # type: ignore[assignment]
+    sub._hlc = True
     sub._bus = FakeBus(clock)  # type: ignore[assignment]
     sub._key = KEY  # an exact key: its samples are named by it
     assert len(sub.drain(3)) == 3 and len(sub.drain()) == 7
