@@ -39,7 +39,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.modes import do_set_mode_params
 from agents.mavlink.signing import SignatureVerifier, signing_timestamp
-from agents.mavlink.wire import decode_datagram, encode, new_codec, sign_outgoing, signature_ok
+from agents.mavlink.wire import encode, new_codec, sign_outgoing, signature_ok
+from agents.mavlink.wire_decode import decode_datagram
 from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 

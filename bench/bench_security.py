@@ -25,7 +25,8 @@ import time
 from pathlib import Path
 
 from agents.mavlink.signing import signing_timestamp
-from agents.mavlink.wire import decode_datagram, new_codec, sign_outgoing
+from agents.mavlink.wire import new_codec, sign_outgoing
+from agents.mavlink.wire_decode import decode_datagram
 from agents.scenario.model import HomeConfig, VehicleConfig
 from deploy.launch.ports import free_tcp_port
 from deploy.report.cpu_load import process_cpu_s

@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from agents.mavlink.wire import MAVLinkMessage as Msg
 from agents.mavlink.wire import encode
+from agents.mavlink.wire_decode import MAVLinkMessage as Msg
 from sim_backend import telemetry as tm
 from sim_backend.autopilot import ACCEPTED, DENIED, SEVERITY_WARNING, UNSUPPORTED
 from sim_backend.endpoint_view import EndpointView, Rx

@@ -32,8 +32,9 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from agents.mavlink.rx_gate import VEHICLE_BUDGET, RxGate
 from agents.mavlink.signing import IFLAG_SIGNED, SignatureVerifier
-from agents.mavlink.wire import MAVLinkMessage as Msg
-from agents.mavlink.wire import decode_datagram, encode, new_codec, sign_outgoing, signature_ok
+from agents.mavlink.wire import encode, new_codec, sign_outgoing, signature_ok
+from agents.mavlink.wire_decode import MAVLinkMessage as Msg
+from agents.mavlink.wire_decode import decode_datagram
 from agents.scenario.model import HomeConfig
 from sim_backend import commands, protocols
 from sim_backend import telemetry as tm

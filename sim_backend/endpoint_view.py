@@ -12,8 +12,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple, Protocol
 
-from agents.mavlink.wire import Codec
-from agents.mavlink.wire import MAVLinkMessage as Msg
+from agents.mavlink.wire_decode import Codec
+from agents.mavlink.wire_decode import MAVLinkMessage as Msg
 from agents.scenario.model import HomeConfig
 from sim_backend import telemetry as tm
 from sim_backend.autopilot import Autopilot

@@ -13,8 +13,8 @@ import math
 import struct
 
 from agents.mavlink.modes import MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, PX4, decode_custom_mode
-from agents.mavlink.wire import MAVLinkMessage as Msg
 from agents.mavlink.wire import encode
+from agents.mavlink.wire_decode import MAVLinkMessage as Msg
 from sim_backend.autopilot import ACCEPTED, DENIED, SEVERITY_WARNING
 from sim_backend.endpoint_view import EndpointView, Handler, Rx
 

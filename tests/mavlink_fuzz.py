@@ -9,7 +9,8 @@ import struct
 from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.dialects.v20.common import mcrf4xx
 
-from agents.mavlink.wire import MAVLinkMessage, decode_datagram, new_codec
+from agents.mavlink.wire import new_codec
+from agents.mavlink.wire_decode import MAVLinkMessage, decode_datagram
 from sim_backend.endpoint import HANDLERS, IGNORED
 
 HEADER = struct.Struct("<BBBBBBBHB")

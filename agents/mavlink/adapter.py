@@ -30,15 +30,8 @@ from agents.mavlink.udp import ANCILLARY_BYTES, bind_udp, kernel_drops
 from agents.mavlink.vehicle_messages import Addr, VehicleMessages
 from agents.mavlink.vehicle_types import AdapterConfig, VehicleState
 from agents.mavlink.velocity_setpoint import velocity_fields
-from agents.mavlink.wire import (
-    Framer,
-    MAVLinkMessage,
-    decode_datagram,
-    encode,
-    new_codec,
-    sign_outgoing,
-    signature_ok,
-)
+from agents.mavlink.wire import Framer, encode, new_codec, sign_outgoing, signature_ok
+from agents.mavlink.wire_decode import MAVLinkMessage, decode_datagram
 
 __all__ = ["AdapterConfig", "MavlinkAdapter", "VehicleState"]  # as imported from here
 log = logging.getLogger(__name__)

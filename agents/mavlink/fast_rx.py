@@ -23,7 +23,7 @@ from hmac import compare_digest
 from typing import Any
 
 from agents.mavlink.signing import SignatureVerifier, keyed_sha256
-from agents.mavlink.wire import FAST_IDS, Codec, dialect_tables
+from agents.mavlink.wire_decode import FAST_IDS, Codec, dialect_tables
 
 LOCAL_POSITION_NED = 32
 _HEADER = struct.Struct("<BBBBBBBHB")

@@ -23,7 +23,8 @@ from agents.mavlink.modes import (
 )
 from agents.mavlink.timemap import VehicleClock
 from agents.mavlink.vehicle_types import NO_STATE, AdapterConfig, VehicleState
-from agents.mavlink.wire import Codec, Framer, MAVLinkMessage, decode_datagram
+from agents.mavlink.wire import Framer
+from agents.mavlink.wire_decode import Codec, MAVLinkMessage, decode_datagram
 
 log = logging.getLogger("agents.mavlink.adapter")
 Addr = tuple[str, int]

@@ -1,5 +1,4 @@
-"""MAVLink bytes in and out: the one place that makes them (agents.mavlink.wire_decode
-reads them; its names are re-exported here).
+"""MAVLink bytes out: the one place that makes them (agents.mavlink.wire_decode reads them).
 
 Sending packs with precompiled structs (pymavlink's message objects only for the
 low-rate rest); `Framer` packs the one message a follower sends every tick in a single
@@ -28,19 +27,12 @@ from agents.mavlink.signing import (
 )
 from agents.mavlink.wire_decode import (
     _HEADER_V2,
-    FAST_IDS,
-    STX_V1,
     STX_V2,
     Codec,
-    Decoded,
     MAVLinkMessage,
-    decode_datagram,
     dialect_tables,
 )
 
-__all__ = ["FAST_IDS", "STX_V1", "STX_V2", "Codec", "Decoded", "Framer", "MAVLinkMessage",
-           "decode_datagram", "dialect_tables", "encode", "encode_fields", "encode_payload",
-           "frame_bytes", "new_codec", "sign_outgoing", "signature_ok"]
 COMMON = "pymavlink.dialects.v20.common"
 _STAMP = struct.Struct("<BQ")
 _BYTE = tuple(bytes((i,)) for i in range(256))

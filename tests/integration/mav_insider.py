@@ -32,7 +32,8 @@ from pathlib import Path
 
 from agents.mavlink.signing import signing_timestamp
 from agents.mavlink.signing_keys import load_key
-from agents.mavlink.wire import Codec, decode_datagram, encode, new_codec, sign_outgoing
+from agents.mavlink.wire import encode, new_codec, sign_outgoing
+from agents.mavlink.wire_decode import Codec, decode_datagram
 from tests.integration.rogue import wait_running
 
 ARM_DISARM, NAV_LAND, REQUEST_MESSAGE, FORCE = 400, 21, 512, 21196.0

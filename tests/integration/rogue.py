@@ -38,7 +38,8 @@ from pathlib import Path
 
 import msgpack
 
-from agents.mavlink.wire import decode_datagram, new_codec
+from agents.mavlink.wire import new_codec
+from agents.mavlink.wire_decode import decode_datagram
 from transport.bus import Congestion
 from transport.codec import encode
 from transport.credentials import Identity

@@ -14,7 +14,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from agents.mavlink.wire import decode_datagram, new_codec
+from agents.mavlink.wire import new_codec
+from agents.mavlink.wire_decode import decode_datagram
 
 HOST = "127.0.0.1"
 

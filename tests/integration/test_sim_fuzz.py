@@ -15,7 +15,8 @@ import time
 
 import pytest
 
-from agents.mavlink.wire import decode_datagram, new_codec
+from agents.mavlink.wire import new_codec
+from agents.mavlink.wire_decode import decode_datagram
 from tests.integration.sim_process import HOST, PlainClient, message_outcomes, start_sim
 from tests.mavlink_fuzz import (
     HANDLED_CLASSES,

@@ -13,7 +13,8 @@ from agents.mavlink.adapter import AdapterConfig, MavlinkAdapter
 from agents.mavlink.modes import encode_custom_mode
 from agents.mavlink.offboard import OffboardKeeper
 from agents.mavlink.timemap import SO_TIMESTAMPNS, BootClockMap, kernel_arrival_s
-from agents.mavlink.wire import decode_datagram, new_codec
+from agents.mavlink.wire import new_codec
+from agents.mavlink.wire_decode import decode_datagram
 from errors import LinkLostError, MavlinkError
 
 ADDR = ("127.0.0.1", 14580)

@@ -19,15 +19,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.dialects.v20.common import mcrf4xx
 
 from agents.mavlink.signing import SignatureVerifier, signing_timestamp
-from agents.mavlink.wire import (
-    FAST_IDS,
-    MAVLinkMessage,
-    decode_datagram,
-    encode,
-    new_codec,
-    sign_outgoing,
-    signature_ok,
-)
+from agents.mavlink.wire import encode, new_codec, sign_outgoing, signature_ok
+from agents.mavlink.wire_decode import FAST_IDS, MAVLinkMessage, decode_datagram
 
 pytestmark = pytest.mark.timeout(120)
 KEY = bytes(range(1, 33))

@@ -16,15 +16,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from agents.mavlink import lean_common, lean_gen
 from agents.mavlink.signing import signing_timestamp
-from agents.mavlink.wire import (
-    FAST_IDS,
-    MAVLinkMessage,
-    decode_datagram,
-    encode,
-    encode_fields,
-    new_codec,
-    sign_outgoing,
-)
+from agents.mavlink.wire import encode, encode_fields, new_codec, sign_outgoing
+from agents.mavlink.wire_decode import FAST_IDS, MAVLinkMessage, decode_datagram
 
 pytestmark = pytest.mark.timeout(120)
 KEY = bytes(range(32))

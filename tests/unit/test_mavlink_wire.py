@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from agents.mavlink.wire import decode_datagram, encode, encode_fields, new_codec
+from agents.mavlink.wire import encode, encode_fields, new_codec
+from agents.mavlink.wire_decode import decode_datagram
 
 CASES = [
     (mavlink2.MAVLink_local_position_ned_message, (1234, 1.0, 2.0, 3.0, 0.1, 0.2, 0.0)),

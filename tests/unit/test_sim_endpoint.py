@@ -9,7 +9,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from agents.mavlink.wire import decode_datagram, new_codec
+from agents.mavlink.wire import new_codec
+from agents.mavlink.wire_decode import decode_datagram
 from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 
