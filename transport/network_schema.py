@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 LINK_PROTOCOLS = ("tcp", "udp")
 # How each process runs Zenoh (transport.zenoh_config.RUNTIME_SETTINGS): "one_thread" (the
 # default), all of it on one thread; "split", its own threads for receiving, sending and
-# the rest (~30 us less one-way latency, ~45 us more CPU per follower tick).
+# the rest (~45 us more CPU per follower tick, no less latency: docs/large-swarms.md).
 ZENOH_RUNTIMES = ("split", "one_thread")
 AGENT_SCHEDS = ("normal", "batch")
 # `[network] zenoh_lease_s` bounds, seconds: a lease under a second expires links on any
