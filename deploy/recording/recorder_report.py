@@ -2,15 +2,44 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from collections import Counter
+from typing import Any, Protocol
 
+from agents.membership.liveness import MembershipWatch
+from deploy.recording.assembler import RunAssembler
+from deploy.recording.intake import Intake
 from deploy.recording.links import link_report, unreadable_links
+from deploy.recording.mcap_log import McapLog
 from deploy.recording.progress import behind_s, live_errors
-
-if TYPE_CHECKING:
-    from deploy.recording.loop import Recorder
+from deploy.recording.view_feed import ViewFeed
+from deploy.report.link_history import LinkHistory
+from deploy.report.rundir import RunInfo
+from transport.bus import Bus
+from transport.decoder import Decoder
+from transport.messages import ProcessStatus
 
 MCAP_FILE = "recording.mcap"
+
+
+class Recorder(Protocol):
+    """What a report reads of the recorder (deploy.recording.loop.Recorder)."""
+
+    bus: Bus
+    decoder: Decoder
+    asm: RunAssembler
+    mcap: McapLog
+    intake: Intake
+    feed: ViewFeed
+    liveness: MembershipWatch
+    link_history: LinkHistory
+    follower_status: dict[int, ProcessStatus]
+    carried: Counter[str]
+    info: RunInfo
+    state: str
+    stop_reason: str
+    decode_cpu_s: float
+    started_wall_s: float
+    newest_stamp_s: float
 
 
 def counters(rec: Recorder) -> dict[str, Any]:
