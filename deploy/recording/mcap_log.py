@@ -127,7 +127,9 @@ def wire_json(cls: type, payload: bytes) -> tuple[bytes, int, int] | None:
     try:
         wire = _UNPACK.decode(payload)
         version, tag, sid, seq, stamp_s = wire[:5]
-        if type(version) is not int or version != CODEC_VERSION or type(seq) is not int:
+        # Types first: a hostile list or string as the stamp times 1e9 is a gigabyte.
+        if type(version) is not int or version != CODEC_VERSION or type(seq) is not int \
+                or type(stamp_s) is not float or stamp_s - stamp_s != 0.0:
             return None
         want, names = _wire_names(cls, version)
         if tag != want or len(wire) != 5 + len(names):
@@ -136,9 +138,8 @@ def wire_json(cls: type, payload: bytes) -> tuple[bytes, int, int] | None:
                 **dict(zip(names, wire[5:], strict=True))}
         data = _JSON.encode(body)
         stamp_ns = int(stamp_s * _NS)
-    except (msgspec.DecodeError, msgspec.EncodeError, TypeError, ValueError, KeyError,
-            OverflowError):
-        return None
+    except Exception:  # hostile input: the decoder and encoder raise many types (deep nesting:
+        return None    # RecursionError), as the codec's unpacking does
     return data, max(0, stamp_ns), seq & 0xFFFFFFFF
 
 

@@ -191,3 +191,8 @@ def test_a_state_recorded_from_its_wire_array_is_its_messages_json() -> None:
     assert json.loads(data) == json.loads(message_json(msg))
     assert (stamp_ns, seq) == (int(START_S * 1e9), 7)
     assert wire_json(FollowerState, encode(msg)[:-1]) is None  # cut short
+    wire = msgpack.unpackb(encode(msg))
+    for stamp in ([1], "x", b"\x00", float("nan")):  # [1] * 1e9 would be a gigabyte
+        wire[4] = stamp
+        assert wire_json(FollowerState, msgpack.packb(wire)) is None
+    assert wire_json(FollowerState, b"\x91" * 60_000 + b"\x00") is None  # nested too deep
