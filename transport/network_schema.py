@@ -11,9 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 LINK_PROTOCOLS = ("tcp", "udp")
-# How each process runs Zenoh (transport.zenoh_config.RUNTIME_SETTINGS): "one_thread" (the
-# default), all of it on one thread; "split", its own threads for receiving, sending and
-# the rest (~45 us more CPU per follower tick, no less latency: docs/large-swarms.md).
+# How each process runs Zenoh (transport.zenoh_config.RUNTIME_SETTINGS): "split" (the
+# default), its own threads for receiving, sending and the rest; "one_thread", all of it on
+# one (~45 us less CPU per follower tick, but a consumer that stops reading then stalls
+# every link of a publisher that waits on it: docs/large-swarms.md).
 ZENOH_RUNTIMES = ("split", "one_thread")
 AGENT_SCHEDS = ("normal", "batch")
 # `[network] zenoh_lease_s` bounds, seconds: a lease under a second expires links on any
@@ -84,7 +85,7 @@ class NetworkConfig:
     default: LinkImpairment = field(default_factory=LinkImpairment)
     links: tuple[tuple[int, int, LinkImpairment], ...] = ()  # (from, to) 0-based overrides
     seed: int = 0
-    zenoh_runtime: str = "one_thread"
+    zenoh_runtime: str = "split"
     # Every process's Zenoh lease, seconds (transport.zenoh_config.LEASE_KEY); None: Zenoh's
     # 10 s.  Longer: fewer keep-alives over a large mesh, and a frozen process stays a
     # member that much longer (docs/faults.md).

@@ -122,7 +122,7 @@ class ZenohConfig:
     # Stamp each sample as it arrives (transport.zenoh_bus): a Python callback, with the
     # GIL, on Zenoh's receiving thread for every sample, so off unless latency is measured.
     arrival_stamps: bool = False
-    runtime: str = "one_thread"  # one of ZENOH_RUNTIMES (scenario `[network] zenoh_runtime`)
+    runtime: str = "split"  # one of ZENOH_RUNTIMES (scenario `[network] zenoh_runtime`)
     # A peer's or client's lease (scenario `[network] zenoh_lease_s`); None: Zenoh's 10 s.
     # A router keeps ROUTER_LEASE_MS whatever this says.
     lease_s: float | None = None

@@ -88,7 +88,7 @@ def network(table: Table, n: int) -> NetworkConfig:
         default=default,
         links=tuple(links),
         seed=seed,
-        zenoh_runtime=choice(table.get("zenoh_runtime", "one_thread"), ZENOH_RUNTIMES,
+        zenoh_runtime=choice(table.get("zenoh_runtime", "split"), ZENOH_RUNTIMES,
                              "network.zenoh_runtime"),
         agent_sched=choice(table.get("agent_sched", "normal"), AGENT_SCHEDS,
                            "network.agent_sched"),

@@ -236,7 +236,7 @@ def test_estimator_order_is_one_or_two_and_two_needs_the_robust_estimator() -> N
 
 
 @pytest.mark.parametrize(("key", "default", "other", "bad"), [
-    ("zenoh_runtime", "one_thread", "split", '"threads"'),
+    ("zenoh_runtime", "split", "one_thread", '"threads"'),
     ("agent_sched", "normal", "batch", '"fifo"'),
 ])
 def test_network_choices_default_accept_the_other_and_name_a_bad_value(
