@@ -1,8 +1,13 @@
 """A simulated autopilot's clock services: TIMESYNC and SYSTEM_TIME, as PX4 keeps them.
 
-- A TIMESYNC request (tc1 == 0) is answered at once with tc1 = the vehicle's boot clock
-  in ns and ts1 mirrored (PX4's `Timesync::handle_message`: hrt_absolute_time() * 1000).
-  Clients map the vehicle's time_boot_ms onto their own clock from these replies.
+- A TIMESYNC request (tc1 == 0) is answered with tc1 = the vehicle's boot clock in ns and
+  ts1 mirrored (PX4's `Timesync::handle_message`: hrt_absolute_time() * 1000).  Clients
+  map the vehicle's time_boot_ms onto their own clock from these replies.  The simulator
+  handles what arrived during a tick at the tick's end (sim_backend.runtime), so tc1 is
+  the boot clock half-way between the request's arrival (the kernel's stamp,
+  sim_backend.arrival) and the reply: the wait then falls evenly on both legs of the
+  round trip, and the client's midpoint estimate stays unbiased, as with PX4's answer at
+  once.
 - The vehicle originates a request every `period_s` (ts1 = its boot clock, ns), as PX4's
   TIMESYNC stream does; a reply carrying one of its recent ts1 gives the round trip to its
   partner, counted (the simulated vehicle needs no offset: nothing it does is stamped by
@@ -38,9 +43,11 @@ class ClockService:
 
     def __init__(self, mav: mavlink2.MAVLink, send: Callable[[bytes, Addr], None],
                  boot_s: Callable[[], float], unix_s: Callable[[], float],
-                 counters: Counter[str], period_s: float = 1.0) -> None:
+                 counters: Counter[str], period_s: float = 1.0,
+                 held_s: Callable[[], float] = lambda: 0.0) -> None:
         self.mav, self._send = mav, send  # the endpoint's send (counts tx and its errors)
         self.boot_s, self.unix_s = boot_s, unix_s
+        self.held_s = held_s  # how long the message being handled waited to be read
         self.counters = counters
         self.period_s = period_s
         self.last_rtt_s: float | None = None
@@ -53,9 +60,10 @@ class ClockService:
         return self
 
     def on_timesync(self, msg: mavlink2.MAVLink_message, addr: Addr) -> str:
-        now_ns = max(1, round(self.boot_s() * 1e9))  # tc1 = 0 would read as a request
+        now_s, held = self.boot_s(), self.held_s()
         if msg.tc1 == 0:
             self.counters["timesync_answered"] += 1
+            now_ns = max(1, round((now_s - 0.5 * held) * 1e9))  # 0 would read as a request
             # Packed from its fields (the same bytes: tests/unit/test_mavlink_wire.py): each
             # agent asks 4 times a second: 256 answers a second in ring64's simulator, 1.9
             # instead of 4.4 us each, signed.
@@ -63,7 +71,7 @@ class ClockService:
             return "answered"
         if msg.ts1 in self._requests:
             self.counters["timesync_replies"] += 1
-            self.last_rtt_s = (now_ns - msg.ts1) * 1e-9
+            self.last_rtt_s = now_s - held - msg.ts1 * 1e-9  # to the reply's arrival
             return "handled"
         self.counters["timesync_ignored"] += 1  # a reply to a request we did not send
         return "ignored"

@@ -58,6 +58,9 @@ class VehicleEndpoint:
                  messages: Counter[str] | None = None) -> None:
         self.sysid = sysid
         self.sock = sock
+        # The ancillary data of the datagram last read (its kernel arrival stamp, if any:
+        # sim_backend.arrival), set by the loop that reads the socket.
+        self.arrival: list[tuple[int, int, bytes]] = []
         self.default_dest = default_dest
         self.autopilot = autopilot
         self.params = params

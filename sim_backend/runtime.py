@@ -1,9 +1,18 @@
 """The simulator process's one loop: fixed-rate ticks over many vehicles, each a MAVLink system.
 
 The backend owns simulated time: `sim_time_s` advances by exactly one tick per
-step.  Real-time pacing reads an injectable clock; `step_once()` advances one tick
-without waiting, so tests can drive the simulator without sleeping.  Hooks in
+step.  Real-time pacing reads an injectable clock and sleep; `step_once()` advances one
+tick without waiting, so tests can drive the simulator without sleeping.  Hooks in
 `on_tick` see every tick's state (the swarm's truth and sensor publisher attaches here).
+
+While pacing, the loop sleeps to each tick and then reads what arrived meanwhile: one
+wake-up a tick, not one per datagram.  Each wake-up costs several times the code's warm
+cost (BENCHMARKS.md, "What a tick costs"), and a swarm's agents send at their own phases
+over the tick: waking per datagram cost the simulator a quarter of its CPU in the paper's
+case and a sixth with 64 vehicles.  A setpoint still acts at the tick after it
+arrived, as before; what waits is a reply (a command's ACK, a parameter) by up to a tick,
+as with an autopilot that serves its links from its main loop.  TIMESYNC alone needs the
+arrival time, and takes it from the kernel (sim_backend.arrival).
 
 While `run()` paces, the vehicles' boot clock is locked to the real clock as a real
 autopilot's is: a late tick (a scheduling stall, a SIGSTOP of this process) is caught
@@ -28,6 +37,7 @@ from agents.mavlink.modes import FLAVOURS
 from agents.scenario.model import HomeConfig, VehicleConfig
 from errors import SimulatorError
 from sim_backend import kinematics
+from sim_backend.arrival import ANCILLARY_BYTES, held_s, stamp_arrivals
 from sim_backend.autopilot import Autopilot, ControlRow
 from sim_backend.clock_services import ClockService
 from sim_backend.endpoint import VehicleEndpoint
@@ -58,7 +68,8 @@ class Simulator:
 
     def __init__(self, spawn_ned_m: np.ndarray, vehicle: VehicleConfig, home: HomeConfig,
                  cfg: SimConfig, clock: Callable[[], float] = time.monotonic,
-                 weather: SimWeather | None = None) -> None:
+                 weather: SimWeather | None = None,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
         if cfg.signing_secret is not None and cfg.signing_key is not None:
             raise SimulatorError("signing: a run secret (a key per vehicle) or one key, not both")
         if cfg.flavour not in FLAVOURS:
@@ -82,7 +93,7 @@ class Simulator:
         self.messages: Counter[str] = Counter()
         self.stats = LoopStats()
         self.on_tick: list[TickHook] = []
-        self._clock = clock
+        self._clock, self._sleep = clock, sleep
         self._origin_s: float | None = None  # clock reading at boot time 0 while run() paces
         self._selector = selectors.DefaultSelector()
         self._resting: list[int] = []  # vehicles off the selector: their tick's budget is spent
@@ -109,6 +120,7 @@ class Simulator:
             if self.cfg.peer_hosts:  # its agent's datagrams alone (SimConfig.peer_hosts)
                 sock.connect(dest)
             sock.setblocking(False)
+            stamp_arrivals(sock)
         except OSError:
             sock.close()
             raise
@@ -123,8 +135,9 @@ class Simulator:
         if key is not None:  # the others' keys: built once every endpoint is open
             endpoint.enforce_signing(key, key_of_vehicle=lambda s: self._keys.get(s))
         self._selector.register(sock, selectors.EVENT_READ, i)
-        self.clocks.append(ClockService(endpoint.mav, endpoint.send_to, self.boot_time_s, time.time,
-                                        self.counters).attach(endpoint))
+        self.clocks.append(ClockService(
+            endpoint.mav, endpoint.send_to, self.boot_time_s, time.time, self.counters,
+            held_s=lambda: held_s(endpoint.arrival, time.time())).attach(endpoint))
         return endpoint
 
     @property
@@ -256,7 +269,7 @@ class Simulator:
             self.counters["mav_budget_spent"] += 1
             return False
         try:
-            data, addr = ep.sock.recvfrom(65535)
+            data, ep.arrival, _flags, addr = ep.sock.recvmsg(65535, ANCILLARY_BYTES)
         except (BlockingIOError, InterruptedError):
             return False
         except ConnectionRefusedError:  # a connected vehicle's agent not (yet) listening
@@ -282,14 +295,18 @@ class Simulator:
     def run(self, should_stop: Callable[[], bool], max_ticks: int | None = None) -> LoopStats:
         """Tick at rate_hz in real time until should_stop() or max_ticks.
 
-        Each tick first serves datagrams until it is due, then advances, so the state sent
-        with time_boot_ms t is the state at boot time t, sent at t.  Late ticks catch up.
+        Each tick sleeps until it is due, takes what arrived meanwhile, then advances, so the
+        state sent with time_boot_ms t is the state at boot time t, sent at t (after that
+        tick's datagrams are handled).  Late ticks catch up.
         """
         self._origin_s = self._clock() - self.sim_time_s
         k = 0
         try:
             while not should_stop() and (max_ticks is None or k < max_ticks):
-                self.receive_until(self._origin_s + self.sim_time_s + self.dt_s)
+                rest_s = self._origin_s + self.sim_time_s + self.dt_s - self._clock()
+                if rest_s > 0.0:
+                    self._sleep(rest_s)
+                self.receive_until(-1.0)
                 self._catch_up()
                 self._advance()
                 k += 1

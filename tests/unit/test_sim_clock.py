@@ -1,6 +1,6 @@
 """The simulator's boot clock under a stall: caught up, not dropped; TIMESYNC and SYSTEM_TIME.
 
-A fake clock drives `Simulator.run`: waiting for a deadline moves the clock there, and a
+A fake clock drives `Simulator.run`: its sleep to a tick moves the clock there, and a
 tick hook "stalls" the process by moving it further (what a SIGSTOP does to a real one).
 """
 
@@ -35,18 +35,13 @@ def rig() -> Iterator[tuple[Simulator, FakeClock, socket.socket]]:
     client.bind(("127.0.0.1", 0))
     client.setblocking(False)
     clock = FakeClock()
+
+    def sleep(seconds: float) -> None:
+        clock.t += seconds
+
     sim = Simulator(grid_spawn_ned(3), VehicleConfig(), HomeConfig(),
                     SimConfig(listen_base_port=0, send_base_port=client.getsockname()[1]),
-                    clock=clock)
-    real_receive = sim.receive_until
-
-    def receive_until(deadline: float) -> None:
-        # Late: as the real one (the first ready socket, then back to ticking); else serve
-        # what is queued and "sleep" to the deadline.
-        real_receive(deadline if clock.t >= deadline else -1.0)
-        clock.t = max(clock.t, deadline)
-
-    sim.receive_until = receive_until  # type: ignore[method-assign]
+                    clock=clock, sleep=sleep)
     try:
         yield sim, clock, client
     finally:
@@ -137,3 +132,22 @@ def test_timesync_requests_are_answered_with_the_boot_clock_in_ns(rig) -> None:
                   ("127.0.0.1", sim.listen_ports()[0]))
     sim.run(lambda: False, max_ticks=1)
     assert sim.counters["timesync_replies"] == 1 and sim.clocks[0].last_rtt_s is not None
+
+
+def test_a_paced_tick_sleeps_to_its_time_then_takes_what_arrived_without_waiting(rig) -> None:
+    """One wake-up a tick: the sockets are read when the tick is due, never waited on."""
+    sim, clock, client = rig
+    gcs = new_codec(255, 190)
+    client.sendto(gcs.timesync_encode(0, 5).pack(gcs), ("127.0.0.1", sim.listen_ports()[1]))
+    waits: list[float | None] = []
+    select = sim._selector.select
+
+    def recorded(timeout: float | None = None) -> list:
+        waits.append(timeout)
+        return select(timeout)
+    sim._selector.select = recorded  # type: ignore[method-assign]
+    start = clock.t
+    sim.run(lambda: False, max_ticks=3)
+    assert waits and all(w == 0.0 for w in waits)
+    assert clock.t - start == pytest.approx(3 * sim.dt_s)
+    assert sim.counters["timesync_answered"] == 1
