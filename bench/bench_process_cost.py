@@ -3,7 +3,9 @@
 `sim`: `python -m deploy.commands.sim` runs as a child with a run secret (every vehicle
 enforces signing with its own key) while this process plays one agent per vehicle: a
 signed SET_POSITION_TARGET_LOCAL_NED at the agents' rate, a HEARTBEAT a second, each
-vehicle put in OFFBOARD and armed first, and all telemetry drained.  The child's CPU over
+vehicle asked for the telemetry rates a follower asks (ATTITUDE and GLOBAL_POSITION_INT at
+4 Hz; `--default-rates`: not asked, all three at 50 Hz), put in OFFBOARD and armed first,
+and all telemetry drained.  The child's CPU over
 all its threads (/proc/<pid>/stat, utime + stime) over a window after it settled, divided
 by vehicles x ticks in the window.
 
@@ -38,6 +40,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.gcs_agents import HOST, Agents
 
 CLK_TCK = os.sysconf("SC_CLK_TCK")
+RATES = {False: "telemetry rates as a follower asks them",
+         True: "the vehicles' default telemetry rates"}
 
 
 def proc_cpu_s(pid: int) -> float:
@@ -45,7 +49,8 @@ def proc_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLK_TCK
 
 
-def sim_run(n: int, seconds: float, rate_hz: float, agent_hz: float, base: int) -> dict:
+def sim_run(n: int, seconds: float, rate_hz: float, agent_hz: float, base: int,
+            ask_rates: bool = True) -> dict:
     listen, send = base, base + 1000
     sinks = []
     sel = selectors.DefaultSelector()
@@ -59,7 +64,7 @@ def sim_run(n: int, seconds: float, rate_hz: float, agent_hz: float, base: int) 
     secret = os.urandom(32)
     with tempfile.NamedTemporaryFile(delete=False) as f:
         f.write(secret)
-    agents = Agents(secret, n)
+    agents = Agents(secret, n, ask_rates)
     # ENCLOSE_BENCH_WRAP: a profiler's command line to run the simulator under (py-spy ...)
     wrap = os.environ.get("ENCLOSE_BENCH_WRAP", "").split()
     proc = subprocess.Popen(
@@ -131,10 +136,12 @@ def spread(values: list[float]) -> str:
 def main_sim(args: argparse.Namespace) -> None:
     print(f"simulator: {args.vehicles} vehicles, tick {args.rate_hz:g} Hz; per vehicle "
           f"signed setpoints {args.agent_hz:g} Hz, TIMESYNC 4 Hz, HEARTBEAT 1 Hz; "
+          f"{RATES[args.default_rates]}; "
           f"{args.seconds:g} s window after 3 s; load {os.getloadavg()[0]:.2f}")
     per = []
     for k in range(args.runs):
-        r = sim_run(args.vehicles, args.seconds, args.rate_hz, args.agent_hz, args.base_port)
+        r = sim_run(args.vehicles, args.seconds, args.rate_hz, args.agent_hz, args.base_port,
+                    not args.default_rates)
         per.append(r["us_per_vehicle_tick"])
         print(f"  run {k + 1}: {r['us_per_vehicle_tick']:6.1f} us/vehicle-tick  "
               f"CPU {r['cpu_pct']:5.1f} %  overruns {r['overrun_pct']:.2f} %  setpoints "
@@ -154,6 +161,8 @@ def main() -> int:
     ap.add_argument("--rate-hz", type=float, default=50.0)
     ap.add_argument("--agent-hz", type=float, default=50.0)
     ap.add_argument("--base-port", type=int, default=27000)
+    ap.add_argument("--default-rates", action="store_true",
+                    help="do not ask the followers' telemetry rates (all streams at 50 Hz)")
     args = ap.parse_args()
     if args.what == "sim":
         main_sim(args)

@@ -10,6 +10,13 @@ from pymavlink.dialects.v20 import common as mavlink2
 from agents.mavlink.modes import do_set_mode_params
 from agents.mavlink.signing import signing_timestamp
 from agents.mavlink.signing_keys import vehicle_key
+from agents.mavlink.startup import (
+    MAV_CMD_COMPONENT_ARM_DISARM,
+    MAV_CMD_DO_SET_MODE,
+    MAV_CMD_SET_MESSAGE_INTERVAL,
+    StartupTimeouts,
+    stream_rates,
+)
 from agents.mavlink.wire import encode, encode_fields, new_codec, sign_outgoing
 
 HOST = "127.0.0.1"
@@ -19,7 +26,8 @@ GCS_SYSID, GCS_COMPID = 245, 191
 class Agents:
     """One signing ground-station codec per vehicle (link i, vehicle i+1's key)."""
 
-    def __init__(self, secret: bytes, n: int) -> None:
+    def __init__(self, secret: bytes, n: int, ask_rates: bool = True) -> None:
+        self.ask_rates = ask_rates  # False: the vehicles stream at their default rates
         self.codecs = []
         for i in range(n):
             mav = new_codec(GCS_SYSID, GCS_COMPID, mavlink2)
@@ -46,6 +54,11 @@ class Agents:
         return encode(mav, mav.command_long_encode(i + 1, 1, cmd, 0, *p))
 
     def start(self, i: int) -> list[bytes]:
-        """OFFBOARD, then arm: what a follower asks once setpoints stream."""
-        return [self.command(i, 176, *do_set_mode_params("px4", "OFFBOARD")),
-                self.command(i, 400, 1.0)]
+        """What a follower asks once setpoints stream: its telemetry rates
+        (agents.mavlink.startup.stream_rates: ATTITUDE and GLOBAL_POSITION_INT down to
+        4 Hz), OFFBOARD, then arm."""
+        rates = [self.command(i, MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
+                 for msg_id, hz in stream_rates(StartupTimeouts()) if self.ask_rates]
+        offboard = do_set_mode_params("px4", "OFFBOARD")
+        return [*rates, self.command(i, MAV_CMD_DO_SET_MODE, *offboard),
+                self.command(i, MAV_CMD_COMPONENT_ARM_DISARM, 1.0)]

@@ -29,12 +29,12 @@ def _timed(fn, acc: list[int]):  # type: ignore[no-untyped-def]
     return wrapped
 
 
-def phases_once(n: int, ticks: int, rate_hz: float) -> dict[str, float]:
+def phases_once(n: int, ticks: int, rate_hz: float, ask_rates: bool = True) -> dict[str, float]:
     secret = os.urandom(32)
     cfg = SimConfig(rate_hz=rate_hz, telemetry_hz=rate_hz, listen_base_port=0,
                     send_base_port=28000, signing_secret=secret)
     sim = Simulator(grid_spawn_ned(n), VehicleConfig(), HomeConfig(), cfg)
-    agents = Agents(secret, n)
+    agents = Agents(secret, n, ask_rates)
     sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sink.bind((HOST, 0))
     sink.setblocking(False)
@@ -86,7 +86,7 @@ def main_phases(args: argparse.Namespace) -> None:
           f"{os.getloadavg()[0]:.2f}")
     rows = []
     for k in range(args.runs):
-        r = phases_once(args.vehicles, args.ticks, args.rate_hz)
+        r = phases_once(args.vehicles, args.ticks, args.rate_hz, not args.default_rates)
         rows.append(r)
         print(f"  run {k + 1}: receive {r['receive']:5.1f}  model {r['model']:5.1f}  "
               f"telemetry {r['telemetry']:5.1f}  total {r['total']:5.1f} us  "

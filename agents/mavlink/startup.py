@@ -198,12 +198,16 @@ def wait_position(ad: MavlinkAdapter, t: StartupTimeouts) -> VehicleState:
     return wait_heard(ad, lambda s: s.link_ok, t.position_s, "LOCAL_POSITION_NED", t)
 
 
+def stream_rates(t: StartupTimeouts) -> tuple[tuple[int, float], ...]:
+    """(message id, Hz) an agent asks its vehicle for: LOCAL_POSITION_NED at the control's
+    rate; ATTITUDE and GLOBAL_POSITION_INT (home altitude only) at `slow_telemetry_hz`."""
+    return ((MSG_LOCAL_POSITION_NED, t.telemetry_hz), (MSG_ATTITUDE, t.slow_telemetry_hz),
+            (MSG_GLOBAL_POSITION_INT, t.slow_telemetry_hz))
+
+
 def set_rates(ad: MavlinkAdapter, t: StartupTimeouts) -> None:
-    """LOCAL_POSITION_NED at the control's rate; ATTITUDE and GLOBAL_POSITION_INT (home
-    altitude only) at `slow_telemetry_hz`.  A refusal keeps the vehicle's default rate."""
-    rates = ((MSG_LOCAL_POSITION_NED, t.telemetry_hz), (MSG_ATTITUDE, t.slow_telemetry_hz),
-             (MSG_GLOBAL_POSITION_INT, t.slow_telemetry_hz))
-    for msg_id, hz in rates:
+    """Ask for `stream_rates`.  A refusal keeps the vehicle's default rate."""
+    for msg_id, hz in stream_rates(t):
         try:
             command(ad, MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, 1e6 / hz), t)
         except MavlinkError as exc:  # the default rate still works, just coarser or dearer
