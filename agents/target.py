@@ -47,18 +47,18 @@ def tracking_command(
 
 
 def reference(
-    motion: TargetMotion, start_s: float | None, now_s: float
+    motion: TargetMotion, index: int, start_s: float | None, now_s: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The profile's (m, 2) positions and velocities at `now_s`; before the start (no start
-    word yet, or the word heard ahead of its start stamp), its start points at rest.
+    """Target `index`'s (2,) profile position and velocity at `now_s`; before the start (no
+    start word yet, or the word heard ahead of its start stamp), its start point at rest.
 
     The profile's velocity at t = 0 is not zero.  Fed forward while waiting, it held the
     target v / POSITION_GAIN_PER_S (1 m at 1 m/s) ahead of its start point, and set it
     off at the word, a start delay early: the run began with the targets displaced."""
     if start_s is None or now_s < start_s:
-        pos, vel = motion.state(0.0)
+        pos, vel = motion.state_of(index, 0.0)
         return pos, np.zeros_like(vel)
-    return motion.state(now_s - start_s)
+    return motion.state_of(index, now_s - start_s)
 
 
 class TargetNode:
@@ -88,12 +88,12 @@ class TargetNode:
         self.cost.mark("receive")
         state = self.vehicle.poll()
         self.cost.mark("mav_in")
-        ref_pos, ref_vel = reference(self.motion, self.start_s, now_s)
+        ref_pos, ref_vel = reference(self.motion, self.index, self.start_s, now_s)
         pos = np.asarray(state.pos_enu_m)
         if not state.link_ok or not np.all(np.isfinite(pos)):
             self.status.counters["ticks_without_vehicle"] += 1
             return
-        u = tracking_command(ref_pos[self.index], ref_vel[self.index], pos[:2], self.speed_max_m_s)
+        u = tracking_command(ref_pos, ref_vel, pos[:2], self.speed_max_m_s)
         climb = ALTITUDE_GAIN_PER_S * (self.altitude_m - pos[2])
         self.cost.mark("law")
         if not self.vehicle.send_velocity_enu((float(u[0]), float(u[1]), float(climb))):

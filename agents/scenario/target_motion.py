@@ -90,16 +90,25 @@ class TargetMotion:
         pos, vel = self.states(np.array([t_s]))
         return pos[0], vel[0]
 
+    def state_of(self, j: int, t_s: float) -> tuple[FloatArray, FloatArray]:
+        """Target j's (2,) position and velocity at time `t_s` (a target process flies its
+        own alone: the others' would double its work at every tick)."""
+        pos, vel = self._one(j, np.array([max(0.0, t_s - self._start_s)]))
+        return pos[0], (vel[0] if t_s >= self._start_s else np.zeros(2))
+
     def states(self, times_s: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(k, m, 2) positions and velocities at each of `times_s`, vectorised over time."""
         t = np.asarray(times_s, dtype=np.float64)
         tau = np.maximum(0.0, t - self._start_s)
         pos = np.empty((len(t), len(self._specs), 2))
         vel = np.empty_like(pos)
-        for j, spec in enumerate(self._specs):
-            if j in self._knots:
-                pos[:, j], vel[:, j] = _random_walk(self._knots[j], tau)
-            else:
-                pos[:, j], vel[:, j] = _closed_form(spec, tau)
+        for j in range(len(self._specs)):
+            pos[:, j], vel[:, j] = self._one(j, tau)
         vel[t < self._start_s] = 0.0
         return pos, vel
+
+    def _one(self, j: int, tau: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(k, 2) positions and velocities of target j at times `tau` since the start."""
+        if j in self._knots:
+            return _random_walk(self._knots[j], tau)
+        return _closed_form(self._specs[j], tau)

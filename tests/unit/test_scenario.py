@@ -130,6 +130,11 @@ def test_profiles_velocity_is_the_derivative_of_position() -> None:
     assert np.linalg.norm(vel[:, 1], axis=1) == pytest.approx(0.5 * math.sqrt(2.0))
     again, _ = TargetMotion(s).states(t)
     np.testing.assert_array_equal(pos, again)  # seeded: reproducible
+    for k in (0, 4321, 30000):  # one target's state, as a target process asks it
+        for j in range(2):
+            one_pos, one_vel = motion.state_of(j, float(t[k]))
+            np.testing.assert_allclose(one_pos, pos[k, j], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(one_vel, vel[k, j], rtol=0, atol=1e-12)
 
 
 def test_paper_v2_matches_the_paper() -> None:
