@@ -35,10 +35,18 @@ CommandHandler = Callable[[EndpointView, Params, Rx], Outcome]
 
 
 def on_setpoint(ep: EndpointView, msg: Msg, rx: Rx) -> str:
+    return apply_setpoint(ep, msg.type_mask, msg.coordinate_frame, (msg.x, msg.y, msg.z),
+                          (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate, rx)
+
+
+def apply_setpoint(ep: EndpointView, type_mask: int, frame: int,
+                   pos: tuple[float, float, float], vel: tuple[float, float, float],
+                   yaw: float, yaw_rate: float, rx: Rx) -> str:
+    """SET_POSITION_TARGET_LOCAL_NED's fields to the autopilot; its outcome.  Also straight
+    from the wire, without a message object (sim_backend.endpoint, agents.mavlink.fast_rx)."""
     row = rx.row
     try:
-        sp = decode_setpoint(msg.type_mask, msg.coordinate_frame, (msg.x, msg.y, msg.z),
-                             (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate, row.pos, row.yaw)
+        sp = decode_setpoint(type_mask, frame, pos, vel, yaw, yaw_rate, row.pos, row.yaw)
     except SetpointRejected as exc:
         key = "ignored_nonfinite" if "finite" in str(exc) else "ignored_setpoints"
         ep.counters[key] += 1

@@ -1,4 +1,4 @@
-"""An adapter's receive path in one pass per datagram, for the frames a vehicle streams.
+"""A MAVLink receiver's path in one pass per datagram, for the frames sent to it at rate.
 
 The layered path (RxGate's screen of the first frame, `decode_datagram` into pymavlink
 message objects, `signature_ok` per message) costs a follower ~25 Python calls and a dozen
@@ -11,7 +11,8 @@ types `decode_datagram` decodes by struct (FAST_IDS), signed when a verifier is 
 the first frame it cannot judge so (MAVLink 1, unsigned, another type, a bad CRC, a cut
 frame) it stops, and the layered path takes the datagram from there: for the first frame
 that means all of it, screen included.  So verdicts, counters and the order in which
-messages reach the adapter equal the layered path's (tests/unit/test_mavlink_fast_rx.py).
+messages reach the receiver equal the layered path's (tests/unit/test_mavlink_fast_rx.py,
+tests/unit/test_sim_fast_rx.py).
 A refused first frame is what the screen would refuse: the datagram is dropped unparsed.
 """
 
@@ -26,8 +27,9 @@ from agents.mavlink.signing import SignatureVerifier, keyed_sha256
 from agents.mavlink.wire_decode import FAST_IDS, Codec, dialect_tables
 
 LOCAL_POSITION_NED = 32
+SET_POSITION_TARGET_LOCAL_NED = 84
 _HEADER = struct.Struct("<BBBBBBBHB")
-# (msg id, sysid, compid, LOCAL_POSITION_NED's fields in wire order or the frame's bytes)
+# (msg id, sysid, compid, the unpacked type's fields in wire order or the frame's bytes)
 Accepted = tuple[int, int, int, Any]
 
 
@@ -35,7 +37,8 @@ class FastRx:
     """One vehicle link's one-pass reader: `scan(datagram)` (module docstring).
 
     `counters`: the receiver's, for what scan decides past the first frame (rejections
-    as signing_rejected_<reason>, frames of types the dialect lacks as unknown_types)."""
+    as signing_rejected_<reason>, frames of types the dialect lacks as unknown_types);
+    `unpacked`: the message id whose fields come unpacked (one of FAST_IDS)."""
 
     __slots__ = (
         "counters",
@@ -44,17 +47,19 @@ class FastRx:
         "flags",
         "hasher",
         "known",
-        "position",
+        "unpacked",
+        "unpacker",
         "verifier",
     )
 
     def __init__(self, mav: Codec, verifier: SignatureVerifier | None,
-                 counters: Counter[str]) -> None:
+                 counters: Counter[str], unpacked: int = LOCAL_POSITION_NED) -> None:
         tables = dialect_tables(mav)
         self.extras = {i: tables.fast[i].extra for i in FAST_IDS if i in tables.fast}
         self.known = tables.known
         self.crc = tables.crc
-        self.position: struct.Struct = tables.fast[LOCAL_POSITION_NED].cls.unpacker
+        self.unpacked = unpacked
+        self.unpacker: struct.Struct = tables.fast[unpacked].cls.unpacker
         self.verifier = verifier
         self.hasher = None if verifier is None else keyed_sha256(verifier.key)
         self.counters = counters
@@ -92,10 +97,10 @@ class FastRx:
                     i = end
                     continue
             body: Any
-            if msg_id == LOCAL_POSITION_NED:
-                pos = self.position  # MAVLink 2 cuts trailing zeros; a newer dialect adds
-                body = pos.unpack_from(data, i + 10) if mlen == pos.size else pos.unpack(
-                    data[i + 10:crc_at][:pos.size].ljust(pos.size, b"\0"))
+            if msg_id == self.unpacked:
+                fmt = self.unpacker  # MAVLink 2 cuts trailing zeros; a newer dialect adds
+                body = fmt.unpack_from(data, i + 10) if mlen == fmt.size else fmt.unpack(
+                    data[i + 10:crc_at][:fmt.size].ljust(fmt.size, b"\0"))
             else:
                 body = data[i:end]
             accepted.append((msg_id, sysid, compid, body))
