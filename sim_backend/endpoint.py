@@ -120,21 +120,11 @@ class VehicleEndpoint:
     def on_datagram(self, data: bytes, addr: Addr, now_s: float, row: tm.Row) -> None:
         """The one entry point for a received UDP datagram; never raises."""
         self.counters["rx_datagrams"] += 1
-        gate, rest, refused = self.gate, 0, None
-        if gate.fits(len(data)):
-            accepted, rest, refused = self.fast.scan(data)
-        if refused is not None:
-            gate.refuse(refused, addr)
-            return
-        if rest == 0:  # the first frame is the layered path's: all of the datagram is
-            admitted = gate.admit(data, addr, now_s)
-            if admitted:
-                self.parse_datagram(admitted, addr, now_s, row)
-            return
-        gate.take(len(data))
-        self._take_accepted(accepted, addr, Rx(addr, now_s, row))
-        if rest < len(data):
-            self.parse_datagram(data[rest:], addr, now_s, row, remembered=True)
+        accepted, layered = self.fast.read(self.gate, data, addr, now_s)
+        if accepted:
+            self._take_accepted(accepted, addr, Rx(addr, now_s, row))
+        if layered:  # its sender remembered with the head, as parse_datagram would
+            self.parse_datagram(layered, addr, now_s, row, remembered=bool(accepted))
 
     def _take_accepted(self, accepted: list[Accepted], addr: Addr, rx: Rx) -> None:
         """Frames FastRx accepted (verified, when signing is enforced), in order, as

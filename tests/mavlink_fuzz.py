@@ -5,10 +5,13 @@ from __future__ import annotations
 import re
 import socket
 import struct
+from typing import Any
 
+from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.dialects.v20.common import mcrf4xx
 
+from agents.mavlink.signing import signature
 from agents.mavlink.wire import new_codec
 from agents.mavlink.wire_decode import MAVLinkMessage, decode_datagram
 from sim_backend.endpoint import HANDLERS, IGNORED
@@ -39,6 +42,29 @@ def raw_frame(cls: type[mavlink2.MAVLink_message], payload: bytes, seq: int = 0,
     body = head + payload
     crc = mcrf4xx(body[1:] + bytes((cls.crc_extra,)), 0xFFFF)
     return body + crc.to_bytes(2, "little")
+
+
+def signed_frame(cls: Any, payload: bytes, sysid: int, compid: int, stamp: int | None,
+                 key: bytes, link: int = 0, flags: int = 0) -> bytes:
+    """A MAVLink 2 frame of `cls` around `payload` (any bytes), signed with `key` at `stamp`
+    (unsigned when None), with a good CRC; `flags`: more incompatibility flags."""
+    body = HEADER.pack(0xFD, len(payload), flags | (stamp is not None), 0, 7, sysid, compid,
+                       cls.id & 0xFFFF, cls.id >> 16) + payload
+    frame = body + mcrf4xx(body[1:] + bytes((cls.crc_extra,)), 0xFFFF).to_bytes(2, "little")
+    if stamp is None:
+        return frame
+    frame += bytes((link,)) + stamp.to_bytes(6, "little")
+    return frame + signature(key, frame)
+
+
+def damaged(draw: st.DrawFn, data: bytes) -> bytes:
+    """`data` as it came, mostly; now and then cut short, or with garbage after it."""
+    cut = draw(st.sampled_from((None,) * 6 + ("cut", "garbage")))
+    if cut == "cut":
+        return data[:draw(st.integers(1, len(data)))]
+    if cut == "garbage":
+        return data + draw(st.binary(min_size=1, max_size=20))
+    return data
 
 
 def target_offset(cls: type) -> int | None:

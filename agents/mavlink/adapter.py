@@ -134,21 +134,11 @@ class MavlinkAdapter(VehicleMessages):
     def _take(self, data: bytes, addr: Addr, received: float) -> None:
         """A datagram off the socket: FastRx takes what it can judge, the gate's screen and
         `_datagram` the rest (agents.mavlink.fast_rx: the same verdicts either way)."""
-        gate, rest, refused = self.gate, 0, None
-        if gate.fits(len(data)):
-            accepted, rest, refused = self.fast.scan(data)
-        if refused is not None:
-            gate.refuse(refused, addr)
-            return
-        if rest == 0:
-            admitted = gate.admit(data, addr, received)
-            if admitted:
-                self._datagram(admitted, addr, received)
-            return
-        gate.take(len(data))
-        self.apply(accepted, addr, received)
-        if rest < len(data):
-            self._datagram(data[rest:], addr, received)
+        accepted, layered = self.fast.read(self.gate, data, addr, received)
+        if accepted:
+            self.apply(accepted, addr, received)
+        if layered:
+            self._datagram(layered, addr, received)
 
     def _datagram(self, data: bytes, addr: Addr, received: float) -> None:
         decoded = decode_datagram(self.mav, data)

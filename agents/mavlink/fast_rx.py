@@ -23,6 +23,7 @@ from collections import Counter
 from hmac import compare_digest
 from typing import Any
 
+from agents.mavlink.rx_gate import Addr, RxGate
 from agents.mavlink.signing import SignatureVerifier, keyed_sha256
 from agents.mavlink.wire_decode import FAST_IDS, Codec, dialect_tables
 
@@ -65,6 +66,24 @@ class FastRx:
         self.counters = counters
         # Incompatibility flags taken: signed only, when signatures are checked.
         self.flags = (1,) if verifier is not None else (0, 1)
+
+    def read(self, gate: RxGate, data: bytes, sender: Addr,
+             stamp: float) -> tuple[list[Accepted], bytes]:
+        """A datagram off the socket, charged to `gate`: (the frames this pass accepted, the
+        part of it the layered path takes, b"" for none).  A datagram that does not fit the
+        tick's parse budget, or whose first frame is not this pass's, is all the gate's
+        (`RxGate.admit`: screened, cut or carried to the next tick); one whose first frame
+        is refused is dropped here as the screen would drop it."""
+        rest, refused = 0, None
+        if gate.fits(len(data)):
+            accepted, rest, refused = self.scan(data)
+        if refused is not None:
+            gate.refuse(refused, sender)
+            return [], b""
+        if rest == 0:
+            return [], gate.admit(data, sender, stamp) or b""
+        gate.take(len(data))
+        return accepted, data[rest:]
 
     def scan(self, data: bytes) -> tuple[list[Accepted], int, str | None]:
         """(the frames accepted, in order; where the layered path takes over: len(data)

@@ -11,7 +11,6 @@ counters, signature streams, state and everything else they keep must stay equal
 from __future__ import annotations
 
 import math
-import struct
 from collections import Counter
 from typing import Any
 
@@ -19,18 +18,17 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
-from pymavlink.dialects.v20.common import mcrf4xx
 
 from agents.mavlink import lean_common
 from agents.mavlink.adapter import SETPOINT, AdapterConfig, MavlinkAdapter
 from agents.mavlink.rx_gate import RxBudget
-from agents.mavlink.signing import TICKS_PER_S, SignatureVerifier, signature, signing_timestamp
+from agents.mavlink.signing import TICKS_PER_S, SignatureVerifier, signing_timestamp
 from agents.mavlink.wire import Framer, encode_fields, new_codec, sign_outgoing
+from tests.mavlink_fuzz import damaged, signed_frame
 
 pytestmark = pytest.mark.timeout(180)
 KEY = bytes(range(1, 33))
 OTHER_KEY = bytes(range(2, 34))
-HEADER_V2 = struct.Struct("<BBBBBBBHB")
 NOW_S = 1_800_000_000.0
 NOW = signing_timestamp(NOW_S)
 ADDR = ("127.0.0.1", 14580)
@@ -39,19 +37,6 @@ CLASSES = tuple(mavlink2.mavlink_map[i] for i in (0, 1, 24, 30, 32, 32, 32, 33, 
                                                    245, 242, 253, 147))
 SETTINGS = settings(max_examples=250, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])
-
-
-def build(cls: Any, payload: bytes, sysid: int, compid: int, stamp: int | None,
-          key: bytes = KEY, link: int = 0, flags: int = 0) -> bytes:
-    """A MAVLink 2 frame of `cls` around `payload`, signed with `key` at `stamp` (unsigned
-    when None), with a good CRC."""
-    body = HEADER_V2.pack(0xFD, len(payload), flags | (stamp is not None), 0, 7, sysid, compid,
-                          cls.id & 0xFFFF, cls.id >> 16) + payload
-    frame = body + mcrf4xx(body[1:] + bytes((cls.crc_extra,)), 0xFFFF).to_bytes(2, "little")
-    if stamp is None:
-        return frame
-    frame += bytes((link,)) + stamp.to_bytes(6, "little")
-    return frame + signature(key, frame)
 
 
 def position_payload(draw: st.DrawFn) -> bytes:
@@ -78,7 +63,7 @@ def frames(draw: st.DrawFn) -> bytes:
     if kind == "v1":
         data = mavlink2.MAVLink(None, sysid, compid)
         return bytes(data.heartbeat_encode(2, 12, 129, 0x60000, 4).pack(data, force_mavlink1=True))
-    frame = build(cls, payload, sysid, compid, None if kind == "unsigned" else stamp,
+    frame = signed_frame(cls, payload, sysid, compid, None if kind == "unsigned" else stamp,
                   OTHER_KEY if kind == "wrong_key" else KEY, link, 2 if kind == "flags" else 0)
     if draw(st.integers(0, 7)) == 0:  # a flipped byte: CRC, header or signature
         at = draw(st.integers(0, len(frame) - 1))
@@ -88,12 +73,7 @@ def frames(draw: st.DrawFn) -> bytes:
 
 @st.composite
 def datagrams(draw: st.DrawFn) -> bytes:
-    data = b"".join(draw(st.lists(frames(), min_size=1, max_size=4)))
-    cut = draw(st.sampled_from((None,) * 6 + ("cut", "garbage")))
-    if cut == "cut":
-        data = data[:draw(st.integers(1, len(data)))]
-    elif cut == "garbage":
-        data += draw(st.binary(min_size=1, max_size=20))
+    data = damaged(draw, b"".join(draw(st.lists(frames(), min_size=1, max_size=4))))
     return data
 
 
@@ -175,8 +155,8 @@ def test_a_good_datagram_is_read_past_the_screen_and_forgeries_still_refused() -
     ad.verifier.screen = lambda data: screened.append(data) or screen(data)  # type: ignore
     position = lean_common.MAVLink_local_position_ned_message
     payload = position.unpacker.pack(1000, 1.0, 2.0, -3.0, 0.5, 0.25, -1.0)
-    good = build(position, payload, 1, 1, NOW + 1)
-    forged = build(position, payload, 1, 1, NOW + 2, key=OTHER_KEY)
+    good = signed_frame(position, payload, 1, 1, NOW + 1, KEY)
+    forged = signed_frame(position, payload, 1, 1, NOW + 2, OTHER_KEY)
     assert isinstance(ad.sock, FakeSocket)
     ad.sock.queue += [good, forged, good]  # the second `good` is a replay
     ad.poll()
@@ -233,7 +213,7 @@ def test_accept_and_refuse_give_check_s_verdicts_and_streams(
     ours, theirs = (SignatureVerifier(KEY, clock=lambda: NOW_S, allowed_unsigned=frozenset(),
                                       max_streams=max_streams) for _ in range(2))
     for link, sysid, compid, offset, good in frames_sent:
-        data = build(cls, bytes(cls.unpacker.size), sysid, compid, NOW + offset,
+        data = signed_frame(cls, bytes(cls.unpacker.size), sysid, compid, NOW + offset,
                      KEY if good else OTHER_KEY, link)
         if good:
             verdict = ours.accept(link, sysid, compid, NOW + offset)

@@ -13,7 +13,6 @@ and what they sent must stay equal.
 from __future__ import annotations
 
 import math
-import struct
 from collections import Counter
 from typing import Any
 
@@ -21,10 +20,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
-from pymavlink.dialects.v20.common import mcrf4xx
 
 from agents.mavlink.rx_gate import RxBudget
-from agents.mavlink.signing import TICKS_PER_S, signature, signing_timestamp
+from agents.mavlink.signing import TICKS_PER_S, signing_timestamp
 from agents.scenario.model import HomeConfig, VehicleConfig
 from sim_backend import endpoint as endpoint_module
 from sim_backend import telemetry as tm
@@ -32,11 +30,11 @@ from sim_backend.autopilot import Autopilot
 from sim_backend.clock_services import ClockService
 from sim_backend.endpoint import VehicleEndpoint
 from sim_backend.params import ParamStore, default_params
+from tests.mavlink_fuzz import damaged, signed_frame
 
 pytestmark = pytest.mark.timeout(180)
 KEY = bytes(range(1, 33))
 OTHER_KEY = bytes(range(2, 34))
-HEADER_V2 = struct.Struct("<BBBBBBBHB")
 NOW_S = 1_800_000_000.0
 NOW = signing_timestamp(NOW_S)
 ADDRS = (("127.0.0.1", 14580), ("127.0.0.1", 14581), ("127.0.0.2", 14550))
@@ -51,19 +49,6 @@ CLASSES = (SETPOINT, SETPOINT, SETPOINT, SETPOINT, mavlink2.MAVLink_heartbeat_me
 SETTINGS = settings(max_examples=250, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])
 ROW = tm.Row(1000, (0.5, -1.0, -2.5), (0.1, 0.0, 0.0), 0.0, 0.0, 0.3, 0.0, False)
-
-
-def build(cls: Any, payload: bytes, sysid: int, compid: int, stamp: int | None,
-          key: bytes = KEY, link: int = 0, flags: int = 0) -> bytes:
-    """A MAVLink 2 frame of `cls` around `payload`, signed with `key` at `stamp` (unsigned
-    when None), with a good CRC."""
-    body = HEADER_V2.pack(0xFD, len(payload), flags | (stamp is not None), 0, 7, sysid, compid,
-                          cls.id & 0xFFFF, cls.id >> 16) + payload
-    frame = body + mcrf4xx(body[1:] + bytes((cls.crc_extra,)), 0xFFFF).to_bytes(2, "little")
-    if stamp is None:
-        return frame
-    frame += bytes((link,)) + stamp.to_bytes(6, "little")
-    return frame + signature(key, frame)
 
 
 def setpoint_payload(draw: st.DrawFn) -> bytes:
@@ -92,7 +77,7 @@ def frames(draw: st.DrawFn) -> bytes:
     if kind == "v1":
         mav = mavlink2.MAVLink(None, sysid, compid)
         return bytes(mav.heartbeat_encode(6, 8, 0, 0, 4).pack(mav, force_mavlink1=True))
-    frame = build(cls, payload, sysid, compid, None if kind == "unsigned" else stamp,
+    frame = signed_frame(cls, payload, sysid, compid, None if kind == "unsigned" else stamp,
                   OTHER_KEY if kind == "wrong_key" else KEY, draw(st.sampled_from((0, 0, 1))),
                   2 if kind == "flags" else 0)
     if draw(st.integers(0, 7)) == 0:  # a flipped byte: CRC, header or signature
@@ -103,12 +88,7 @@ def frames(draw: st.DrawFn) -> bytes:
 
 @st.composite
 def datagrams(draw: st.DrawFn) -> tuple[bytes, tuple[str, int]]:
-    data = b"".join(draw(st.lists(frames(), min_size=1, max_size=4)))
-    cut = draw(st.sampled_from((None,) * 6 + ("cut", "garbage")))
-    if cut == "cut":
-        data = data[:draw(st.integers(1, len(data)))]
-    elif cut == "garbage":
-        data += draw(st.binary(min_size=1, max_size=20))
+    data = damaged(draw, b"".join(draw(st.lists(frames(), min_size=1, max_size=4))))
     return data, draw(st.sampled_from(ADDRS))
 
 
@@ -193,7 +173,7 @@ def test_a_signed_setpoint_is_flown_from_its_fields_with_one_hash(
     assert ep.verifier is not None
     payload = SETPOINT.unpacker.pack(0, 0.0, 0.0, 0.0, 1.5, -0.5, 0.25, 0.0, 0.0, 0.0, 0.0,
                                      0.0, 3527, 1, 1, 1)
-    data = build(SETPOINT, payload, 1, 1, NOW + 5)
+    data = signed_frame(SETPOINT, payload, 1, 1, NOW + 5, KEY)
 
     def layered(*_: object) -> None:
         raise AssertionError("the layered path's screen or check ran")
@@ -223,9 +203,9 @@ def test_a_sender_refused_a_peer_slot_is_counted_once_per_datagram() -> None:
             ep = endpoint(cls, KEY, None)
             for k, addr in enumerate(ADDRS):
                 stamp = NOW + 10 * k
-                ep.on_datagram(build(SETPOINT, setpoint, 1, 1, stamp)
-                               + build(mavlink2.MAVLink_param_request_read_message, request,
-                                       1, 1, stamp + 1), addr, 10.0, ROW)
+                ep.on_datagram(signed_frame(SETPOINT, setpoint, 1, 1, stamp, KEY)
+                               + signed_frame(mavlink2.MAVLink_param_request_read_message,
+                                              request, 1, 1, stamp + 1, KEY), addr, 10.0, ROW)
             assert ep.counters["peers_refused"] == 1, cls
             assert set(ep.peers) == set(ADDRS[:2])
     finally:
