@@ -12,11 +12,8 @@ ardupilotmega, or garbage that happens to frame) cannot be CRC-checked: it is co
 
 Replies (COMMAND_ACK, PARAM_VALUE, requested messages) go to the sender; streamed
 telemetry goes to the PX4-SITL-style default destination and to every address
-that talked to the vehicle recently (its peers), bundled into one datagram per tick.
-A vehicle that enforces signing takes as a peer only an address that sent it a frame
-signed with its key: an unsigned HEARTBEAT (accepted, as on PX4) buys no telemetry, and
-a full peer table refuses a newcomer (`peers_refused`) rather than evict a live peer.
-Without signing, any sender is a peer and a newcomer evicts the stalest (as PX4 SITL).
+that talked to the vehicle recently (its peers, sim_backend.peers; a signed sender a full
+table refuses is counted as `peers_refused`), bundled into one datagram per tick.
 
 What is read per tick is bounded (agents.mavlink.rx_gate: `gate`, `VEHICLE_BUDGET`).
 A datagram is walked once by agents.mavlink.fast_rx where it can judge it exactly as the
@@ -46,10 +43,9 @@ from sim_backend import telemetry as tm
 from sim_backend.autopilot import SEVERITY_WARNING, Autopilot
 from sim_backend.endpoint_view import Addr, EndpointView, Handler, MissionStore, Rx
 from sim_backend.params import ParamStore
+from sim_backend.peers import Peers
 
 log = logging.getLogger(__name__)
-PEER_TIMEOUT_S = 30.0
-MAX_PEERS = 8
 MAX_LOGGED_ERRORS = 5
 SETPOINT_KIND = "SET_POSITION_TARGET_LOCAL_NED"
 ServiceHandler = Callable[[Msg, Addr], str]  # a service that owns a message type; outcome
@@ -78,7 +74,7 @@ class VehicleEndpoint:
         # Parses what we receive: never keyed, because pymavlink's own check moves a
         # stream's timestamp before it verifies (agents.mavlink.signing).
         self.rx_codec = new_codec(sysid, 1, mavlink2)
-        self.peers: dict[Addr, float] = {}
+        self.peers = Peers()
         self.missions = MissionStore()
         # Services that own a message type (sim_backend.clock_services: TIMESYNC, SYSTEM_TIME).
         self.handlers: dict[str, ServiceHandler] = {}
@@ -129,10 +125,7 @@ class VehicleEndpoint:
     def _take_accepted(self, accepted: list[Accepted], addr: Addr, rx: Rx) -> None:
         """Frames FastRx accepted (verified, when signing is enforced), in order, as
         `parse_datagram` takes them: the sender remembered, each message dispatched."""
-        if self.verifier is None:
-            self._remember(addr, rx.now_s)
-        else:
-            self._remember_signed(addr, rx.now_s)
+        self._remember(addr, rx.now_s)
         for msg_id, _sysid, _compid, body in accepted:
             if msg_id == SET_POSITION_TARGET_LOCAL_NED:
                 self._setpoint(body, rx)
@@ -168,12 +161,10 @@ class VehicleEndpoint:
             self.counters["unknown_types"] += decoded.unknown
         messages = [m for m in decoded.messages
                     if signature_ok(self.verifier, m, self.counters)]
-        if remembered:
-            pass
-        elif self.verifier is None and messages:
+        signed = self.verifier is not None
+        if not remembered and messages and (
+                not signed or any(m._header.incompat_flags & IFLAG_SIGNED for m in messages)):
             self._remember(addr, now_s)
-        elif any(m._header.incompat_flags & IFLAG_SIGNED for m in messages):
-            self._remember_signed(addr, now_s)
         rx = Rx(addr, now_s, row)
         for msg in messages:
             self.dispatch(msg, rx)
@@ -220,21 +211,12 @@ class VehicleEndpoint:
             self.counters["answer_errors"] += 1
 
     def _remember(self, addr: Addr, now_s: float) -> None:
-        if addr not in self.peers and len(self.peers) >= MAX_PEERS:
-            oldest = min(self.peers, key=self.peers.__getitem__)
-            del self.peers[oldest]
-        self.peers[addr] = now_s
-
-    def _remember_signed(self, addr: Addr, now_s: float) -> None:
-        """A signed sender's address as a peer; a full table makes room only from a peer
-        silent for PEER_TIMEOUT_S (it would have been dropped at the next telemetry)."""
-        if addr not in self.peers and len(self.peers) >= MAX_PEERS:
-            stale = min(self.peers, key=self.peers.__getitem__)
-            if now_s - self.peers[stale] <= PEER_TIMEOUT_S:
-                self.counters["peers_refused"] += 1
-                return
-            del self.peers[stale]
-        self.peers[addr] = now_s
+        """The sender of a datagram that carried messages (signed ones, when signing is
+        enforced) as a peer (sim_backend.peers)."""
+        if self.verifier is None:
+            self.peers.remember(addr, now_s)
+        elif not self.peers.remember_signed(addr, now_s):
+            self.counters["peers_refused"] += 1
 
     # ---- send ---------------------------------------------------------------------------
     def build(self, msg_id: int, row: tm.Row) -> bytes | None:
@@ -291,8 +273,7 @@ class VehicleEndpoint:
     def broadcast(self, data: bytes, now_s: float) -> None:
         peers = self.peers
         if peers:
-            for addr in [a for a, t in peers.items() if now_s - t > PEER_TIMEOUT_S]:
-                del peers[addr]
+            peers.expire(now_s)
         self.send_to(data, self.default_dest)
         for addr in peers:
             if addr != self.default_dest:

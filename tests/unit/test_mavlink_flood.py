@@ -19,7 +19,7 @@ from agents.mavlink.signing_keys import vehicle_key
 from agents.mavlink.wire import encode, new_codec, sign_outgoing
 from agents.scenario.model import HomeConfig, VehicleConfig
 from errors import ConfigError, SimulatorError
-from sim_backend.endpoint import MAX_PEERS
+from sim_backend.peers import MAX_PEERS
 from sim_backend.runtime import SimConfig, Simulator, grid_spawn_ned
 from sim_backend.sim_values import parse_peer_hosts
 

@@ -24,7 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from agents.mavlink.rx_gate import RxBudget
 from agents.mavlink.signing import TICKS_PER_S, signing_timestamp
 from agents.scenario.model import HomeConfig, VehicleConfig
-from sim_backend import endpoint as endpoint_module
+from sim_backend import peers as peers_module
 from sim_backend import telemetry as tm
 from sim_backend.autopilot import Autopilot
 from sim_backend.clock_services import ClockService
@@ -147,14 +147,14 @@ def snapshot(ep: VehicleEndpoint) -> dict[str, Any]:
 @given(st.lists(st.lists(datagrams(), max_size=5), min_size=1, max_size=4),
        st.sampled_from((KEY, KEY, None)),
        st.sampled_from((None, None, RxBudget(2, 200), RxBudget(8, 120))),
-       st.sampled_from((endpoint_module.MAX_PEERS, 2)))
+       st.sampled_from((peers_module.MAX_PEERS, 2)))
 def test_fast_path_keeps_every_verdict_outcome_and_state(
         ticks: list[list[tuple[bytes, tuple[str, int]]]], key: bytes | None,
         budget: RxBudget | None, max_peers: int) -> None:
     """A peer table of 2 fills with our 3 senders: a newcomer is then refused (signed) or
     evicts the stalest (unsigned), once per datagram on either path."""
     fast, layered = endpoint(VehicleEndpoint, key, budget), endpoint(Layered, key, budget)
-    saved, endpoint_module.MAX_PEERS = endpoint_module.MAX_PEERS, max_peers
+    saved, peers_module.MAX_PEERS = peers_module.MAX_PEERS, max_peers
     try:
         for t, datagrams_of_tick in enumerate(ticks):
             for ep in (fast, layered):
@@ -164,7 +164,7 @@ def test_fast_path_keeps_every_verdict_outcome_and_state(
                         ep.on_datagram(data, addr, 10.0 + 0.02 * t, ROW)
             assert snapshot(fast) == snapshot(layered)
     finally:
-        endpoint_module.MAX_PEERS = saved
+        peers_module.MAX_PEERS = saved
 
 
 def test_a_signed_setpoint_is_flown_from_its_fields_with_one_hash(
@@ -197,7 +197,7 @@ def test_a_sender_refused_a_peer_slot_is_counted_once_per_datagram() -> None:
     layered path) remembers its sender once, as the layered path does."""
     setpoint = SETPOINT.unpacker.pack(0, *([0.0] * 11), 3527, 1, 1, 1)
     request = mavlink2.MAVLink_param_request_read_message.unpacker.pack(-1, 1, 1, b"SYSID")
-    saved, endpoint_module.MAX_PEERS = endpoint_module.MAX_PEERS, 2
+    saved, peers_module.MAX_PEERS = peers_module.MAX_PEERS, 2
     try:
         for cls in (VehicleEndpoint, Layered):
             ep = endpoint(cls, KEY, None)
@@ -209,4 +209,4 @@ def test_a_sender_refused_a_peer_slot_is_counted_once_per_datagram() -> None:
             assert ep.counters["peers_refused"] == 1, cls
             assert set(ep.peers) == set(ADDRS[:2])
     finally:
-        endpoint_module.MAX_PEERS = saved
+        peers_module.MAX_PEERS = saved
