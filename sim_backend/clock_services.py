@@ -24,12 +24,12 @@ from typing import Protocol
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from agents.mavlink.rx_gate import Addr
 from agents.mavlink.wire import encode_fields
 
 TIMESYNC = mavlink2.MAVLink_timesync_message
 SYSTEM_TIME = mavlink2.MAVLink_system_time_message
 
-Addr = tuple[str, int]
 Handler = Callable[[mavlink2.MAVLink_message, Addr], str]  # returns the outcome
 REMEMBERED_REQUESTS = 8
 

@@ -28,6 +28,7 @@ import logging
 import socket
 from collections import Counter
 from collections.abc import Callable
+from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -133,17 +134,16 @@ class VehicleEndpoint:
                 for msg in decode_datagram(self.rx_codec, body).messages:
                     self.dispatch(msg, rx)
 
-    def _setpoint(self, f: tuple[float | int, ...], rx: Rx) -> None:
+    def _setpoint(self, f: tuple[Any, ...], rx: Rx) -> None:
         """`dispatch` of a SET_POSITION_TARGET_LOCAL_NED from its fields in wire order
         (time_boot_ms, x, y, z, vx, vy, vz, afx, afy, afz, yaw, yaw_rate, type_mask,
         target_system, target_component, coordinate_frame)."""
-        if f[13] not in (0, self.sysid):
-            self.counters["ignored_other_sysid"] += 1
+        if self._other_system(f[13]):
             outcome = "ignored"
         else:
             try:
                 outcome = commands.apply_setpoint(
-                    self, int(f[12]), int(f[15]), (f[1], f[2], f[3]), (f[4], f[5], f[6]),
+                    self, f[12], f[15], (f[1], f[2], f[3]), (f[4], f[5], f[6]),
                     f[10], f[11], rx)
             except Exception:  # as dispatch: count it, answer it, keep flying
                 outcome = "failed"
@@ -194,11 +194,16 @@ class VehicleEndpoint:
         handler = HANDLERS.get(kind)
         if handler is None:
             return "ignored" if kind in IGNORED else "unhandled"
-        target = getattr(msg, "target_system", 0)
-        if target not in (0, self.sysid):
-            self.counters["ignored_other_sysid"] += 1
+        if self._other_system(getattr(msg, "target_system", 0)):
             return "ignored"
         return handler(self, msg, rx)
+
+    def _other_system(self, target_system: int) -> bool:
+        """A message addressed to another system (0 is everyone): counted, not handled."""
+        if target_system in (0, self.sysid):
+            return False
+        self.counters["ignored_other_sysid"] += 1
+        return True
 
     def _answer_failure(self, kind: str, msg: Msg | None, rx: Rx) -> None:
         try:
@@ -296,7 +301,7 @@ def _heartbeat(ep: EndpointView, msg: Msg, rx: Rx) -> str:
 # The one dispatch table: message type -> handler returning the outcome.
 HANDLERS: dict[str, Handler] = {
     "HEARTBEAT": _heartbeat,
-    "SET_POSITION_TARGET_LOCAL_NED": commands.on_setpoint,
+    SETPOINT_KIND: commands.on_setpoint,
     "COMMAND_LONG": commands.on_command,
     "COMMAND_INT": commands.on_command,
     **protocols.HANDLERS,

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple, Protocol
 
+from agents.mavlink.rx_gate import Addr
 from agents.mavlink.wire_decode import Codec
 from agents.mavlink.wire_decode import MAVLinkMessage as Msg
 from agents.scenario.model import HomeConfig
@@ -19,7 +20,6 @@ from sim_backend import telemetry as tm
 from sim_backend.autopilot import Autopilot
 from sim_backend.params import ParamStore
 
-Addr = tuple[str, int]
 # frame, command, current, autocontinue, param1..4, x (degE7), y (degE7), z
 Item = tuple[int, int, int, int, float, float, float, float, int, int, float]
 

@@ -10,7 +10,8 @@ A peer silent for PEER_TIMEOUT_S is dropped (`expire`).
 
 from __future__ import annotations
 
-Addr = tuple[str, int]
+from agents.mavlink.rx_gate import Addr
+
 PEER_TIMEOUT_S = 30.0
 MAX_PEERS = 8
 

@@ -21,13 +21,13 @@ from agents.mavlink.modes import (
     decode_custom_mode,
     flavour_of_autopilot,
 )
+from agents.mavlink.rx_gate import Addr
 from agents.mavlink.timemap import VehicleClock
 from agents.mavlink.vehicle_types import NO_STATE, AdapterConfig, VehicleState
 from agents.mavlink.wire import Framer
 from agents.mavlink.wire_decode import Codec, MAVLinkMessage, decode_datagram
 
 log = logging.getLogger("agents.mavlink.adapter")
-Addr = tuple[str, int]
 MAV_SEVERITY_WARNING = 4
 STATUSTEXT_KEPT = 20
 # What `handle` does more with than hear the vehicle: HEARTBEAT, GLOBAL_POSITION_INT,
