@@ -11,6 +11,7 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
+import agents.scenario
 from agents.loading.law_loader import make_law
 from agents.scenario.checks import check_admissible
 from agents.scenario.faults import parse_faults
@@ -53,7 +54,7 @@ def shipped_text(name: str) -> str:
     """The text of a shipped scenario.  From the package's folder when it is one (as pip
     installs it): importlib.resources costs a follower 1.4 MB of imports (tempfile,
     shutil, compressors; issue 15: <= 50 MB per follower); it serves zipped installs."""
-    path = Path(__file__).with_name("shipped") / f"{name}.toml"
+    path = Path(agents.scenario.__file__).with_name("shipped") / f"{name}.toml"
     if path.is_file():
         return path.read_text(encoding="utf-8")
     from importlib import resources

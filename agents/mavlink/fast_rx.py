@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import struct
 from collections import Counter
-from hmac import compare_digest
 from typing import Any
 
+from agents.mavlink.digest import compare_digest
 from agents.mavlink.rx_gate import Addr, RxGate
 from agents.mavlink.signing import SignatureVerifier, keyed_sha256
 from agents.mavlink.wire_decode import FAST_IDS, Codec, dialect_tables

@@ -8,7 +8,7 @@ Generated from: ('lean_common.xml',)
 
 Note: this file has been auto-generated. DO NOT EDIT
 """
-import hashlib
+from agents.mavlink.digest import sha256
 import json
 import logging
 import os
@@ -49,13 +49,7 @@ MAVLINK_TYPE_INT64_T = 8
 MAVLINK_TYPE_FLOAT = 9
 MAVLINK_TYPE_DOUBLE = 10
 
-# CRC calculation using fastcrc, falling back to a pure Python implementation
-# if fastcrc is not available
-try:
-    import fastcrc
-    mcrf4xx = fastcrc.crc16.mcrf4xx
-except Exception:
-    mcrf4xx = None  # type: ignore
+from agents.mavlink.crc import mcrf4xx
 
 
 BytesLike = Union[List[int], Tuple[int], bytes, bytearray, str]
@@ -270,7 +264,7 @@ class MAVLink_message(object):
     def sign_packet(self, mav: "MAVLink") -> None:
         assert mav.signing.secret_key is not None
 
-        h = hashlib.new("sha256")
+        h = sha256()
         self._msgbuf += struct.pack("<BQ", mav.signing.link_id, mav.signing.timestamp)[:7]
         h.update(mav.signing.secret_key)
         h.update(self._msgbuf)
@@ -1444,7 +1438,7 @@ class MAVLink(object):
         # set the streams timestamp so we reject timestamps that go backwards
         self.signing.stream_timestamps[stream_key] = timestamp
 
-        h = hashlib.new("sha256")
+        h = sha256()
         h.update(self.signing.secret_key)
         h.update(msgbuf[:-6])
         sig1 = h.digest()[:6]

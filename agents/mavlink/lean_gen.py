@@ -108,7 +108,23 @@ def generate() -> str:
         out = Path(tmp) / "lean_common"
         with contextlib.redirect_stdout(io.StringIO()):  # the generator's progress lines
             mavgen_python.generate(str(out), [parsed])
-        return header() + out.with_suffix(".py").read_text(encoding="utf-8")
+        return header() + _lean_imports(out.with_suffix(".py").read_text(encoding="utf-8"))
+
+
+def _lean_imports(module: str) -> str:
+    """mavgen's module signs with hashlib (OpenSSL, 3.6 MB of RSS) and checks with fastcrc
+    (0.5 MB): use digest.sha256 and crc.mcrf4xx, which load nothing."""
+    fastcrc = ("# CRC calculation using fastcrc, falling back to a pure Python implementation\n"
+               "# if fastcrc is not available\ntry:\n    import fastcrc\n"
+               "    mcrf4xx = fastcrc.crc16.mcrf4xx\n"
+               "except Exception:\n    mcrf4xx = None  # type: ignore\n")
+    for old, new in (("import hashlib\n", "from agents.mavlink.digest import sha256\n"),
+                     ('hashlib.new("sha256")', "sha256()"),
+                     (fastcrc, "from agents.mavlink.crc import mcrf4xx\n")):
+        if old not in module:
+            raise RuntimeError(f"mavgen's output changed: no {old!r} to replace")
+        module = module.replace(old, new)
+    return module
 
 
 def main() -> None:

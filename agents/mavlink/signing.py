@@ -23,13 +23,12 @@ vehicle that knows the other vehicles' keys tells a frame signed with one of the
 
 from __future__ import annotations
 
-import hashlib
-import hmac
 import time
 from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
+from agents.mavlink.digest import compare_digest, sha256
 from agents.mavlink.signing_keys import KEY_LEN
 from errors import ConfigError
 
@@ -64,7 +63,7 @@ def keyed_sha256(key: bytes) -> Any:
     """A sha256 that has taken `key`: copy it, then update it with a frame."""
     base = _KEYED.get(key)
     if base is None:
-        base = _KEYED[key] = hashlib.sha256(key)
+        base = _KEYED[key] = sha256(key)
     return base
 
 
@@ -173,10 +172,10 @@ class SignatureVerifier:
         # Signature first: nothing about a badly signed frame may change our state.
         signed_part, link_id, sig = frame[:-6], frame[-SIGNATURE_LEN], frame[-6:]
         memo = self._good_sig
-        if memo is not None and memo[0] == signed_part and hmac.compare_digest(memo[1], sig):
+        if memo is not None and memo[0] == signed_part and compare_digest(memo[1], sig):
             if commit:
                 self._good_sig = None
-        elif hmac.compare_digest(signature(self.key, signed_part), sig):
+        elif compare_digest(signature(self.key, signed_part), sig):
             if not commit:
                 self._good_sig = (signed_part, sig)
         else:
@@ -244,7 +243,7 @@ class SignatureVerifier:
         if self.key_of_vehicle is None:
             return False
         key = self.key_of_vehicle(link_id + 1)
-        if key is None or key == self.key or not hmac.compare_digest(
+        if key is None or key == self.key or not compare_digest(
                 signature(key, signed_part), sig):
             return False
         self.wrong_key_sysid = link_id + 1

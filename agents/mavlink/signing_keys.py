@@ -12,11 +12,10 @@ vehicle's key, each agent only its own, and the key is also what MAVProxy's `sig
 
 from __future__ import annotations
 
-import hashlib
-import hmac
 import os
 from pathlib import Path
 
+from agents.mavlink.digest import sha256
 from errors import ConfigError
 
 KEY_LEN = 32
@@ -32,15 +31,17 @@ def write_key(path: Path) -> bytes:
 
 def key_from_passphrase(passphrase: str) -> bytes:
     """MAVProxy's `signing setup <passphrase>` key: sha256 of the passphrase."""
-    return hashlib.sha256(passphrase.encode()).digest()
+    return bytes(sha256(passphrase.encode()).digest())
 
 
 def vehicle_passphrase(run_secret: bytes, sysid: int) -> str:
     """Vehicle `sysid`'s signing passphrase (64 hex digits): what a ground station is given."""
     if not 1 <= sysid <= 255:
         raise ConfigError("sysid", f"a MAVLink system id is 1..255, got {sysid}")
+    import hmac  # OpenSSL, loaded only where keys are derived (digest.py)
+
     label = VEHICLE_KEY_LABEL.format(sysid=sysid).encode()
-    return hmac.new(run_secret, label, hashlib.sha256).hexdigest()
+    return hmac.new(run_secret, label, "sha256").hexdigest()
 
 
 def vehicle_key(run_secret: bytes, sysid: int) -> bytes:
