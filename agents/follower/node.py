@@ -49,6 +49,11 @@ ALTITUDE_GAIN_PER_S = 1.0
 # pause; kept small so that a flood on one peer's key (a process holding that peer's
 # credentials) costs each tick at most this many decodes and never delays the others.
 PEER_QUEUE = 8
+# The vehicle's sensing sends one observation per target per tick, and only the newest of
+# each is used.  A queued sample holds Zenoh's whole receive batch (~8 KB): at 1024 (the
+# bus's default) the observations sent during take-off, before the first tick drains them,
+# were the follower's peak memory (+1.4 MB in the paper's case).
+OBSERVATION_QUEUE_PER_TARGET = PEER_QUEUE
 # A follower first running this long after the start joins a running swarm
 # (LawRunner.join); at the start all begin together from p~.
 JOIN_AFTER_S = 1.0
@@ -74,7 +79,8 @@ class FollowerNode:
         self.silent: frozenset[int] = frozenset()  # neighbours not heard for a hold
         self._alive: frozenset[int] | None = None  # the token set regroup last decided on
         self.subs = [
-            bus.subscribe(self.keys.sensor_targets(index)),
+            bus.subscribe(self.keys.sensor_targets(index),
+                          OBSERVATION_QUEUE_PER_TARGET * max(scenario.m, 1)),
             bus.subscribe(self.keys.control()),
         ]
         self.peer_subs: dict[int, Subscription] = {}
