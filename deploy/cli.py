@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 from agents.shell.lifeline import die_with_launcher
 from agents.shell.phases import mark
-from deploy.version import enclose_version
+from enclose_release import VERSION
 from errors import EncloseError
 
 # Each module exposes `register(subparsers)`, which adds its subparser and sets `func(args) -> int`.
@@ -37,7 +37,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
         description="Finite-time enclosing of moving targets by a networked swarm.",
     )
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
-    parser.add_argument("--version", action="version", version=f"enclose {enclose_version()}")
+    parser.add_argument("--version", action="version", version=f"enclose {VERSION}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     first = next((a for a in argv or () if not a.startswith("-")), None)
     for name in (COMMANDS[first],) if first in COMMANDS else COMMAND_MODULES:

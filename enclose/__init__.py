@@ -11,11 +11,11 @@
 
 from __future__ import annotations
 
-from deploy.version import enclose_version
 from enclose.api import replay, run, simulate, sweep
 from enclose.results import Run, load_run
 from enclose.scenario import Scenario
+from enclose_release import VERSION
 
-__version__ = enclose_version()
+__version__ = VERSION
 
 __all__ = ["Run", "Scenario", "__version__", "load_run", "replay", "run", "simulate", "sweep"]

@@ -25,20 +25,10 @@ from typing import Any
 
 import msgpack
 
+from enclose_release import VERSION
 from errors import JournalError
 
 JOURNAL_VERSION = 1
-
-
-def enclose_version() -> str:
-    """This enclose's version (deploy.version's, read here: agents import nothing of
-    deploy).  A replay by another version need not reproduce: it is refused."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("enclose")
-    except PackageNotFoundError:
-        return "0+unknown"
 
 
 ZLIB_LEVEL = 1
@@ -60,7 +50,7 @@ class FrameWriter:
         self._next_flush_s = time.monotonic() + FLUSH_EVERY_S
         self.bytes_written = 0
         self._write(self._pack({"magic": MAGIC, "version": JOURNAL_VERSION,
-                                "enclose": enclose_version(), **header}))
+                                "enclose": VERSION, **header}))
 
     def add(self, record: object) -> None:
         self._parts.append(self._pack(record))
@@ -111,7 +101,7 @@ class Frames:
             raise JournalError(str(path), 0, f"unreadable header: {exc}") from None
         if not isinstance(header, dict) or header.get("magic") != MAGIC:
             raise JournalError(str(path), 0, "not an enclose journal")
-        mine = enclose_version()
+        mine = VERSION  # a replay by another release need not reproduce: it is refused
         if header.get("version") != JOURNAL_VERSION or header.get("enclose") != mine:
             raise JournalError(
                 str(path), 0, f"written by enclose {header.get('enclose')!r} (journal "

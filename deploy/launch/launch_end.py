@@ -18,7 +18,7 @@ from deploy.launch.launch_state import LaunchState
 from deploy.procs.restarts import EXIT_SOMETHING_DIED
 from deploy.report.cpu_load import overrun_summary
 from deploy.report.verdict import announce
-from deploy.version import enclose_version
+from enclose_release import VERSION
 
 log = logging.getLogger("enclose.run")
 
@@ -45,7 +45,7 @@ def stop_in_order(launch: LaunchState) -> None:
 def launch_report(launch: LaunchState) -> dict[str, Any]:
     """The content of launch.json (a host's launcher adds its hosts: deploy.hosts.host_launch)."""
     return {
-        "enclose_version": enclose_version(),
+        "enclose_version": VERSION,
         "swarm": launch.keys.swarm,
         "zenoh_endpoint": launch.endpoint,
         "vehicle_base_port": launch.vehicle_base,

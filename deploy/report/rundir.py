@@ -16,7 +16,7 @@ from agents.analysis.metrics import ErrorSeries, Metrics
 from agents.analysis.timeseries import FloatArray, RunSeries, decimated_rows
 from agents.scenario.model import Scenario
 from deploy.report.weather_report import weather_text
-from deploy.version import enclose_version
+from enclose_release import VERSION
 from errors import EncloseError
 
 SERIES_FILE = "series.csv"
@@ -195,7 +195,7 @@ def _csv_batches(path: Path, names: list[str],
 
 
 def write_metrics(run_dir: Path, metrics: Metrics, info: RunInfo, extra: dict[str, Any]) -> None:
-    payload = {**metrics.as_dict(), **extra, "enclose_version": enclose_version()}
+    payload = {**metrics.as_dict(), **extra, "enclose_version": VERSION}
     clean = {
         k: (None if isinstance(v, float) and not math.isfinite(v) else v)
         for k, v in payload.items()

@@ -125,14 +125,17 @@ def test_sim_arguments_are_checked_before_any_process() -> None:
 
 def test_version_on_the_command_line_and_in_the_package(
         capsys: pytest.CaptureFixture[str]) -> None:
+    from importlib.metadata import version
+
     from deploy.cli import main
-    from deploy.version import enclose_version
+    from enclose_release import VERSION
 
     with pytest.raises(SystemExit) as done:
         main(["--version"])
     assert done.value.code == 0
-    assert capsys.readouterr().out.strip() == f"enclose {enclose_version()}"
-    assert enclose.__version__ == enclose_version() != ""
+    assert capsys.readouterr().out.strip() == f"enclose {VERSION}"
+    # Written once, in enclose_release.py: the installed metadata is read from it.
+    assert enclose.__version__ == VERSION == version("enclose") != ""
 
 
 def test_metrics_json_carries_the_version(tmp_path: Path) -> None:
@@ -140,14 +143,14 @@ def test_metrics_json_carries_the_version(tmp_path: Path) -> None:
 
     from agents.analysis.metrics import Metrics
     from deploy.report.rundir import RunInfo, write_metrics
-    from deploy.version import enclose_version
+    from enclose_release import VERSION
 
     metrics = Metrics(1.0, 0.01, 0.01, 0.001, 2.0, 0.1, 10.0, 100, 3.0, 3.0, 4.0)
     info = RunInfo("paper", "lockstep", 4, 2, (1, 2, 3, 0), tuple(np.ones(4)), 8.0, 0.1,
                    0.02, 5.0)
     write_metrics(tmp_path, metrics, info, {})
     saved = json.loads((tmp_path / "metrics.json").read_text())
-    assert saved["enclose_version"] == enclose_version()
+    assert saved["enclose_version"] == VERSION
 
 
 def test_law_overrides_become_the_commands_law_flags() -> None:

@@ -12,13 +12,14 @@ import msgpack
 import pytest
 
 from agents.follower.journal import JournalWriter, PeerCodec, journal_path
-from agents.follower.journal_file import JOURNAL_VERSION, Frames, FrameWriter, enclose_version
+from agents.follower.journal_file import JOURNAL_VERSION, Frames, FrameWriter
 from agents.follower.journal_replay import replay
 from agents.follower.runner import LawRunner
 from agents.law.interface import Inputs, Law, Output, Peer, Sample, Setup
 from agents.loading.law_loader import make_law
 from agents.loading.scenario_file import load_scenario
 from agents.membership.follower_place import setup_for
+from enclose_release import VERSION
 from errors import JournalError
 
 pytestmark = pytest.mark.timeout(60)
@@ -119,7 +120,7 @@ def test_another_version_is_refused_naming_both(tmp_path: Path) -> None:
     path = tmp_path / "f.journal"
     import zlib
 
-    mine = enclose_version()
+    mine = VERSION
     for version, enclose in ((JOURNAL_VERSION + 1, mine), (JOURNAL_VERSION, "0.0.1")):
         head = msgpack.packb({"magic": "enclose-journal", "version": version,
                               "enclose": enclose})
