@@ -45,7 +45,7 @@ def number(table: Table, key: str, path: str, default: float | None = None) -> f
         raise ScenarioError(where, f"must be a number, got {raw!r}")
     try:
         value = exact_float(raw) if isinstance(raw, str) else float(raw)
-    except (TypeError, ValueError, ZeroDivisionError) as exc:
+    except (TypeError, ValueError, ZeroDivisionError, OverflowError) as exc:
         raise ScenarioError(where, f"must be a number, got {raw!r}") from exc
     if not math.isfinite(value):
         raise ScenarioError(where, f"must be finite, got {raw!r}")
