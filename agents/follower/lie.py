@@ -18,10 +18,13 @@ import math
 import signal
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 from agents.scenario.faults import LIE_MODES
 from transport.law_fields import FieldSpec, LawFields, LawValue
+
+if TYPE_CHECKING:
+    from random import Random
 
 OFFSET_M = 25.0 + 0j
 WALK_M_PER_SQRT_S = 3.0  # ~16 m after 30 s: fast enough to matter, slow per message
@@ -56,7 +59,7 @@ class Liar:
         self.mode: str | None = None
         self._specs = specs
         self._seed = seed
-        self._rng: Any = None  # random.Random, made at the first lie: `random` is 0.2 MB of RSS
+        self._rng: Random | None = None  # made at the first walk: `random` is 0.2 MB of RSS
         self._walk = 0j
         self._last_s: float | None = None
         self._frozen: Published | None = None

@@ -31,7 +31,7 @@ def write_key(path: Path) -> bytes:
 
 def key_from_passphrase(passphrase: str) -> bytes:
     """MAVProxy's `signing setup <passphrase>` key: sha256 of the passphrase."""
-    return bytes(sha256(passphrase.encode()).digest())
+    return sha256(passphrase.encode()).digest()
 
 
 def vehicle_passphrase(run_secret: bytes, sysid: int) -> str:
