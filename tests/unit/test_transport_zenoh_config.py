@@ -51,6 +51,9 @@ def test_defaults_are_safe_peer_on_loopback() -> None:
     assert get(cfg, "transport/link/tx/batch_size") == LINK_BUFFER_BYTES
     assert get(cfg, "transport/link/rx/buffer_size") == LINK_BUFFER_BYTES
     assert get(cfg, "transport/shared_memory/enabled") is False  # no watchdog threads
+    # One link a pair of peers: only the greater ZID dials; any router is dialled.
+    assert get(cfg, "scouting/gossip/autoconnect_strategy") == {
+        "peer": {"to_router": "always", "to_peer": "greater-zid"}}
 
 
 def test_every_session_refuses_messages_over_the_codecs_cap() -> None:
@@ -142,6 +145,19 @@ def test_user_file_silent_on_scouting_gets_multicast_off(tmp_path: Path) -> None
     assert get(cfg, "listen/endpoints") == ["tcp/127.0.0.1:17004"]
     assert get(cfg, "transport/unicast/max_links") == 2
     assert get(cfg, "transport/shared_memory/enabled") is True  # the user's
+
+
+def test_a_user_file_keeps_zenohs_own_autoconnect_strategy(tmp_path: Path) -> None:
+    path = tmp_path / "zenoh.json5"
+    path.write_text('{ scouting: { gossip: { autoconnect_strategy:'
+                    ' { peer: { to_peer: "always", to_router: "always" } } } } }')
+    cfg = ZenohConfig(user_config_path=str(path))
+    assert get(cfg, "scouting/gossip/autoconnect_strategy")["peer"]["to_peer"] == "always"
+    silent = tmp_path / "silent.json5"
+    silent.write_text("{ transport: { link: { tx: { batch_size: 32768 } } } }")
+    strategy = get(ZenohConfig(user_config_path=str(silent)),
+                   "scouting/gossip/autoconnect_strategy")
+    assert strategy["peer"]["to_peer"] == "greater-zid"
 
 
 @pytest.mark.parametrize("kwargs", [
