@@ -111,9 +111,9 @@ ACCEPT_TIMEOUT_MS = 3000
 # connections for the 210 pairs of its 21 processes (786 sockets on 127.0.0.1).  With
 # `greater-zid` the peer of greater ZID dials and the other waits: 210, one a pair, so
 # half the mTLS handshakes at start and half the keep-alives and link buffers after.
-# ring64 linked and armed (take-off excluded) in 9.1-10.0 s instead of 12.0-12.9 s,
-# followers' peak RSS 56.3-57.7 MB instead of 60.5-61.2 (bench/bench_start.py, 2 runs a
-# side, alternated).  Routers keep `always`: a peer must dial any router it hears of.
+# ring64 linked and armed (take-off excluded) in 9.1-10.0 s instead of 12.0-12.9 s, its
+# largest follower's peak RSS 56.3-57.7 MB instead of 60.5-61.2 (bench/bench_start.py, 2
+# runs a side, alternated).  A router is still always dialled: it dials no peer itself.
 AUTOCONNECT_STRATEGY_KEY = "scouting/gossip/autoconnect_strategy"
 AUTOCONNECT_STRATEGY = {"peer": {"to_router": "always", "to_peer": "greater-zid"}}
 _MODES = ("peer", "client", "router")
