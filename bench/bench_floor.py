@@ -12,13 +12,15 @@ Real processes on loopback, each as its enclose counterpart talks, and nothing e
   clock map, no MAVLink framing or signing: the floor under a follower's tick.
 - `sim`: one UDP socket per vehicle, answering each setpoint with a LOCAL_POSITION_NED-sized
   datagram each tick, and the targets each follower observes on its sensor key.
-- `recorder`: subscribes to every follower's state (the third subscriber of each state).
+- `recorder`: subscribes to every follower's state (the third subscriber of each state),
+  drained every 20 ms and not decoded: the floor under the recorder's CPU per message.
 
 After --settle-s the parent reads each process's CPU over all its threads
 (/proc/<pid>/task/*/stat) over --window-s and prints a follower's CPU per tick (the median
-follower, its main thread and Zenoh's threads apart), the machine's busy share and the
-spread over runs.  Compare with `python bench/bench_tick_cost.py --case paper`, a real
-follower on the same traffic.  Nothing else should run meanwhile.
+follower, its main thread and Zenoh's threads apart), the recorder's CPU per state it
+takes in, the machine's busy share and the spread over runs.  Compare with
+`python bench/bench_tick_cost.py --case paper`, a real follower on the same traffic.
+Nothing else should run meanwhile.
 """
 
 from __future__ import annotations
@@ -128,9 +130,12 @@ def sim(args: argparse.Namespace, cred: str | None, end_s: float) -> None:
 def recorder(args: argparse.Namespace, cred: str | None, end_s: float) -> None:
     with session("recorder", args, cred) as bus:
         sub = bus.subscribe(KEYS.all_follower_states(), 1024)
+        messages = 0
         while time.time() < end_s:
-            sub.drain()
+            messages += len(sub.drain())
             time.sleep(0.02)
+        if args.counts:
+            Path(args.counts, "recorder.json").write_text(json.dumps({"messages": messages}))
 
 
 def thread_ticks(pid: int) -> dict[str, int]:
@@ -174,7 +179,8 @@ def one_run(args: argparse.Namespace, port: int) -> dict[str, float]:
         for p in procs.values():
             p.wait(timeout=args.settle_s + args.window_s + 30.0)
     ticks = window_s * args.rate_hz
-    counts = [json.loads(f.read_text()) for f in Path(counts_dir).glob("*.json")]
+    counts = [json.loads(f.read_text()) for f in Path(counts_dir).glob("follower-*.json")]
+    recorded = json.loads((Path(counts_dir) / "recorder.json").read_text())["messages"]
     if len(counts) != args.followers or min(c["ticks"] for c in counts) == 0:
         raise SystemExit(f"bench_floor: {len(counts)} of {args.followers} followers reported")
     us = {r: {g: (after[r][g] - before[r][g]) / CLK_TCK / ticks * 1e6 for g in after[r]}
@@ -183,6 +189,11 @@ def one_run(args: argparse.Namespace, port: int) -> dict[str, float]:
     mid = followers[len(followers) // 2]
     return {"follower_us": mid["main"] + mid["zenoh"], "main_us": mid["main"],
             "zenoh_us": mid["zenoh"], "sim_us": sum(us["sim"].values()),
+            # each follower publishes a state a tick; the recorder takes them all in
+            "recorder_us_per_msg": (after["recorder"]["main"] + after["recorder"]["zenoh"]
+                                    - before["recorder"]["main"] - before["recorder"]["zenoh"])
+            / CLK_TCK / (ticks * args.followers) * 1e6,
+            "recorded_share": recorded / sum(c["ticks"] for c in counts),
             "busy_pct": 100.0 * (busy1 - busy0) / max(1, all1 - all0),
             "states_per_tick": min(c["states"] / c["ticks"] for c in counts),
             "datagrams_per_tick": min(c["datagrams"] / c["ticks"] for c in counts)}
@@ -220,7 +231,8 @@ def main() -> int:
               f"{r['main_us']:.0f}, Zenoh's threads {r['zenoh_us']:.0f}), machine "
               f"{r['busy_pct']:.0f} % busy; each follower received >= "
               f"{r['states_per_tick']:.2f} states and {r['datagrams_per_tick']:.2f} datagrams "
-              f"a tick", flush=True)
+              f"a tick; recorder {r['recorder_us_per_msg']:.1f} us a message "
+              f"({100 * r['recorded_share']:.1f} % of the states sent)", flush=True)
     summary = {name: {"median": statistics.median(r[name] for r in rows),
                       "min": min(r[name] for r in rows), "max": max(r[name] for r in rows)}
                for name in rows[0]}
