@@ -43,6 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from transport.bus import Congestion
 from transport.credentials import Identity, identity_file, make_credentials
 from transport.key_exprs import SwarmKeys
+from transport.network_schema import ZENOH_RUNTIMES
 from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
@@ -206,7 +207,7 @@ def main() -> int:
     p.add_argument("--rate-hz", type=float, default=50.0)
     p.add_argument("--runs", type=int, default=3)
     p.add_argument("--insecure", action="store_true", help="plain TCP, no mTLS or ACL")
-    p.add_argument("--zenoh-runtime", choices=("split", "one_thread"), default="split")
+    p.add_argument("--zenoh-runtime", choices=ZENOH_RUNTIMES, default="split")
     p.add_argument("--lowlatency", action="store_true",
                    help="Zenoh's low-latency transport (transport/unicast/lowlatency)")
     p.add_argument("--settle-s", type=float, default=8.0)
