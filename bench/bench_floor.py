@@ -156,14 +156,29 @@ def machine_ticks() -> tuple[int, int]:
     return sum(values) - values[3] - values[4], sum(values)
 
 
+def child_argv(args: argparse.Namespace, port: int, counts_dir: str) -> list[str]:
+    """This script's command line for a child of the run `args` describes."""
+    argv = [sys.executable, __file__, f"--followers={args.followers}",
+            f"--rate-hz={args.rate_hz}", f"--zenoh-runtime={args.zenoh_runtime}",
+            f"--port={port}", f"--counts={counts_dir}"]
+    return argv + ["--insecure"] * args.insecure + ["--lowlatency"] * args.lowlatency
+
+
 def one_run(args: argparse.Namespace, port: int) -> dict[str, float]:
-    cred = None
-    if not args.insecure:
-        cred = tempfile.mkdtemp(prefix="floor-")
-        make_credentials(Path(cred), KEYS, args.followers, 0)
+    """One floor run: its processes started, measured over the window and stopped."""
+    with tempfile.TemporaryDirectory(prefix="floor-") as tmp:
+        cred = None
+        if not args.insecure:
+            cred = str(Path(tmp, "credentials"))
+            make_credentials(Path(cred), KEYS, args.followers, 0)
+        counts_dir = Path(tmp, "counts")
+        counts_dir.mkdir()
+        return _measured(args, child_argv(args, port, str(counts_dir)), cred, counts_dir)
+
+
+def _measured(args: argparse.Namespace, base: list[str], cred: str | None,
+              counts_dir: Path) -> dict[str, float]:
     end_s = time.time() + args.settle_s + args.window_s + 2.0
-    counts_dir = tempfile.mkdtemp(prefix="floor-counts-")
-    base = [sys.executable, __file__, *sys.argv[1:], f"--port={port}", f"--counts={counts_dir}"]
     roles = ["sim", "recorder"] + [f"follower-{i}" for i in range(args.followers)]
     procs = {r: subprocess.Popen([*base, f"--child={r},{cred or ''},{end_s}"]) for r in roles}
     try:
@@ -178,10 +193,14 @@ def one_run(args: argparse.Namespace, port: int) -> dict[str, float]:
         window_s = time.monotonic() - t0
     finally:
         for p in procs.values():
-            p.wait(timeout=args.settle_s + args.window_s + 30.0)
+            try:
+                p.wait(timeout=max(0.0, end_s - time.time()) + 30.0)
+            except subprocess.TimeoutExpired:  # a child that hangs is stopped, not left
+                p.kill()
+                p.wait()
     ticks = window_s * args.rate_hz
-    counts = [json.loads(f.read_text()) for f in Path(counts_dir).glob("follower-*.json")]
-    recorded = json.loads((Path(counts_dir) / "recorder.json").read_text())["messages"]
+    counts = [json.loads(f.read_text()) for f in counts_dir.glob("follower-*.json")]
+    recorded = json.loads((counts_dir / "recorder.json").read_text())["messages"]
     if len(counts) != args.followers or min(c["ticks"] for c in counts) == 0:
         raise SystemExit(f"bench_floor: {len(counts)} of {args.followers} followers reported")
     us = {r: {g: (after[r][g] - before[r][g]) / CLK_TCK / ticks * 1e6 for g in after[r]}
@@ -200,7 +219,16 @@ def one_run(args: argparse.Namespace, port: int) -> dict[str, float]:
             "datagrams_per_tick": min(c["datagrams"] / c["ticks"] for c in counts)}
 
 
-def main() -> int:
+def floor_args(followers: int, rate_hz: float, insecure: bool, runtime: str) -> argparse.Namespace:
+    """A floor run's settings, for a caller of `one_run` (bench_tick_cost.py --floor)."""
+    # A larger mesh takes longer to link on 2 cores (64 followers: ~20 s).
+    settle_s = max(8.0, 0.4 * followers)
+    return parser().parse_args([f"--followers={followers}", f"--rate-hz={rate_hz}",
+                                f"--zenoh-runtime={runtime}", f"--settle-s={settle_s}"]
+                               + ["--insecure"] * insecure)
+
+
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--followers", type=int, default=4)
@@ -214,7 +242,11 @@ def main() -> int:
     p.add_argument("--window-s", type=float, default=20.0)
     p.add_argument("--port", type=int, default=47411)
     p.add_argument("--counts", default="", help=argparse.SUPPRESS)
-    args, rest = p.parse_known_args()
+    return p
+
+
+def main() -> int:
+    args, rest = parser().parse_known_args()
     if rest and rest[-1].startswith("--child="):
         role, cred, end_s = rest[-1].split("=", 1)[1].split(",")
         if role == "sim":

@@ -1,7 +1,7 @@
 """What a tick costs, phase by phase, over all of a process's threads (issue 50).
 
     python bench/bench_tick_cost.py [--case paper] [--duration 60] [--repeat 5] [--insecure]
-                                    [ENCLOSE_RUN_ARG ...]
+                                    [--floor] [ENCLOSE_RUN_ARG ...]
 
 Runs `enclose run CASE` (the secure default unless --insecure; any other argument is passed
 on, e.g. `--zenoh-runtime one_thread`, for an A/B) with ENCLOSE_TICK_COST set:
@@ -13,7 +13,10 @@ handlers, the garbage collector's pauses between marks land inside them), Zenoh'
 other threads, and the total over all threads, with the median follower of each run, then
 the median and spread (min-max) over runs.  The simulator's CPU per vehicle-tick and the
 recorder's per message recorded come from the run's own load record (launch.json: whole
-run, start-up included).  Nothing else should run meanwhile: say so where it did.
+run, start-up included).  With --floor, a run of bench/bench_floor.py at the case's size
+and rate follows each run (the design's traffic alone), and the tick above it is printed:
+each run's total minus its floor, enclose's own work, which the machine's speed moves less
+than either.  Nothing else should run meanwhile: say so where it did.
 """
 
 from __future__ import annotations
@@ -30,7 +33,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from agents.loading.scenario_file import load_scenario  # noqa: E402
 from agents.shell.tick_cost import ENV, PHASES  # noqa: E402
+from bench.bench_floor import floor_args, one_run  # noqa: E402
 
 GROUPS = ("main", "zenoh", "other")
 ROWS = (*PHASES, "rest", "thread_zenoh", "thread_other", "total")
@@ -96,11 +101,22 @@ def show(label: str, rows: list[dict[str, float]]) -> None:
         print(f"  {k:14s} {statistics.median(vals):8.1f}  [{min(vals):7.1f} - {max(vals):7.1f}]")
 
 
+def floor_of(case: str, insecure: bool, extra: list[str], k: int) -> float:
+    """The design's floor for `case` now (bench/bench_floor.py, one run): a follower's
+    CPU per tick over all its threads for its traffic alone, at the case's size and rate."""
+    scenario = load_scenario(case)
+    runtime = scenario.network.zenoh_runtime
+    if "--zenoh-runtime" in extra[:-1]:
+        runtime = extra[extra.index("--zenoh-runtime") + 1]
+    args = floor_args(scenario.n, scenario.run.rate_hz, insecure, runtime)
+    return one_run(args, args.port + 100 * k)["follower_us"]
+
+
 def main(case: str, duration_s: float, repeat: int, insecure: bool,
-         extra: list[str]) -> int:
+         extra: list[str], floor: bool = False) -> int:
     per_run: list[dict[str, float]] = []
     per_run_targets: list[dict[str, float]] = []
-    sims, recs, busy = [], [], []
+    sims, recs, busy, floors = [], [], [], []
     with tempfile.TemporaryDirectory(prefix="tick-cost-") as tmp:
         for k in range(repeat):
             res = run_once(case, duration_s, insecure, Path(tmp) / f"run-{k}", extra)
@@ -120,10 +136,19 @@ def main(case: str, duration_s: float, repeat: int, insecure: bool,
             print(f"run {k + 1}/{repeat}: follower {per_run[-1]['total']:.0f} us/tick, "
                   f"machine {load['machine_busy_pct']:.0f} % busy; {res['verdict']}",
                   flush=True)
+            if floor:  # alternated with the real runs: the machine's minute moves both
+                floors.append(floor_of(case, insecure, extra, k))
+                print(f"  floor after it: {floors[-1]:.0f} us/tick", flush=True)
     mode = "--insecure" if insecure else "secure"
     print(f"\n{case} {' '.join(extra)}, {duration_s:g} s, {repeat} runs, {mode}; machine busy "
           f"{min(busy):.0f}-{max(busy):.0f} %")
     show("follower (median follower of each run)", per_run)
+    if floors:
+        above = [r["total"] - f for r, f in zip(per_run, floors, strict=True)]
+        print(f"floor      {statistics.median(floors):.0f} us per tick [{min(floors):.0f} - "
+              f"{max(floors):.0f}] (bench/bench_floor.py: the traffic alone, a run after each)")
+        print(f"above it   {statistics.median(above):.0f} us per tick [{min(above):.0f} - "
+              f"{max(above):.0f}] (enclose's own work: each run's total minus its floor)")
     if per_run_targets:
         show("target", per_run_targets)
     print(f"simulator  {statistics.median(sims):.1f} us per vehicle-tick "
@@ -140,5 +165,8 @@ if __name__ == "__main__":
     parser.add_argument("--duration", type=float, default=60.0)
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--insecure", action="store_true")
+    parser.add_argument("--floor", action="store_true",
+                        help="after each run, the design's floor at the case's size and rate "
+                             "(bench/bench_floor.py), and the tick above it")
     a, passed_on = parser.parse_known_args()
-    sys.exit(main(a.case, a.duration, a.repeat, a.insecure, passed_on))
+    sys.exit(main(a.case, a.duration, a.repeat, a.insecure, passed_on, a.floor))
