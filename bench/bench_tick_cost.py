@@ -15,7 +15,8 @@ the median and spread (min-max) over runs.  The simulator's CPU per vehicle-tick
 recorder's per message recorded come from the run's own load record (launch.json: whole
 run, start-up included).  With --floor, a run of bench/bench_floor.py at the case's size
 and rate follows each run (the design's traffic alone), and the tick above it is printed:
-each run's total minus its floor: enclose's own work.  Nothing else should run meanwhile: say so where it did.
+each run's total minus its floor: enclose's own work.  Nothing else should run meanwhile:
+say so where it did.
 """
 
 from __future__ import annotations
