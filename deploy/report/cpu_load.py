@@ -192,7 +192,8 @@ def start_saturation_note(since: tuple[int, int] | None, now: tuple[int, int] | 
     return (f"The machine was {busy:.0f} % busy from the spawns on ({os.cpu_count() or 1} "
             f"cores{load_text}, {processes} processes of this run): they need more CPU than "
             "it has, and the start-up failed for it.  Try a smaller swarm, a lower [run] "
-            "rate_hz, or a machine with more free cores.")
+            "rate_hz, or a machine with more free cores; what a machine holds: "
+            "docs/large-swarms.md, bench/bench_floor.py.")
 
 
 def _by_role(per: dict[str, float], each: str, unit: str, targets_at_most: bool) -> list[str]:
