@@ -49,8 +49,10 @@ from transport.zenoh_config import ZenohConfig
 
 KEYS = SwarmKeys("floor")
 CLK_TCK = os.sysconf("SC_CLK_TCK")
-SETPOINT_BYTES = 53 + 13  # SET_POSITION_TARGET_LOCAL_NED, MAVLink 2, signed
-POSITION_BYTES = 40 + 13  # LOCAL_POSITION_NED (trailing zeros trimmed), signed
+# MAVLink 2 frames as a follower and its vehicle send them: a 10-byte header, the payload,
+# a 2-byte CRC and a 13-byte signature.
+SETPOINT_BYTES = 10 + 53 + 2 + 13  # SET_POSITION_TARGET_LOCAL_NED (78 B, as strace shows)
+POSITION_BYTES = 10 + 28 + 2 + 13  # LOCAL_POSITION_NED
 STATE_FLOATS = 24  # a FollowerState's wire array is ~250 B
 
 
