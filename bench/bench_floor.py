@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import socket
 import statistics
 import subprocess
@@ -40,6 +39,7 @@ import msgpack
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from deploy.report.cpu_load import busy_pct, machine_ticks, process_cpu_s
 from transport.bus import Congestion
 from transport.credentials import Identity, identity_file, make_credentials
 from transport.key_exprs import SwarmKeys
@@ -48,7 +48,6 @@ from transport.zenoh_bus import ZenohBus
 from transport.zenoh_config import ZenohConfig
 
 KEYS = SwarmKeys("floor")
-CLK_TCK = os.sysconf("SC_CLK_TCK")
 # MAVLink 2 frames as a follower and its vehicle send them: a 10-byte header, the payload,
 # a 2-byte CRC and a 13-byte signature.
 SETPOINT_BYTES = 10 + 53 + 2 + 13  # SET_POSITION_TARGET_LOCAL_NED (78 B, as strace shows)
@@ -141,21 +140,10 @@ def recorder(args: argparse.Namespace, cred: str | None, end_s: float) -> None:
             Path(args.counts, "recorder.json").write_text(json.dumps({"messages": messages}))
 
 
-def thread_ticks(pid: int) -> dict[str, int]:
-    """CPU clock ticks per thread group of `pid`: its main thread, and the rest (Zenoh's)."""
-    out = {"main": 0, "zenoh": 0}
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
-        except FileNotFoundError:
-            continue
-        out["main" if task.name == str(pid) else "zenoh"] += int(fields[11]) + int(fields[12])
-    return out
-
-
-def machine_ticks() -> tuple[int, int]:
-    values = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
-    return sum(values) - values[3] - values[4], sum(values)
+def thread_cpu_s(pid: int) -> dict[str, float]:
+    """CPU seconds of `pid`'s main thread and of its other threads (Zenoh's)."""
+    main = process_cpu_s(pid, Path(f"/proc/{pid}/task")) or 0.0  # first: whole >= main
+    return {"main": main, "zenoh": (process_cpu_s(pid) or 0.0) - main}
 
 
 def child_argv(args: argparse.Namespace, port: int, counts_dir: str) -> list[str]:
@@ -186,12 +174,12 @@ def _measured(args: argparse.Namespace, base: list[str], cred: str | None,
     try:
         time.sleep(args.settle_s)
         pids = {r: p.pid for r, p in procs.items()}
-        before = {r: thread_ticks(pid) for r, pid in pids.items()}
-        busy0, all0 = machine_ticks()
+        before = {r: thread_cpu_s(pid) for r, pid in pids.items()}
+        machine0 = machine_ticks()
         t0 = time.monotonic()
         time.sleep(args.window_s)
-        after = {r: thread_ticks(pid) for r, pid in pids.items()}
-        busy1, all1 = machine_ticks()
+        after = {r: thread_cpu_s(pid) for r, pid in pids.items()}
+        machine1 = machine_ticks()
         window_s = time.monotonic() - t0
     finally:
         for p in procs.values():
@@ -205,18 +193,16 @@ def _measured(args: argparse.Namespace, base: list[str], cred: str | None,
     recorded = json.loads((counts_dir / "recorder.json").read_text())["messages"]
     if len(counts) != args.followers or min(c["ticks"] for c in counts) == 0:
         raise SystemExit(f"bench_floor: {len(counts)} of {args.followers} followers reported")
-    us = {r: {g: (after[r][g] - before[r][g]) / CLK_TCK / ticks * 1e6 for g in after[r]}
-          for r in after}
+    us = {r: {g: (after[r][g] - before[r][g]) / ticks * 1e6 for g in after[r]} for r in after}
     followers = sorted((us[r] for r in roles[2:]), key=lambda g: g["main"] + g["zenoh"])
     mid = followers[len(followers) // 2]
+    busy = None if machine0 is None or machine1 is None else busy_pct(machine0, machine1)
     return {"follower_us": mid["main"] + mid["zenoh"], "main_us": mid["main"],
             "zenoh_us": mid["zenoh"], "sim_us": sum(us["sim"].values()),
             # each follower publishes a state a tick; the recorder takes them all in
-            "recorder_us_per_msg": (after["recorder"]["main"] + after["recorder"]["zenoh"]
-                                    - before["recorder"]["main"] - before["recorder"]["zenoh"])
-            / CLK_TCK / (ticks * args.followers) * 1e6,
+            "recorder_us_per_msg": sum(us["recorder"].values()) / args.followers,
             "recorded_share": recorded / sum(c["ticks"] for c in counts),
-            "busy_pct": 100.0 * (busy1 - busy0) / max(1, all1 - all0),
+            "busy_pct": float("nan") if busy is None else busy,
             "states_per_tick": min(c["states"] / c["ticks"] for c in counts),
             "datagrams_per_tick": min(c["datagrams"] / c["ticks"] for c in counts)}
 

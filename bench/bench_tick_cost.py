@@ -101,15 +101,14 @@ def show(label: str, rows: list[dict[str, float]]) -> None:
         print(f"  {k:14s} {statistics.median(vals):8.1f}  [{min(vals):7.1f} - {max(vals):7.1f}]")
 
 
-def floor_of(case: str, insecure: bool, extra: list[str], k: int) -> float:
-    """The design's floor for `case` now (bench/bench_floor.py, one run): a follower's
-    CPU per tick over all its threads for its traffic alone, at the case's size and rate."""
+def floor_settings(case: str, insecure: bool, extra: list[str]) -> argparse.Namespace:
+    """A floor run (bench/bench_floor.py) at `case`'s size, rate and Zenoh runtime: a
+    follower's traffic alone, measured as its CPU per tick over all its threads."""
     scenario = load_scenario(case)
     runtime = scenario.network.zenoh_runtime
     if "--zenoh-runtime" in extra[:-1]:
         runtime = extra[extra.index("--zenoh-runtime") + 1]
-    args = floor_args(scenario.n, scenario.run.rate_hz, insecure, runtime)
-    return one_run(args, args.port + 100 * k)["follower_us"]
+    return floor_args(scenario.n, scenario.run.rate_hz, insecure, runtime)
 
 
 def main(case: str, duration_s: float, repeat: int, insecure: bool,
@@ -117,6 +116,7 @@ def main(case: str, duration_s: float, repeat: int, insecure: bool,
     per_run: list[dict[str, float]] = []
     per_run_targets: list[dict[str, float]] = []
     sims, recs, busy, floors = [], [], [], []
+    floor_run = floor_settings(case, insecure, extra) if floor else None
     with tempfile.TemporaryDirectory(prefix="tick-cost-") as tmp:
         for k in range(repeat):
             res = run_once(case, duration_s, insecure, Path(tmp) / f"run-{k}", extra)
@@ -136,8 +136,8 @@ def main(case: str, duration_s: float, repeat: int, insecure: bool,
             print(f"run {k + 1}/{repeat}: follower {per_run[-1]['total']:.0f} us/tick, "
                   f"machine {load['machine_busy_pct']:.0f} % busy; {res['verdict']}",
                   flush=True)
-            if floor:  # alternated with the real runs: the machine's minute moves both
-                floors.append(floor_of(case, insecure, extra, k))
+            if floor_run is not None:  # alternated with the real runs: the minute moves both
+                floors.append(one_run(floor_run, floor_run.port + 100 * k)["follower_us"])
                 print(f"  floor after it: {floors[-1]:.0f} us/tick", flush=True)
     mode = "--insecure" if insecure else "secure"
     print(f"\n{case} {' '.join(extra)}, {duration_s:g} s, {repeat} runs, {mode}; machine busy "
