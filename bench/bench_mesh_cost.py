@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -31,6 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from deploy.report.cpu_load import busy_pct, machine_ticks, process_cpu_s
 from transport.bus import Congestion
 from transport.credentials import Identity, identity_file, make_credentials
 from transport.key_exprs import SwarmKeys
@@ -71,16 +71,6 @@ def child(index: int, args: argparse.Namespace, cred: str | None, life_s: float)
             time.sleep(period_s)
 
 
-def cpu_ticks(pid: int) -> int:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return int(fields[11]) + int(fields[12])
-
-
-def machine_ticks() -> tuple[int, int]:
-    values = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
-    return sum(values) - values[3] - values[4], sum(values)
-
-
 def measure(args: argparse.Namespace) -> dict[str, float]:
     cred = None
     if not args.insecure:
@@ -92,22 +82,22 @@ def measure(args: argparse.Namespace) -> dict[str, float]:
              for i in range(args.processes)]
     try:
         time.sleep(args.settle_s)
-        before = [cpu_ticks(p.pid) for p in procs]
-        busy0, all0 = machine_ticks()
+        before = [process_cpu_s(p.pid) or 0.0 for p in procs]
+        machine0 = machine_ticks()
         t0 = time.monotonic()
         time.sleep(args.window_s)
-        after = [cpu_ticks(p.pid) for p in procs]
-        busy1, all1 = machine_ticks()
+        after = [process_cpu_s(p.pid) or 0.0 for p in procs]
+        machine1 = machine_ticks()
         window = time.monotonic() - t0
     finally:
         for p in procs:
             p.wait(timeout=life_s + 30.0)
-    hz = os.sysconf("SC_CLK_TCK")
-    share = [100.0 * (b - a) / hz / window for a, b in zip(before, after, strict=True)]
+    share = [100.0 * (b - a) / window for a, b in zip(before, after, strict=True)]
+    busy = None if machine0 is None or machine1 is None else busy_pct(machine0, machine1)
     clients = share[1:] if args.star else share
     return {"mean_pct": sum(clients) / len(clients), "max_pct": max(clients),
             "hub_pct": share[0] if args.star else 0.0,
-            "machine_pct": 100.0 * (busy1 - busy0) / max(1, all1 - all0)}
+            "machine_pct": float("nan") if busy is None else busy}
 
 
 def main() -> int:
